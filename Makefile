@@ -1,0 +1,22 @@
+# Every target does its own set-up on a fresh machine (virtualenv, pip, Vulkan driver).
+PY := .venv/bin/python
+export PYTHONUNBUFFERED := 1
+
+.PHONY: setup demo test bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	$(PY) -m gausstac_maniskill.cli demo
+
+test: setup
+	$(PY) -m pytest -m "not slow" -q
+
+bench: setup
+	$(PY) -m pytest -m slow -q
+	$(PY) -m gausstac_maniskill.bench hertz
+	$(PY) -m gausstac_maniskill.bench splat
+
+clean:
+	rm -rf .venv out build *.egg-info

@@ -1,0 +1,110 @@
+"""The one place that initialises Taichi.
+
+``init("cpu" | "cuda" | "auto")`` picks the compute backend once per process.
+``auto`` means CUDA when a CUDA device works, otherwise the CPU; never Vulkan or
+Metal by accident (``ti.init(arch=ti.gpu)`` silently picks Vulkan on a machine
+without CUDA, which is why we never pass ``ti.gpu``).
+
+The architecture can also be chosen with the environment variable
+``GAUSSTAC_ARCH`` (same values), which ``ensure_init()`` reads.
+"""
+from __future__ import annotations
+
+import os
+import threading
+
+import taichi as ti
+
+__all__ = ["BackendError", "init", "ensure_init", "current_arch", "is_initialized"]
+
+_VALID = ("cpu", "cuda", "auto")
+_lock = threading.Lock()
+_arch: str | None = None
+
+
+class BackendError(RuntimeError):
+    """Raised when the requested compute backend cannot be used."""
+
+
+def _taichi_arch_name() -> str:
+    arch = ti.lang.impl.current_cfg().arch
+    return "cuda" if arch == ti.cuda else ("cpu" if arch in (ti.x64, ti.arm64) else str(arch))
+
+
+def _try_cuda(seed: int, debug: bool) -> bool:
+    """Initialise Taichi on CUDA; return False (and reset) if Taichi fell back."""
+    try:
+        ti.init(arch=ti.cuda, default_fp=ti.f32, random_seed=seed, debug=debug,
+                log_level=ti.ERROR, offline_cache=True)
+    except Exception:  # noqa: BLE001 - any CUDA failure means "no CUDA here"
+        ti.reset()
+        return False
+    if _taichi_arch_name() != "cuda":
+        ti.reset()
+        return False
+    return True
+
+
+def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
+    """Initialise Taichi once for this process and return the arch in use.
+
+    Args:
+        arch: ``"cpu"``, ``"cuda"`` or ``"auto"`` (CUDA if it works, else CPU).
+        seed: Taichi's random seed (``ti.random``), for reproducible runs.
+        debug: Taichi debug mode (bounds checks; slow).
+
+    Returns:
+        ``"cpu"`` or ``"cuda"``.
+
+    Raises:
+        BackendError: ``arch`` is not one of the three names; ``"cuda"`` was asked
+            for on a machine where CUDA does not work; or Taichi was already
+            initialised on a different arch (re-initialising would silently
+            destroy every existing Taichi field).
+    """
+    global _arch
+    if not isinstance(arch, str) or arch.lower() not in _VALID:
+        raise BackendError(f"backend arch={arch!r} is not one of {_VALID}")
+    arch = arch.lower()
+    with _lock:
+        if _arch is not None:
+            if arch in ("auto", _arch):
+                return _arch
+            raise BackendError(
+                f"Taichi is already initialised on {_arch!r}; cannot switch to {arch!r} "
+                "in the same process (it would destroy all simulation state). "
+                "Choose the arch once, before creating any simulator.")
+        if arch in ("cuda", "auto"):
+            if _try_cuda(seed, debug):
+                _arch = "cuda"
+                return _arch
+            if arch == "cuda":
+                raise BackendError(
+                    "backend arch='cuda' was requested but no working CUDA device was "
+                    "found (Taichi could not start its CUDA backend). Use arch='cpu' or "
+                    "arch='auto', or set GAUSSTAC_ARCH=cpu.")
+        cpu_threads = int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
+        kwargs = dict(arch=ti.cpu, default_fp=ti.f32, random_seed=seed, debug=debug,
+                      log_level=ti.WARN, offline_cache=True)
+        if cpu_threads:
+            kwargs["cpu_max_num_threads"] = cpu_threads
+        ti.init(**kwargs)
+        _arch = "cpu"
+        return _arch
+
+
+def ensure_init() -> str:
+    """Initialise with ``$GAUSSTAC_ARCH`` (default ``auto``) unless already done."""
+    if _arch is not None:
+        return _arch
+    return init(os.environ.get("GAUSSTAC_ARCH", "auto"))
+
+
+def current_arch() -> str | None:
+    """The arch chosen by :func:`init`, or ``None`` before initialisation."""
+    return _arch
+
+
+def is_initialized() -> bool:
+    """Whether :func:`init` has run in this process."""
+    return _arch is not None

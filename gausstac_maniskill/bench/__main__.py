@@ -1,0 +1,27 @@
+"""``python -m gausstac_maniskill.bench <name> [options]`` — run a benchmark.
+
+Each benchmark module exposes ``main(argv: list[str]) -> int`` and prints the
+table it measured.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+
+BENCHMARKS = {
+    "hertz": "gausstac_maniskill.bench.hertz",
+    "splat": "gausstac_maniskill.bench.splat",
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in BENCHMARKS:
+        print("usage: python -m gausstac_maniskill.bench {%s} [options]" % "|".join(BENCHMARKS))
+        return 0 if (argv and argv[0] in ("-h", "--help")) else 2
+    module = importlib.import_module(BENCHMARKS[argv[0]])
+    return int(module.main(argv[1:]) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,167 @@
+"""Descriptions (immutable inputs) of the simulation, in SI units.
+
+Like MuJoCo's model/data split, these dataclasses describe *what* is simulated;
+the solver's Taichi fields hold the mutable state. Every field is validated on
+construction and a :class:`~gausstac_maniskill.errors.ConfigError` names the
+field at fault.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from .errors import ConfigError
+
+__all__ = ["Material", "SolverSettings", "MODELS"]
+
+#: Constitutive models understood by the MPM solver.
+MODELS = ("neo_hookean", "fixed_corotated", "foam")
+
+
+def _finite(name: str, value: float) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name}={value!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ConfigError(f"{name}={value!r} must be finite")
+    return value
+
+
+@dataclass(frozen=True)
+class Material:
+    """An isotropic solid for MPM particles.
+
+    Attributes:
+        E: Young's modulus [Pa], > 0. Silicone pads: 0.1–2 MPa; sponge: 5–50 kPa.
+        nu: Poisson's ratio [-], in (-1, 0.5). Up to 0.49 (near-incompressible) is
+            supported; 0.5 exactly is rejected (infinite bulk modulus).
+        density: mass density [kg/m^3], > 0.
+        model: ``"neo_hookean"`` (compressible Neo-Hookean, the default),
+            ``"fixed_corotated"`` (Stomakhin et al. 2012), or ``"foam"``.
+        yield_compression: ``foam`` only. Critical compressive principal strain
+            θc: a singular value of the elastic deformation gradient below
+            ``1 - θc`` flows plastically (the sponge is crushed and stays so).
+        yield_stretch: ``foam`` only. Critical stretch θs (singular values above
+            ``1 + θs`` flow plastically).
+        hardening: ``foam`` only. ξ in ``k(Jp) = exp(ξ (1 - Jp))``: plastic
+            compaction (Jp < 1) stiffens the foam, as cells collapse.
+
+    The ``foam`` model is multiplicative elastoplasticity F = Fe·Fp with a
+    fixed-corotated elastic law on Fe, whose singular values are clamped to
+    [1-θc, 1+θs] after each substep (the excess goes to Fp, Stomakhin et al. 2013),
+    and Lamé parameters scaled by k(Jp), Jp = det Fp.
+    """
+
+    E: float = 3.0e5
+    nu: float = 0.45
+    density: float = 1100.0
+    model: str = "neo_hookean"
+    yield_compression: float = 0.10
+    yield_stretch: float = 0.05
+    hardening: float = 3.0
+
+    def __post_init__(self) -> None:
+        E = _finite("Material.E", self.E)
+        nu = _finite("Material.nu", self.nu)
+        rho = _finite("Material.density", self.density)
+        if E <= 0:
+            raise ConfigError(f"Material.E={self.E!r} Pa must be > 0")
+        if not (-1.0 < nu < 0.5):
+            raise ConfigError(
+                f"Material.nu={self.nu!r} must lie in (-1, 0.5); 0.5 is perfectly "
+                "incompressible (infinite bulk modulus) — use 0.49 for rubber-like silicone")
+        if rho <= 0:
+            raise ConfigError(f"Material.density={self.density!r} kg/m^3 must be > 0")
+        if self.model not in MODELS:
+            raise ConfigError(f"Material.model={self.model!r} is not one of {MODELS}")
+        for name in ("yield_compression", "yield_stretch"):
+            v = _finite(f"Material.{name}", getattr(self, name))
+            if not (0.0 < v < 1.0):
+                raise ConfigError(f"Material.{name}={v!r} must lie in (0, 1)")
+        if _finite("Material.hardening", self.hardening) < 0:
+            raise ConfigError(f"Material.hardening={self.hardening!r} must be >= 0")
+        object.__setattr__(self, "E", E)
+        object.__setattr__(self, "nu", nu)
+        object.__setattr__(self, "density", rho)
+
+    @property
+    def mu(self) -> float:
+        """Shear modulus μ = E / (2(1+ν)) [Pa]."""
+        return self.E / (2.0 * (1.0 + self.nu))
+
+    @property
+    def lam(self) -> float:
+        """First Lamé parameter λ = Eν / ((1+ν)(1-2ν)) [Pa]."""
+        return self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
+
+    @property
+    def wave_speed(self) -> float:
+        """P-wave speed c = √((λ + 2μ)/ρ) [m/s], which bounds the explicit time step."""
+        return math.sqrt((self.lam + 2.0 * self.mu) / self.density)
+
+    @property
+    def plane_strain_modulus(self) -> float:
+        """E* = E / (1 - ν²) [Pa] against a rigid indenter (Hertz)."""
+        return self.E / (1.0 - self.nu ** 2)
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Numerical settings of the MPM co-simulator.
+
+    Attributes:
+        dx: grid spacing [m]. Particles are seeded ``particles_per_axis`` per cell
+            per axis, so the particle spacing is ``dx / particles_per_axis``.
+        particles_per_axis: particles per cell along each axis (2 → 8 per cell).
+        cfl: Courant number C in Δt ≤ C·dx / (c + |v|max); 0 < C ≤ 1.
+        max_substeps: the most substeps one control step may take. If the CFL
+            bound needs more, :class:`~gausstac_maniskill.errors.SimulationError`
+            says so and what to change (never silently unstable).
+        mass_scaling: quasi-static mass scaling s ≥ 1: densities are multiplied
+            by s, so the wave speed and the substep count drop by √s. Inertia is
+            wrong by the same factor — only for slow (quasi-static) contact.
+        damping: viscous velocity damping rate [1/s] applied on the grid
+            (v ← v·exp(-damping·Δt)); 0 = none. Helps reach quasi-static states.
+        gravity: gravitational acceleration [m/s^2] in the world frame.
+        grid_margin: empty cells kept around the active particles' bounding box.
+        max_grid_cells: safety limit on the active grid's cell count.
+    """
+
+    dx: float = 1.0e-3
+    particles_per_axis: int = 2
+    cfl: float = 0.4
+    max_substeps: int = 2000
+    mass_scaling: float = 1.0
+    damping: float = 0.0
+    gravity: tuple = (0.0, 0.0, -9.81)
+    grid_margin: int = 3
+    max_grid_cells: int = 8_000_000
+
+    def __post_init__(self) -> None:
+        if _finite("SolverSettings.dx", self.dx) <= 0:
+            raise ConfigError(f"SolverSettings.dx={self.dx!r} m must be > 0")
+        if int(self.particles_per_axis) != self.particles_per_axis or not (1 <= self.particles_per_axis <= 4):
+            raise ConfigError(f"SolverSettings.particles_per_axis={self.particles_per_axis!r} must be an integer in 1..4")
+        cfl = _finite("SolverSettings.cfl", self.cfl)
+        if not (0.0 < cfl <= 1.0):
+            raise ConfigError(f"SolverSettings.cfl={self.cfl!r} must lie in (0, 1]")
+        if int(self.max_substeps) != self.max_substeps or self.max_substeps < 1:
+            raise ConfigError(f"SolverSettings.max_substeps={self.max_substeps!r} must be a positive integer")
+        if _finite("SolverSettings.mass_scaling", self.mass_scaling) < 1.0:
+            raise ConfigError(f"SolverSettings.mass_scaling={self.mass_scaling!r} must be >= 1")
+        if _finite("SolverSettings.damping", self.damping) < 0.0:
+            raise ConfigError(f"SolverSettings.damping={self.damping!r} 1/s must be >= 0")
+        g = tuple(self.gravity)
+        if len(g) != 3:
+            raise ConfigError(f"SolverSettings.gravity={self.gravity!r} must have 3 components")
+        object.__setattr__(self, "gravity", tuple(_finite("SolverSettings.gravity", v) for v in g))
+        if int(self.grid_margin) != self.grid_margin or self.grid_margin < 2:
+            raise ConfigError(f"SolverSettings.grid_margin={self.grid_margin!r} must be an integer >= 2")
+        if int(self.max_grid_cells) != self.max_grid_cells or self.max_grid_cells < 1000:
+            raise ConfigError(f"SolverSettings.max_grid_cells={self.max_grid_cells!r} must be an integer >= 1000")
+
+    @property
+    def particle_spacing(self) -> float:
+        """Distance between seeded particles [m]."""
+        return self.dx / self.particles_per_axis

@@ -1,0 +1,18 @@
+"""Exceptions raised by gausstac_maniskill. Each message names the file or field at fault."""
+from __future__ import annotations
+
+
+class GaussTacError(Exception):
+    """Base class of every error this package raises on purpose."""
+
+
+class ConfigError(GaussTacError, ValueError):
+    """A description (material, pad, solver setting) has an invalid field."""
+
+
+class AssetError(GaussTacError, ValueError):
+    """An input file (mesh, .ply, URDF) is missing or malformed."""
+
+
+class SimulationError(GaussTacError, RuntimeError):
+    """The simulation reached an invalid state (NaN, particle left the grid, ...)."""

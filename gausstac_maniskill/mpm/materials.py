@@ -1,0 +1,99 @@
+"""Constitutive models for MPM particles, as Taichi functions.
+
+Every model returns the Kirchhoff stress τ = P Fᵀ = J σ [Pa], which is what the
+MLS-MPM momentum transfer needs (force on node i: -Σ_p V0_p τ_p ∇w_ip).
+
+Model ids (``MODEL_IDS``) index the per-material table built by
+:func:`material_table`:
+
+* ``neo_hookean`` — compressible Neo-Hookean,
+  ψ = μ/2 (tr FᵀF - 3) - μ ln J + λ/2 (ln J)²,  τ = μ (F Fᵀ - I) + λ ln J · I.
+  No SVD: the fast default for silicone pads. J is clamped to ≥ 0.05 inside the
+  stress so an inverted particle pushes back instead of producing NaN.
+* ``fixed_corotated`` — ψ = μ ‖F - R‖² + λ/2 (J - 1)², τ = 2μ (F - R) Fᵀ + λ (J - 1) J · I
+  (R from the polar decomposition; robust under inversion).
+* ``foam`` — elastoplastic sponge: fixed-corotated elasticity on Fe with the
+  Stomakhin et al. (2013) return map (singular values of Fe clamped to
+  [1-θc, 1+θs], the excess becomes plastic, Jp = det Fp) and hardening
+  μ, λ ← μ, λ · exp(ξ (1 - Jp)).
+"""
+
+import numpy as np
+import taichi as ti
+
+from ..config import MODELS, Material
+
+MODEL_IDS = {name: i for i, name in enumerate(MODELS)}
+NEO_HOOKEAN, FIXED_COROTATED, FOAM = (MODEL_IDS[m] for m in ("neo_hookean", "fixed_corotated", "foam"))
+
+#: Columns of the material table: mu, lam, model id, yield_compression, yield_stretch, hardening, density.
+TABLE_COLUMNS = ("mu", "lam", "model", "theta_c", "theta_s", "hardening", "density")
+MIN_J = 0.05
+
+
+def material_table(materials: list[Material], mass_scaling: float = 1.0) -> np.ndarray:
+    """Pack materials into a float32 table [M, 8] (columns ``TABLE_COLUMNS``, one pad column)."""
+    table = np.zeros((max(len(materials), 1), 8), np.float32)
+    for i, m in enumerate(materials):
+        table[i, :7] = (m.mu, m.lam, MODEL_IDS[m.model], m.yield_compression,
+                        m.yield_stretch, m.hardening, m.density * mass_scaling)
+    return table
+
+
+@ti.func
+def polar_rotation(F):
+    """Rotation R of the polar decomposition F = R S, with det R = +1."""
+    U, sig, V = ti.svd(F)
+    return U @ V.transpose()
+
+
+@ti.func
+def kirchhoff_stress(F, Jp, mu0, lam0, model, hardening):
+    """Kirchhoff stress τ [Pa] of deformation gradient F (3x3) for one material."""
+    tau = ti.Matrix.zero(ti.f32, 3, 3)
+    I = ti.Matrix.identity(ti.f32, 3)
+    if model == NEO_HOOKEAN:
+        J = ti.max(F.determinant(), MIN_J)
+        tau = mu0 * (F @ F.transpose() - I) + lam0 * ti.log(J) * I
+    else:
+        mu, lam = mu0, lam0
+        if model == FOAM:
+            h = ti.exp(hardening * (1.0 - Jp))
+            mu, lam = mu0 * h, lam0 * h
+        R = polar_rotation(F)
+        J = F.determinant()
+        tau = 2.0 * mu * (F - R) @ F.transpose() + lam * (J - 1.0) * J * I
+    return tau
+
+
+@ti.func
+def plastic_return(F, Jp, theta_c, theta_s):
+    """Foam return map: clamp Fe's singular values; return (Fe, Jp)."""
+    U, sig, V = ti.svd(F)
+    new_Jp = Jp
+    for d in ti.static(range(3)):
+        s_old = sig[d, d]
+        s_new = ti.min(ti.max(s_old, 1.0 - theta_c), 1.0 + theta_s)
+        new_Jp *= s_old / s_new
+        sig[d, d] = s_new
+    return U @ sig @ V.transpose(), new_Jp
+
+
+@ti.func
+def strain_energy_density(F, Jp, mu0, lam0, model, hardening):
+    """Elastic energy per unit rest volume ψ(F) [J/m^3]."""
+    psi = 0.0
+    if model == NEO_HOOKEAN:
+        J = ti.max(F.determinant(), MIN_J)
+        lnJ = ti.log(J)
+        psi = 0.5 * mu0 * ((F.transpose() @ F).trace() - 3.0) - mu0 * lnJ + 0.5 * lam0 * lnJ * lnJ
+    else:
+        mu, lam = mu0, lam0
+        if model == FOAM:
+            h = ti.exp(hardening * (1.0 - Jp))
+            mu, lam = mu0 * h, lam0 * h
+        R = polar_rotation(F)
+        J = F.determinant()
+        D = F - R
+        psi = mu * (D * D).sum() + 0.5 * lam * (J - 1.0) ** 2
+    return psi

@@ -1,0 +1,695 @@
+"""MPMWorld: a partly controlled MLS-MPM world (soft bodies driven by rigid links).
+
+One world holds several particle *groups* (a fingertip pad, a sponge, ...). A group
+is made of dynamic particles (simulated) and optionally kinematic particles bound
+to a rigid *link*: those follow the link's transform exactly, yet still scatter
+their momentum and mass to the grid, so they drive the soft particles next to
+them. Rigid objects enter as SDF *colliders*.
+
+Each :meth:`MPMWorld.step` advances one control step Δt_ctrl: link and collider
+poses move from the previous pose to the one last set (position lerp, rotation
+slerp per substep); the substep count comes from the CFL bound
+Δt ≤ C·dx / (c + |v|max), c = √((λ + 2μ)/ρ). The grid covers only the bounding
+box of awake particles plus a margin and follows them; sleeping groups are not
+touched at all.
+
+Units: metres, kilograms, seconds, pascals, newtons.
+
+Example::
+
+    world = MPMWorld(SolverSettings(dx=1e-3))
+    world.add_link("tip", np.eye(4))
+    world.add_group("pad", pts, Material(E=3e5, nu=0.45), link="tip", kinematic=pts[:, 2] < 0.002)
+    ball = world.add_collider(Sphere(radius=0.005, pose=make_pose([0, 0, 0.02])))
+    world.set_collider_pose(ball, make_pose([0, 0, 0.015]))
+    world.step(0.01)
+    force, torque = world.collider_wrench(ball)
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from .. import backend
+from ..config import Material, SolverSettings
+from ..errors import ConfigError, SimulationError
+from ..transforms import as_pose_matrix, matrix_to_quat, quat_to_matrix
+from . import kernels as K
+from .colliders import Collider, MeshCollider
+from .materials import material_table
+
+__all__ = ["MPMWorld", "StepInfo", "Group"]
+
+_NCHUNK = 16
+_STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id")
+
+
+@dataclass
+class Group:
+    """Book-keeping of one particle group (a contiguous block of particle indices)."""
+
+    name: str
+    start: int
+    count: int
+    material: Material
+    link: int  # -1: not bound to a link
+    n_kinematic: int
+    spacing: float
+    awake: bool = True
+    sleep_pose: np.ndarray | None = None  # link pose when the group fell asleep
+
+    @property
+    def stop(self) -> int:
+        return self.start + self.count
+
+
+@dataclass
+class StepInfo:
+    """What one control step did: substeps, substep length [s], wall time [s]."""
+
+    substeps: int
+    dt_substep: float
+    wall_time: float
+    active_particles: int
+    grid_cells: int
+
+
+class MPMWorld:
+    """A partly controlled MLS-MPM world. See the module docstring.
+
+    Args:
+        settings: numerical settings (grid spacing, CFL number, ...).
+        contact: ``"particle"`` (default) enforces colliders on particles, whose
+            surface is half a particle spacing beyond their centre; ``"grid"``
+            enforces them on grid nodes (classic MPM boundary conditions; the
+            contact surface then sits up to one cell early).
+    """
+
+    def __init__(self, settings: SolverSettings | None = None, contact: str = "particle"):
+        backend.ensure_init()
+        self.settings = settings or SolverSettings()
+        if contact not in ("particle", "grid"):
+            raise ConfigError(f"MPMWorld(contact={contact!r}) must be 'particle' or 'grid'")
+        self.contact = contact
+        self.groups: list[Group] = []
+        self.materials: list[Material] = []
+        self.link_names: list[str] = []
+        self._link_prev: list[np.ndarray] = []  # pose at the start of the next step
+        self._link_next: list[np.ndarray] = []  # pose at its end (last set)
+        self.colliders: list[Collider] = []
+        self._col_prev: list[np.ndarray] = []
+        self._walls: list[tuple[int, float, float]] = []
+        self.time = 0.0
+        self.step_count = 0
+        self.last_step: StepInfo | None = None
+        self._n = 0
+        self._host: dict[str, np.ndarray] = {}
+        self._dev: dict[str, object] = {}
+        self._grid_cap = 0
+        self._slab_cap = 0
+        self._dirty = True
+        self._vmax = 0.0
+        self._col_impulse = np.zeros((0, 6))
+        self._last_dt_ctrl = 1.0
+
+    # ------------------------------------------------------------------ building
+    def add_link(self, name: str, pose) -> int:
+        """Register a rigid link that kinematic particles can bind to; returns its index."""
+        if name in self.link_names:
+            raise ConfigError(f"link {name!r} is already registered")
+        T = as_pose_matrix(pose, f"pose of link {name!r}")
+        self.link_names.append(name)
+        self._link_prev.append(T.copy())
+        self._link_next.append(T.copy())
+        self._dirty = True
+        return len(self.link_names) - 1
+
+    def link_index(self, link) -> int:
+        """Index of a link given by name or index; a clear error if it does not exist."""
+        if isinstance(link, (int, np.integer)):
+            if not 0 <= link < len(self.link_names):
+                raise ConfigError(f"link index {link} out of range (have {len(self.link_names)} links)")
+            return int(link)
+        if link not in self.link_names:
+            raise ConfigError(f"unknown link {link!r}; registered links: {self.link_names}")
+        return self.link_names.index(link)
+
+    def add_group(self, name: str, positions, material: Material, *, link=None, kinematic=None,
+                  velocity=None, particle_volume: float | None = None,
+                  spacing: float | None = None) -> Group:
+        """Add a group of particles.
+
+        Args:
+            name: unique group name (used in error messages and :meth:`group`).
+            positions: [N, 3] world positions [m] in the current configuration,
+                which is taken as the rest configuration (F = I).
+            material: constitutive model and parameters of the dynamic particles.
+            link: name or index of the link that kinematic particles follow.
+            kinematic: [N] bool mask (or ``True`` for all) of particles bound to ``link``.
+            velocity: optional [N, 3] or [3] initial velocity [m/s].
+            particle_volume: rest volume per particle [m^3]; default ``spacing**3``.
+            spacing: particle spacing [m] of these positions; default
+                ``settings.particle_spacing``. The contact radius is ``spacing / 2``.
+        """
+        if any(g.name == name for g in self.groups):
+            raise ConfigError(f"group {name!r} already exists")
+        if not isinstance(material, Material):
+            raise ConfigError(f"add_group({name!r}): material must be a Material, got {type(material).__name__}")
+        pts = np.asarray(positions, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ConfigError(f"add_group({name!r}): positions must have shape [N, 3], got {pts.shape}")
+        if len(pts) == 0:
+            raise ConfigError(f"add_group({name!r}): positions is empty (the particle set has no particles)")
+        if not np.all(np.isfinite(pts)):
+            raise ConfigError(f"add_group({name!r}): positions contain NaN or inf")
+        n = len(pts)
+        kin = np.zeros(n, bool)
+        if kinematic is not None:
+            kin = np.broadcast_to(np.asarray(kinematic, bool), (n,)).copy()
+        lidx = -1
+        if kin.any() or link is not None:
+            if link is None:
+                raise ConfigError(f"add_group({name!r}): kinematic particles need a link")
+            lidx = self.link_index(link)
+        h = float(spacing if spacing is not None else self.settings.particle_spacing)
+        if not (h > 0 and math.isfinite(h)):
+            raise ConfigError(f"add_group({name!r}): spacing={spacing!r} must be > 0")
+        vol = float(particle_volume if particle_volume is not None else h ** 3)
+        if not (vol > 0 and math.isfinite(vol)):
+            raise ConfigError(f"add_group({name!r}): particle_volume={particle_volume!r} must be > 0")
+        vel = np.zeros((n, 3))
+        if velocity is not None:
+            vel = np.broadcast_to(np.asarray(velocity, np.float64), (n, 3)).copy()
+            if not np.all(np.isfinite(vel)):
+                raise ConfigError(f"add_group({name!r}): velocity contains NaN or inf")
+
+        self._pull()
+        if material not in self.materials:
+            self.materials.append(material)
+        mid = self.materials.index(material)
+        gid = len(self.groups)
+        rho = material.density * self.settings.mass_scaling
+        new = {
+            "x": pts.astype(np.float32), "v": vel.astype(np.float32),
+            "C": np.zeros((n, 3, 3), np.float32), "F": np.tile(np.eye(3, dtype=np.float32), (n, 1, 1)),
+            "tau": np.zeros((n, 3, 3), np.float32), "Jp": np.ones(n, np.float32),
+            "impulse": np.zeros((n, 3), np.float32), "contact_id": np.full(n, -1, np.int32),
+            "mass": np.full(n, rho * vol, np.float32), "vol": np.full(n, vol, np.float32),
+            "radius": np.full(n, 0.5 * h, np.float32), "kind": kin.astype(np.int32),
+            "matid": np.full(n, mid, np.int32), "link": np.full(n, lidx, np.int32),
+            "group": np.full(n, gid, np.int32), "X0": np.zeros((n, 3), np.float32),
+        }
+        if lidx >= 0:
+            T = self._link_next[lidx]
+            new["X0"] = ((pts - T[:3, 3]) @ T[:3, :3]).astype(np.float32)
+            new["v"][kin] = 0.0
+        for key, arr in new.items():
+            self._host[key] = arr if key not in self._host else np.concatenate([self._host[key], arr])
+        bind = matrix_to_quat(self._link_next[lidx][:3, :3]) if lidx >= 0 else np.array([1.0, 0, 0, 0])
+        self._host["group_bind"] = np.concatenate(
+            [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])
+        group = Group(name, self._n, n, material, lidx, int(kin.sum()), h)
+        self.groups.append(group)
+        self._n += n
+        self._dirty = True
+        return group
+
+    def add_collider(self, collider: Collider) -> int:
+        """Add a rigid SDF collider; returns its index (for poses and wrenches)."""
+        if not isinstance(collider, Collider) or type(collider) is Collider:
+            raise ConfigError(f"add_collider expects a Sphere, Box, Capsule, HalfSpace or MeshCollider, "
+                              f"got {type(collider).__name__}")
+        self.colliders.append(collider)
+        self._col_prev.append(collider.pose.copy())
+        self._dirty = True
+        return len(self.colliders) - 1
+
+    def add_slip_wall(self, axis: int, position: float, keep: str = "+") -> None:
+        """A bilateral frictionless wall on the grid (e.g. a symmetry plane).
+
+        Grid nodes with coordinate ``axis`` on the ``keep``-opposite side of
+        ``position`` [m], or on it, get zero velocity along ``axis``.
+        """
+        if axis not in (0, 1, 2) or keep not in ("+", "-"):
+            raise ConfigError(f"add_slip_wall(axis={axis!r}, keep={keep!r}): axis in 0..2, keep '+' or '-'")
+        self._walls.append((axis, float(position), 1.0 if keep == "+" else -1.0))
+        self._dirty = True
+
+    # ------------------------------------------------------------------ queries
+    def group(self, name: str) -> Group:
+        """The group called ``name`` (clear error if unknown)."""
+        for g in self.groups:
+            if g.name == name:
+                return g
+        raise ConfigError(f"unknown group {name!r}; groups: {[g.name for g in self.groups]}")
+
+    @property
+    def num_particles(self) -> int:
+        return self._n
+
+    def _read(self, key: str, group: str | None):
+        self._pull()
+        arr = self._host[key]
+        if group is None:
+            return arr.copy()
+        g = self.group(group)
+        return arr[g.start:g.stop].copy()
+
+    def positions(self, group: str | None = None) -> np.ndarray:
+        """Particle positions [N, 3] in metres (all groups, or one)."""
+        return self._read("x", group)
+
+    def velocities(self, group: str | None = None) -> np.ndarray:
+        """Particle velocities [N, 3] in m/s."""
+        return self._read("v", group)
+
+    def deformation_gradients(self, group: str | None = None) -> np.ndarray:
+        """Deformation gradients F [N, 3, 3] relative to the rest configuration."""
+        return self._read("F", group)
+
+    def stresses(self, group: str | None = None) -> np.ndarray:
+        """Cauchy stress σ = τ / J [N, 3, 3] in pascals."""
+        tau = self._read("tau", group)
+        J = np.linalg.det(self._read("F", group))
+        return tau / np.maximum(J, 1e-6)[:, None, None]
+
+    def rest_positions(self, group: str | None = None) -> np.ndarray:
+        """Kinematic particles' rest coordinates [N, 3] in their link frame (0 for others)."""
+        return self._read("X0", group)
+
+    def kinematic_mask(self, group: str | None = None) -> np.ndarray:
+        """[N] bool: which particles are kinematic."""
+        return self._read("kind", group).astype(bool)
+
+    def contact_forces(self, group: str | None = None) -> np.ndarray:
+        """Mean contact force [N, 3] (newtons) each particle received from colliders
+        during the last control step (impulse / Δt_ctrl); zero where no contact."""
+        return self._read("impulse", group) / self._last_dt_ctrl
+
+    def contact_collider(self, group: str | None = None) -> np.ndarray:
+        """[N] index of the collider each particle last touched (-1: none)."""
+        return self._read("contact_id", group)
+
+    def collider_wrench(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Mean reaction (force [N], torque [N·m] about the collider origin) that
+        collider ``index`` received from the particles during the last control step."""
+        if not 0 <= index < len(self.colliders):
+            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
+        J = self._col_impulse[index] / self._last_dt_ctrl if len(self._col_impulse) else np.zeros(6)
+        return J[:3].copy(), J[3:].copy()
+
+    def energy(self) -> tuple[float, float]:
+        """(kinetic, elastic) energy [J] of the awake dynamic particles."""
+        self._push()
+        out = ti.ndarray(ti.f32, shape=2)
+        active = self._dev["active"]
+        K.energies(active, self._n_active, self._dev["v"], self._dev["F"], self._dev["Jp"],
+                   self._dev["kind"], self._dev["matid"], self._dev["mass"], self._dev["vol"],
+                   self._dev["mat_table"], out)
+        e = out.to_numpy()
+        return float(e[0]), float(e[1])
+
+    def wave_speed(self) -> float:
+        """Largest P-wave speed [m/s] of the awake groups (with mass scaling)."""
+        speeds = [g.material.wave_speed for g in self.groups if g.awake and g.count > g.n_kinematic]
+        return max(speeds, default=0.0) / math.sqrt(self.settings.mass_scaling)
+
+    # ------------------------------------------------------------------ driving
+    def set_link_pose(self, link, pose) -> None:
+        """Target world pose (4x4) of a link at the end of the next control step."""
+        i = self.link_index(link)
+        self._link_next[i] = as_pose_matrix(pose, f"pose of link {self.link_names[i]!r}")
+
+    def set_link_poses(self, poses) -> None:
+        """Targets for all links: a dict name -> 4x4, or an array [L, 4, 4] in link order."""
+        if isinstance(poses, dict):
+            for name, T in poses.items():
+                self.set_link_pose(name, T)
+            return
+        arr = np.asarray(poses)
+        if arr.shape != (len(self.link_names), 4, 4):
+            raise ConfigError(f"set_link_poses: expected shape {(len(self.link_names), 4, 4)}, got {arr.shape}")
+        for i, T in enumerate(arr):
+            self.set_link_pose(i, T)
+
+    def set_collider_pose(self, index: int, pose) -> None:
+        """Target world pose (4x4) of collider ``index`` at the end of the next control step."""
+        if not 0 <= index < len(self.colliders):
+            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
+        c = self.colliders[index]
+        c.pose = as_pose_matrix(pose, f"pose of collider {index} ({c.name or type(c).__name__})")
+
+    def set_awake(self, name: str, awake: bool) -> None:
+        """Put a group to sleep (it costs nothing and is not changed) or wake it.
+
+        A group bound to a link is carried rigidly with the link while asleep:
+        on waking, its particles are moved by the link's motion since it fell asleep.
+        """
+        g = self.group(name)
+        if g.awake == bool(awake):
+            return
+        self._pull()
+        if not awake:
+            if g.link >= 0:
+                g.sleep_pose = self._link_prev[g.link].copy()
+            sl = slice(g.start, g.stop)
+            self._host["impulse"][sl] = 0.0
+            self._host["contact_id"][sl] = -1
+        elif g.link >= 0 and g.sleep_pose is not None:
+            T = self._link_prev[g.link] @ np.linalg.inv(g.sleep_pose)
+            R, t = T[:3, :3], T[:3, 3]
+            sl = slice(g.start, g.stop)
+            h = self._host
+            h["x"][sl] = (h["x"][sl].astype(np.float64) @ R.T + t).astype(np.float32)
+            h["v"][sl] = (h["v"][sl] @ R.T).astype(np.float32)
+            for key in ("C", "tau"):
+                h[key][sl] = (R @ h[key][sl] @ R.T).astype(np.float32)
+            h["F"][sl] = (R @ h["F"][sl]).astype(np.float32)
+        g.awake = bool(awake)
+        self._dirty = True
+
+    def plan_substeps(self, dt: float) -> tuple[int, float]:
+        """Substeps for a control step of ``dt`` seconds from the CFL bound.
+
+        Raises:
+            SimulationError: the bound needs more than ``settings.max_substeps``.
+        """
+        s = self.settings
+        c = self.wave_speed()
+        v = self._vmax + self._driver_speed(dt)
+        dt_max = s.cfl * s.dx / max(c + v, 1e-12)
+        n = max(1, math.ceil(dt / dt_max - 1e-9))
+        if n > s.max_substeps:
+            raise SimulationError(
+                f"control step dt={dt:g} s needs {n} substeps (CFL: Δt ≤ {s.cfl}·dx/(c+|v|) = "
+                f"{dt_max:.3g} s with dx={s.dx:g} m, wave speed c={c:.3g} m/s, |v|max={v:.3g} m/s) but "
+                f"SolverSettings.max_substeps={s.max_substeps}. Use a shorter control step, a coarser dx, "
+                f"a softer material, quasi-static SolverSettings.mass_scaling > 1, or raise max_substeps.")
+        return n, dt / n
+
+    def _driver_speed(self, dt: float) -> float:
+        """Upper bound of link/collider surface speeds [m/s] over the next step."""
+        speed = 0.0
+        h = self._host
+        for i in range(len(self.link_names)):
+            a, b = self._link_prev[i], self._link_next[i]
+            ang = _angle(a[:3, :3].T @ b[:3, :3])
+            mask = (h.get("link", np.zeros(0)) == i) & (h.get("kind", np.zeros(0)) == 1)
+            r = float(np.linalg.norm(h["X0"][mask], axis=1).max()) if mask.any() else 0.0
+            speed = max(speed, (np.linalg.norm(b[:3, 3] - a[:3, 3]) + ang * r) / dt)
+        for c, a in zip(self.colliders, self._col_prev):
+            b = c.pose
+            ang = _angle(a[:3, :3].T @ b[:3, :3])
+            r = _collider_radius(c)
+            if not math.isfinite(r) and self._n:
+                x = h["x"]
+                r = float(np.linalg.norm(x - b[:3, 3], axis=1).max())
+            speed = max(speed, (np.linalg.norm(b[:3, 3] - a[:3, 3]) + ang * r) / dt)
+        return speed
+
+    def step(self, dt: float) -> StepInfo:
+        """Advance one control step of ``dt`` seconds; links and colliders move from
+        their previous pose to the last one set. Returns a :class:`StepInfo`.
+
+        Raises:
+            ConfigError: dt is not a positive finite number.
+            SimulationError: the CFL bound cannot be met, a value became NaN/inf,
+                or the active region grew beyond ``settings.max_grid_cells``.
+        """
+        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+            raise ConfigError(f"step(dt={dt!r}): dt must be a positive finite number of seconds")
+        t0 = time.perf_counter()
+        self._push()
+        n_sub, dt_sub = self.plan_substeps(float(dt))
+        self._upload_poses()
+        d = self._dev
+        s = self.settings
+        if self._n_active:
+            K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
+        col_imp = np.zeros((max(len(self.colliders), 1), 6), np.float32)
+        d["col_impulse"].from_numpy(col_imp)
+        cells = 0
+        for k in range(n_sub):
+            if self._n_active == 0:
+                break
+            cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub)
+        if self._n_active and self.contact == "particle":
+            K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
+                             d["col_pose"], d["col_impulse"])
+        self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
+        self._check_health()
+        for i in range(len(self.link_names)):
+            self._link_prev[i] = self._link_next[i].copy()
+        self._col_prev = [c.pose.copy() for c in self.colliders]
+        self._host_stale = True
+        self._last_dt_ctrl = float(dt)
+        self.time += float(dt)
+        self.step_count += 1
+        self.last_step = StepInfo(n_sub, dt_sub, time.perf_counter() - t0, self._n_active, cells)
+        return self.last_step
+
+    # ------------------------------------------------------------------ internals
+    def _substep(self, a0: float, a1: float, dt: float) -> int:
+        d, s = self._dev, self.settings
+        inv_dx = 1.0 / s.dx
+        if self._n_kin:
+            K.kinematic_update(d["active_kin"], self._n_kin, d["x"], d["v"], d["C"], d["F"], d["tau"],
+                               d["X0"], d["link"], d["group"], d["link_pose"], d["group_bind"], a0, a1, dt)
+        # active region: bounding box of stencil base cells, plus margin
+        K.chunk_bounds(d["active"], self._n_active, d["x"], inv_dx, _NCHUNK, d["bounds"])
+        b = d["bounds"].to_numpy()
+        lo, hi = b[:, :3].min(0), b[:, 3:].max(0)
+        m = s.grid_margin
+        origin = lo - m
+        dims = hi - lo + 3 + 2 * m
+        ncell = int(np.prod(dims.astype(np.int64)))
+        if ncell > s.max_grid_cells:
+            raise SimulationError(self._explode_message(lo, hi))
+        if ncell > self._grid_cap:
+            self._alloc_grid(int(min(ncell * 1.5, s.max_grid_cells)))
+        axis = int(np.argmax(dims))
+        n_slabs = int((hi[axis] - lo[axis]) // 2 + 1)
+        if n_slabs + 1 > self._slab_cap:
+            self._slab_cap = 2 * (n_slabs + 1)
+            d["slab_start"] = ti.ndarray(ti.i32, shape=self._slab_cap)
+            d["cursor"] = ti.ndarray(ti.i32, shape=self._slab_cap)
+        K.sort_into_slabs(d["active"], self._n_active, d["x"], inv_dx, axis, int(lo[axis]), n_slabs,
+                          d["slab_of"], d["slab_start"], d["cursor"], d["order"])
+        ox, oy, oz = (int(v) for v in origin)
+        nx, ny, nz = (int(v) for v in dims)
+        K.clear_grid(ncell, d["grid_v"], d["grid_m"], d["grid_mk"])
+        K.p2g(d["order"], d["slab_start"], n_slabs, d["x"], d["v"], d["C"], d["tau"], d["mass"],
+              d["vol"], d["kind"], d["link"], ox, oy, oz, ny, nz, inv_dx, dt,
+              d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_link"])
+        g = s.gravity
+        K.grid_update(ncell, ox, oy, oz, ny, nz, s.dx, dt, g[0], g[1], g[2], math.exp(-s.damping * dt),
+                      d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_link"], d["link_pose"], a0, a1,
+                      d["walls"], len(self._walls), int(self.contact == "grid"), len(self.colliders),
+                      d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"], d["col_sticky"],
+                      d["sdf"], d["sdf_info"], d["col_impulse"])
+        K.g2p(d["order"], self._n_active, d["x"], d["v"], d["C"], d["F"], d["tau"], d["Jp"],
+              d["kind"], d["matid"], d["mass"], d["radius"], d["impulse"], d["contact_id"],
+              d["mat_table"], ox, oy, oz, ny, nz, inv_dx, dt, d["grid_v"],
+              int(self.contact == "particle"), len(self.colliders), d["col_kind"], d["col_prm"],
+              d["col_pose"], d["col_mu"], d["col_sticky"], d["sdf"], d["sdf_info"], a0, a1,
+              0.3 * s.dx / dt)
+        return ncell
+
+    def _alloc_grid(self, cap: int) -> None:
+        d = self._dev
+        d["grid_v"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
+        d["grid_m"] = ti.ndarray(ti.f32, shape=cap)
+        d["grid_mk"] = ti.ndarray(ti.f32, shape=cap)
+        d["grid_link"] = ti.ndarray(ti.i32, shape=cap)
+        self._grid_cap = cap
+
+    def _explode_message(self, lo, hi) -> str:
+        self._dirty = False
+        x = self._dev["x"].to_numpy()
+        parts = []
+        for g in self.groups:
+            if g.awake:
+                gx = x[g.start:g.stop]
+                parts.append(f"{g.name!r}: [{gx.min(0).round(4).tolist()} .. {gx.max(0).round(4).tolist()}] m")
+        ext = (hi - lo + 1) * self.settings.dx
+        return (f"the active particles spread over {ext.round(4).tolist()} m "
+                f"(> SolverSettings.max_grid_cells={self.settings.max_grid_cells} cells of dx="
+                f"{self.settings.dx:g} m) at t={self.time:.4g} s, step {self.step_count}: particles are "
+                f"flying apart (unstable simulation?). Group extents: " + "; ".join(parts))
+
+    def _check_health(self) -> None:
+        if not self._n_active:
+            self._vmax = 0.0
+            return
+        d = self._dev
+        K.chunk_health(d["active"], self._n_active, d["x"], d["v"], d["F"], d["kind"], _NCHUNK,
+                       d["first_bad"], d["vmax_chunk"])
+        bad = d["first_bad"].to_numpy()
+        self._vmax = float(d["vmax_chunk"].to_numpy().max())
+        bad = bad[bad >= 0]
+        if len(bad):
+            p = int(bad.min())
+            g = next(g for g in self.groups if g.start <= p < g.stop)
+            raise SimulationError(
+                f"particle {p - g.start} of group {g.name!r} has a NaN/inf position, velocity or "
+                f"deformation gradient after step {self.step_count + 1} (t={self.time:.4g} s, "
+                f"{self.last_step.substeps if self.last_step else '?'} substeps of the previous step). "
+                f"The simulation is unstable: lower SolverSettings.cfl, check material parameters "
+                f"(E={g.material.E:g} Pa, nu={g.material.nu:g}) and link/collider motions.")
+
+    def _pull(self) -> None:
+        """Copy device state back to the host arrays (if the device is newer)."""
+        if getattr(self, "_host_stale", False) and self._dev:
+            for key in _STATE_FIELDS:
+                self._host[key] = self._dev[key].to_numpy()[: self._n]
+            self._host_stale = False
+
+    def _push(self) -> None:
+        """(Re)build device arrays from the host after any structural change."""
+        if not self._dirty:
+            return
+        self._pull()
+        if self._n == 0 and not self.groups:
+            self._n_active = 0
+            self._n_kin = 0
+        h, d = self._host, self._dev
+        n = max(self._n, 1)
+
+        def upload(key, arr, dtype, shape=()):
+            nd = (ti.Vector.ndarray(shape[0], dtype, shape=len(arr)) if len(shape) == 1 else
+                  ti.Matrix.ndarray(shape[0], shape[1], dtype, shape=len(arr)) if len(shape) == 2 else
+                  ti.ndarray(dtype, shape=arr.shape))
+            nd.from_numpy(np.ascontiguousarray(arr))
+            d[key] = nd
+
+        if self._n:
+            for key in ("x", "v", "impulse", "X0"):
+                upload(key, h[key], ti.f32, (3,))
+            for key in ("C", "F", "tau"):
+                upload(key, h[key], ti.f32, (3, 3))
+            for key in ("Jp", "mass", "vol", "radius"):
+                upload(key, h[key], ti.f32)
+            for key in ("kind", "matid", "link", "group", "contact_id"):
+                upload(key, h[key], ti.i32)
+            upload("group_bind", h["group_bind"].astype(np.float32), ti.f32)
+        awake = np.zeros(n, bool)
+        for g in self.groups:
+            if g.awake:
+                awake[g.start:g.stop] = True
+        kind = h["kind"] if self._n else np.zeros(n, np.int32)
+        active = np.flatnonzero(awake[: self._n]).astype(np.int32)
+        active_kin = active[kind[active] == 1]
+        self._n_active, self._n_kin = len(active), len(active_kin)
+        upload("active", np.resize(active, max(len(active), 1)), ti.i32)
+        upload("active_kin", np.resize(active_kin, max(len(active_kin), 1)), ti.i32)
+        for key in ("order", "slab_of"):
+            d[key] = ti.ndarray(ti.i32, shape=n)
+        d["bounds"] = ti.ndarray(ti.i32, shape=(_NCHUNK, 6))
+        d["first_bad"] = ti.ndarray(ti.i32, shape=_NCHUNK)
+        d["vmax_chunk"] = ti.ndarray(ti.f32, shape=_NCHUNK)
+        upload("mat_table", material_table(self.materials, self.settings.mass_scaling), ti.f32)
+        walls = np.array(self._walls, np.float32).reshape(-1, 3)
+        upload("walls", walls if len(walls) else np.zeros((1, 3), np.float32), ti.f32)
+        # colliders
+        nc = max(len(self.colliders), 1)
+        kinds = np.zeros(nc, np.int32)
+        prm = np.zeros((nc, 4), np.float32)
+        mu = np.zeros(nc, np.float32)
+        sticky = np.zeros(nc, np.int32)
+        info = np.zeros((nc, 4), np.int32)
+        sdf_parts, offset = [], 0
+        for i, c in enumerate(self.colliders):
+            kinds[i], prm[i], mu[i], sticky[i] = c.kind, c.params(), c.friction, int(c.sticky)
+            if isinstance(c, MeshCollider):
+                info[i] = (offset, *c.sdf.shape)
+                sdf_parts.append(c.sdf.ravel())
+                offset += c.sdf.size
+        upload("col_kind", kinds, ti.i32)
+        upload("col_prm", prm, ti.f32)
+        upload("col_mu", mu, ti.f32)
+        upload("col_sticky", sticky, ti.i32)
+        upload("sdf_info", info, ti.i32)
+        upload("sdf", np.concatenate(sdf_parts) if sdf_parts else np.zeros(1, np.float32), ti.f32)
+        d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
+        d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
+        d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
+        if self._grid_cap == 0:
+            self._alloc_grid(4096)
+        self._dirty = False
+        self._host_stale = False
+
+    def _upload_poses(self) -> None:
+        def rows(prev, nxt):
+            out = np.zeros((max(len(prev), 1), 14), np.float32)
+            for i, (a, b) in enumerate(zip(prev, nxt)):
+                qa, qb = matrix_to_quat(a[:3, :3]), matrix_to_quat(b[:3, :3])
+                if qa @ qb < 0:
+                    qb = -qb
+                out[i] = np.concatenate([a[:3, 3], qa, b[:3, 3], qb])
+            return out
+
+        self._dev["link_pose"].from_numpy(rows(self._link_prev, self._link_next))
+        self._dev["col_pose"].from_numpy(rows(self._col_prev, [c.pose for c in self.colliders]))
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict:
+        """The full mutable state (numpy arrays and scalars); see :meth:`load_state_dict`."""
+        self._pull()
+        return {
+            "particles": {k: self._host[k].copy() for k in _STATE_FIELDS} if self._n else {},
+            "link_prev": np.array(self._link_prev).copy(), "link_next": np.array(self._link_next).copy(),
+            "collider_prev": np.array(self._col_prev).copy(),
+            "collider_pose": np.array([c.pose for c in self.colliders]).copy(),
+            "awake": np.array([g.awake for g in self.groups]),
+            "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in self.groups],
+            "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
+            "collider_impulse": self._col_impulse.copy(), "last_dt_ctrl": self._last_dt_ctrl,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore a state from :meth:`state_dict` of a world built the same way (bit-exact)."""
+        parts = state.get("particles", {})
+        for k in _STATE_FIELDS if self._n else ():
+            if k not in parts or parts[k].shape != self._host[k].shape:
+                got = None if k not in parts else parts[k].shape
+                raise ConfigError(f"load_state_dict: particles[{k!r}] has shape {got}, "
+                                  f"this world needs {self._host[k].shape}")
+        if len(state["awake"]) != len(self.groups):
+            raise ConfigError(f"load_state_dict: state has {len(state['awake'])} groups, world has {len(self.groups)}")
+        self._pull()
+        for k in _STATE_FIELDS if self._n else ():
+            self._host[k] = parts[k].copy()
+        self._link_prev = [T.copy() for T in state["link_prev"]]
+        self._link_next = [T.copy() for T in state["link_next"]]
+        self._col_prev = [T.copy() for T in state["collider_prev"]]
+        for c, T in zip(self.colliders, state["collider_pose"]):
+            c.pose = T.copy()
+        for g, a, sp in zip(self.groups, state["awake"], state["sleep_pose"]):
+            g.awake, g.sleep_pose = bool(a), (None if sp is None else sp.copy())
+        self.time, self.step_count = float(state["time"]), int(state["step_count"])
+        self._vmax = float(state["vmax"])
+        self._col_impulse = state["collider_impulse"].copy()
+        self._last_dt_ctrl = float(state["last_dt_ctrl"])
+        self._dirty = True
+
+
+def _angle(R: np.ndarray) -> float:
+    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def _collider_radius(c: Collider) -> float:
+    from . import colliders as col
+
+    if c.kind == col.SPHERE:
+        return c.radius
+    if c.kind == col.BOX:
+        return float(np.linalg.norm(c.half_extents))
+    if c.kind == col.CAPSULE:
+        return c.radius + c.half_length
+    if c.kind == col.MESH:
+        return float(np.linalg.norm(np.abs(c.mesh.bounds).max(0)))
+    return math.inf

@@ -1,0 +1,15 @@
+"""3D Gaussian Splatting: Gaussian sets and their .ply files, a Taichi rasterizer
+(CPU and CUDA), and deformation of Gaussians by rigid links and MPM particles."""
+from .gaussians import (SH_C0, GaussianSet, covariance_from_scale_rotation, load_ply,
+                        num_sh_coeffs, quat_multiply, quat_to_rotmat, rgb_to_sh_dc,
+                        rotmat_to_quat, save_ply, sh_dc_to_rgb)
+from .rasterizer import (RenderOutput, intrinsics_from_fov, look_at, rasterize, render,
+                         sapien_pose_to_opencv_extrinsic)
+
+__all__ = [
+    "GaussianSet", "load_ply", "save_ply", "SH_C0", "rgb_to_sh_dc", "sh_dc_to_rgb",
+    "num_sh_coeffs", "quat_to_rotmat", "quat_multiply", "rotmat_to_quat",
+    "covariance_from_scale_rotation",
+    "RenderOutput", "rasterize", "render", "intrinsics_from_fov", "look_at",
+    "sapien_pose_to_opencv_extrinsic",
+]
