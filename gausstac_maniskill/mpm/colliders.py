@@ -147,10 +147,12 @@ class MeshCollider(Collider):
             raise ConfigError(f"{label}.mesh is required")
         if isinstance(mesh, (str, bytes)) or hasattr(mesh, "__fspath__"):
             path = str(mesh)
+            import os
+
+            if not os.path.isfile(path):
+                raise AssetError(f"{path}: mesh file not found ({label}.mesh)")
             try:
                 mesh = trimesh.load(path, force="mesh")
-            except FileNotFoundError:
-                raise AssetError(f"{path}: mesh file not found ({label}.mesh)") from None
             except Exception as exc:  # noqa: BLE001
                 raise AssetError(f"{path}: cannot read mesh ({label}.mesh): {exc}") from None
             label = f"{label} ({path})"
@@ -276,3 +278,50 @@ def collider_contact(kinds: ti.template(), prms: ti.template(), poses: ti.templa
     phi, n_local = local_sdf(kinds[k], prm, sdf, info, k, q)
     v = (x - (R0 @ q + t0)) / dt
     return phi, R1 @ n_local, v
+
+
+@ti.kernel
+def _sdf_query(points: ti.types.ndarray(dtype=ti.math.vec3, ndim=1), kind: ti.i32,
+               prm: ti.types.ndarray(dtype=ti.f32, ndim=2), pose: ti.types.ndarray(dtype=ti.f32, ndim=2),
+               sdf: ti.types.ndarray(dtype=ti.f32, ndim=1), info: ti.types.ndarray(dtype=ti.i32, ndim=2),
+               phi_out: ti.types.ndarray(dtype=ti.f32, ndim=1),
+               n_out: ti.types.ndarray(dtype=ti.math.vec3, ndim=1)):
+    for i in range(points.shape[0]):
+        kinds_dummy = kind
+        R, t = pose_at(pose, 0, 1.0)
+        q = R.transpose() @ (points[i] - t)
+        p4 = ti.Vector([prm[0, 0], prm[0, 1], prm[0, 2], prm[0, 3]])
+        phi, n = local_sdf(kinds_dummy, p4, sdf, info, 0, q)
+        phi_out[i] = phi
+        n_out[i] = R @ n
+
+
+def signed_distance(collider: Collider, points) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance [m] (negative inside) and outward unit normal of ``collider``
+    at world ``points`` [N, 3], evaluated by the same Taichi code the solver uses."""
+    from .. import backend
+    from ..transforms import pose_to_vec7
+
+    backend.ensure_init()
+    pts = np.ascontiguousarray(np.asarray(points, np.float32).reshape(-1, 3))
+    nd_pts = ti.Vector.ndarray(3, ti.f32, shape=len(pts))
+    nd_pts.from_numpy(pts)
+    row = np.concatenate([pose_to_vec7(collider.pose)] * 2).astype(np.float32)[None]
+    pose = ti.ndarray(ti.f32, shape=(1, 14))
+    pose.from_numpy(row)
+    prm = ti.ndarray(ti.f32, shape=(1, 4))
+    prm.from_numpy(collider.params()[None])
+    if isinstance(collider, MeshCollider):
+        grid = collider.sdf.ravel()
+        info_np = np.array([[0, *collider.sdf.shape]], np.int32)
+    else:
+        grid = np.zeros(1, np.float32)
+        info_np = np.zeros((1, 4), np.int32)
+    sdf = ti.ndarray(ti.f32, shape=len(grid))
+    sdf.from_numpy(np.ascontiguousarray(grid, dtype=np.float32))
+    info = ti.ndarray(ti.i32, shape=(1, 4))
+    info.from_numpy(info_np)
+    phi = ti.ndarray(ti.f32, shape=len(pts))
+    nrm = ti.Vector.ndarray(3, ti.f32, shape=len(pts))
+    _sdf_query(nd_pts, collider.kind, prm, pose, sdf, info, phi, nrm)
+    return phi.to_numpy(), nrm.to_numpy()

@@ -40,10 +40,12 @@ def bspline_weights(fx):
     return [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
 
 
-@ti.kernel
-def kinematic_update(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM,
-                     X0: NDV, link: NDI, group: NDI, link_poses: NDF2, group_bind: NDF2,
-                     alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32):
+@ti.func
+def kinematic_update(kin: ti.template(), n: ti.template(), x: ti.template(),
+        v: ti.template(), C: ti.template(), F: ti.template(), tau: ti.template(),
+        X0: ti.template(), link: ti.template(), group: ti.template(), link_poses: ti.template(),
+        group_bind: ti.template(), alpha0: ti.template(), alpha1: ti.template(),
+        dt: ti.template()):
     """Place kinematic particles on their link at fraction alpha0 of the control step.
 
     Their velocity is the finite difference of the link transform over this substep
@@ -65,8 +67,9 @@ def kinematic_update(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: N
         tau[p] = ti.Matrix.zero(ti.f32, 3, 3)
 
 
-@ti.kernel
-def chunk_bounds(active: NDI, n: ti.i32, x: NDV, inv_dx: ti.f32, nchunk: ti.i32, out: NDI2):
+@ti.func
+def chunk_bounds(active: ti.template(), n: ti.template(), x: ti.template(),
+        inv_dx: ti.template(), nchunk: ti.template(), out: ti.template()):
     """Per chunk of particles, min/max of the stencil base cell (out[c] = lo xyz, hi xyz)."""
     ti.loop_config(block_dim=1)
     for c in range(nchunk):
@@ -83,9 +86,11 @@ def chunk_bounds(active: NDI, n: ti.i32, x: NDV, inv_dx: ti.f32, nchunk: ti.i32,
             out[c, 3 + d] = hi[d]
 
 
-@ti.kernel
-def sort_into_slabs(active: NDI, n: ti.i32, x: NDV, inv_dx: ti.f32, axis: ti.i32, lo_axis: ti.i32,
-                    n_slabs: ti.i32, slab_of: NDI, slab_start: NDI, cursor: NDI, order: NDI):
+@ti.func
+def sort_into_slabs(active: ti.template(), n: ti.template(), x: ti.template(),
+        inv_dx: ti.template(), axis: ti.template(), lo_axis: ti.template(),
+        n_slabs: ti.template(), slab_of: ti.template(), slab_start: ti.template(),
+        cursor: ti.template(), order: ti.template()):
     """Stable counting sort of the active particles by slab (two cells along ``axis``)."""
     ti.loop_config(serialize=True)
     for s in range(n_slabs + 1):
@@ -107,19 +112,23 @@ def sort_into_slabs(active: NDI, n: ti.i32, x: NDV, inv_dx: ti.f32, axis: ti.i32
         cursor[s] += 1
 
 
-@ti.kernel
-def clear_grid(ncell: ti.i32, grid_v: NDV, grid_m: NDF, grid_mk: NDF):
+@ti.func
+def clear_grid(ncell: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        grid_mk: ti.template(), grid_dp: ti.template()):
     for i in range(ncell):
         grid_v[i] = vec3(0.0)
+        grid_dp[i] = vec3(0.0)
         grid_m[i] = 0.0
         grid_mk[i] = 0.0
 
 
-@ti.kernel
-def p2g(order: NDI, slab_start: NDI, n_slabs: ti.i32, x: NDV, v: NDV, C: NDM, tau: NDM,
-        mass: NDF, vol: NDF, kind: NDI, link: NDI,
-        ox: ti.i32, oy: ti.i32, oz: ti.i32, ny: ti.i32, nz: ti.i32, inv_dx: ti.f32, dt: ti.f32,
-        grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_link: NDI):
+@ti.func
+def p2g(order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
+        x: ti.template(), v: ti.template(), C: ti.template(), tau: ti.template(),
+        mass: ti.template(), vol: ti.template(), kind: ti.template(), link: ti.template(),
+        ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
+        nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
+        grid_m: ti.template(), grid_mk: ti.template(), grid_link: ti.template()):
     """Scatter mass and APIC momentum (with the stress impulse) to the grid.
 
     Momentum to node i: w_ip [m_p v_p + (m_p C_p - Δt V0_p (4/dx²) τ_p)(x_i - x_p)].
@@ -153,14 +162,17 @@ def p2g(order: NDI, slab_start: NDI, n_slabs: ti.i32, x: NDV, v: NDV, C: NDM, ta
                         grid_link[idx] = lk
 
 
-@ti.kernel
-def grid_update(ncell: ti.i32, ox: ti.i32, oy: ti.i32, oz: ti.i32, ny: ti.i32, nz: ti.i32,
-                dx: ti.f32, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32, damping: ti.f32,
-                grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_link: NDI,
-                link_poses: NDF2, alpha0: ti.f32, alpha1: ti.f32,
-                walls: NDF2, n_walls: ti.i32,
-                grid_contact: ti.i32, n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
-                col_mu: NDF, col_sticky: NDI, sdf: NDF, sdf_info: NDI2, col_impulse: NDF2):
+@ti.func
+def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
+        oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
+        dt: ti.template(), gx: ti.template(), gy: ti.template(), gz: ti.template(),
+        damping: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        grid_mk: ti.template(), grid_link: ti.template(), link_poses: ti.template(),
+        alpha0: ti.template(), alpha1: ti.template(), walls: ti.template(),
+        n_walls: ti.template(), grid_contact: ti.template(), n_col: ti.template(),
+        col_kind: ti.template(), col_prm: ti.template(), col_pose: ti.template(),
+        col_mu: ti.template(), col_sticky: ti.template(), sdf: ti.template(),
+        sdf_info: ti.template(), col_impulse: ti.template()):
     """Momentum -> velocity, gravity, damping, then boundary conditions per node.
 
     * Nodes where kinematic mass is at least half the node mass move exactly with
@@ -219,22 +231,13 @@ def grid_update(ncell: ti.i32, ox: ti.i32, oy: ti.i32, oz: ti.i32, ny: ti.i32, n
             grid_v[idx] = vel
 
 
-@ti.kernel
-def g2p(order: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM, Jp: NDF,
-        kind: NDI, matid: NDI, mass: NDF, radius: NDF, impulse: NDV, contact_id: NDI,
-        mat_table: NDF2,
-        ox: ti.i32, oy: ti.i32, oz: ti.i32, ny: ti.i32, nz: ti.i32, inv_dx: ti.f32, dt: ti.f32,
-        grid_v: NDV, particle_contact: ti.i32, n_col: ti.i32, col_kind: NDI, col_prm: NDF2,
-        col_pose: NDF2, col_mu: NDF, col_sticky: NDI, sdf: NDF, sdf_info: NDI2,
-        alpha0: ti.f32, alpha1: ti.f32, max_push: ti.f32):
-    """Gather velocity and its gradient, update F (and plasticity), stress, contact, advect.
-
-    Particle contact: a particle whose predicted position x + Δt v lies closer than
-    its radius to a collider's surface gets the normal velocity that puts it exactly
-    on the surface (capped at ``max_push``), and Coulomb friction on its tangential
-    velocity relative to the collider. The velocity change times the particle mass
-    is the contact impulse, stored per particle (its negative acts on the collider).
-    """
+@ti.func
+def g2p(order: ti.template(), n: ti.template(), x: ti.template(), v: ti.template(),
+        C: ti.template(), F: ti.template(), tau: ti.template(), Jp: ti.template(),
+        kind: ti.template(), matid: ti.template(), mat_table: ti.template(), ox: ti.template(),
+        oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(),
+        inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template()):
+    """Gather velocity and its gradient, update F (and plasticity) and stress, advect."""
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
         p = order[ii]
@@ -259,32 +262,104 @@ def g2p(order: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM, Jp: NDF
             if model == mat.FOAM:
                 Fn, jp = mat.plastic_return(Fn, jp, mat_table[mi, 3], mat_table[mi, 4])
             tau[p] = mat.kirchhoff_stress(Fn, jp, mat_table[mi, 0], mat_table[mi, 1], model, mat_table[mi, 5])
-            # contact with rigid colliders (particle mode)
-            if particle_contact:
-                for c in range(n_col):
-                    x_pred = x[p] + dt * new_v
-                    phi, nrm, vc = collider_contact(col_kind, col_prm, col_pose, sdf, sdf_info,
-                                                    c, x_pred, alpha0, alpha1, dt)
-                    gap = phi - radius[p]
-                    if gap < 0.0:
-                        dvn = ti.min(-gap / dt, max_push)
-                        vrel = new_v - vc
-                        vn = vrel.dot(nrm)
-                        vt = vrel - vn * nrm
-                        vtn = vt.norm()
-                        if col_sticky[c] or vtn <= col_mu[c] * dvn:
-                            vt = vec3(0.0)
-                        else:
-                            vt *= 1.0 - col_mu[c] * dvn / vtn
-                        out_v = vc + (vn + dvn) * nrm + vt
-                        impulse[p] += mass[p] * (out_v - new_v)
-                        contact_id[p] = c
-                        new_v = out_v
             v[p] = new_v
             C[p] = new_C
             F[p] = Fn
             Jp[p] = jp
             x[p] = x[p] + dt * new_v
+
+
+@ti.func
+def contact_scatter(order: ti.template(), slab_start: ti.template(),
+        n_slabs: ti.template(), x: ti.template(), kind: ti.template(), mass: ti.template(),
+        radius: ti.template(), impulse: ti.template(), contact_id: ti.template(),
+        ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
+        nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
+        grid_dp: ti.template(), n_col: ti.template(), col_kind: ti.template(),
+        col_prm: ti.template(), col_pose: ti.template(), col_mu: ti.template(),
+        col_sticky: ti.template(), sdf: ti.template(), sdf_info: ti.template(),
+        alpha0: ti.template(), alpha1: ti.template(), max_push: ti.template(),
+        reach: ti.template()):
+    """Particle-detected contact, applied as momentum on the grid.
+
+    For each dynamic particle near a collider, its free velocity v* is gathered
+    from the grid and its end-of-substep position x + Δt v* is tested against the
+    collider's surface inflated by the particle radius (the material's surface lies
+    half a particle spacing beyond the centres). If it would penetrate, the velocity
+    change Δv that puts it on the surface (normal part, capped at ``max_push``) with
+    Coulomb friction on the tangential slip is turned into the impulse m_p Δv, which
+    is scattered to the particle's grid stencil (weights w_ip), so the whole
+    continuum - not only the particle - feels the collider. The impulse is also
+    stored per particle (contact forces / tactile) and, negated, acts on the collider.
+    Slab-ordered like :func:`p2g`, hence atomic-free and deterministic.
+    """
+    origin = ti.Vector([ox, oy, oz])
+    for color in ti.static(range(2)):
+        ti.loop_config(block_dim=1)
+        for h in range((n_slabs - color + 1) // 2):
+            s = 2 * h + color
+            for ii in range(slab_start[s], slab_start[s + 1]):
+                p = order[ii]
+                if kind[p] == DYNAMIC:
+                    near = False
+                    for c in range(n_col):
+                        phi, nrm, vc = collider_contact(col_kind, col_prm, col_pose, sdf, sdf_info,
+                                                        c, x[p], alpha0, alpha1, dt)
+                        if phi - radius[p] < reach:
+                            near = True
+                    if near:
+                        Xp = x[p] * inv_dx - origin
+                        base = ti.cast(ti.floor(Xp - 0.5), ti.i32)
+                        fx = Xp - base
+                        w = bspline_weights(fx)
+                        v0 = vec3(0.0)
+                        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                            v0 += w[i][0] * w[j][1] * w[k][2] * grid_v[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
+                        vp = v0
+                        for c in range(n_col):
+                            phi, nrm, vc = collider_contact(col_kind, col_prm, col_pose, sdf, sdf_info,
+                                                            c, x[p] + dt * vp, alpha0, alpha1, dt)
+                            gap = phi - radius[p]
+                            if gap < 0.0:
+                                dvn = ti.min(-gap / dt, max_push)
+                                vrel = vp - vc
+                                vt = vrel - vrel.dot(nrm) * nrm
+                                vtn = vt.norm()
+                                dvt = vec3(0.0)
+                                if col_sticky[c] or vtn <= col_mu[c] * dvn:
+                                    dvt = -vt
+                                else:
+                                    dvt = -(col_mu[c] * dvn / vtn) * vt
+                                vp = vp + dvn * nrm + dvt
+                                contact_id[p] = c
+                        if contact_id[p] >= 0:
+                            J = mass[p] * (vp - v0)
+                            impulse[p] += J
+                            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                                idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
+                                grid_dp[idx] = grid_dp[idx] + (w[i][0] * w[j][1] * w[k][2]) * J
+
+
+@ti.func
+def contact_apply(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
+        oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
+        grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
+        grid_dp: ti.template(), walls: ti.template(), n_walls: ti.template()):
+    """Add the scattered contact momentum to free nodes (not pinned, walls kept)."""
+    for idx in range(ncell):
+        m = grid_m[idx]
+        dp = grid_dp[idx]
+        if m > 0.0 and grid_mk[idx] < 0.5 * m and dp.norm_sqr() > 0.0:
+            k = idx % nz
+            j = (idx // nz) % ny
+            i = idx // (ny * nz)
+            xi = ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
+            dv = dp / m
+            for w in range(n_walls):
+                ax = ti.cast(walls[w, 0], ti.i32)
+                if walls[w, 2] * (xi[ax] - walls[w, 1]) <= 1e-9:
+                    dv[ax] = 0.0
+            grid_v[idx] = grid_v[idx] + dv
 
 
 @ti.kernel
@@ -347,3 +422,76 @@ def energies(active: NDI, n: ti.i32, v: NDV, F: NDM, Jp: NDF, kind: NDI, matid: 
             out[1] += vol[p] * mat.strain_energy_density(
                 F[p], Jp[p], mat_table[mi, 0], mat_table[mi, 1],
                 ti.cast(mat_table[mi, 2], ti.i32), mat_table[mi, 5])
+
+
+# --------------------------------------------------------------------------- fused substep
+# Taichi spends ~10 µs per kernel argument on the Python side; a substep is therefore
+# two launches: `prepare` (returns the active box by value) and `advance`.
+
+BOX = ti.types.vector(8, ti.i32)
+
+
+@ti.kernel
+def prepare(active: NDI, n: ti.i32, kin: NDI, n_kin: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM,
+            X0: NDV, link: NDI, group: NDI, link_poses: NDF2, group_bind: NDF2,
+            alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32, inv_dx: ti.f32, margin: ti.i32,
+            bounds: NDI2, slab_of: NDI, slab_start: NDI, cursor: NDI, order: NDI, slab_cap: ti.i32) -> BOX:
+    """Move kinematic particles, find the active box, sort particles into slabs.
+
+    Returns (origin xyz, dims xyz, number of slabs, slab axis); number of slabs is
+    -1 if it would exceed ``slab_cap`` (nothing is sorted then).
+    """
+    kinematic_update(kin, n_kin, x, v, C, F, tau, X0, link, group, link_poses, group_bind, alpha0, alpha1, dt)
+    chunk_bounds(active, n, x, inv_dx, 16, bounds)
+    lo = ti.Vector([BIG, BIG, BIG])
+    hi = ti.Vector([-BIG, -BIG, -BIG])
+    for c in ti.static(range(16)):  # tiny reduction, unrolled (serial)
+        for d in ti.static(range(3)):
+            lo[d] = ti.min(lo[d], bounds[c, d])
+            hi[d] = ti.max(hi[d], bounds[c, 3 + d])
+    dims = hi - lo + 3 + 2 * margin
+    axis = 0
+    if dims[1] > dims[axis]:
+        axis = 1
+    if dims[2] > dims[axis]:
+        axis = 2
+    n_slabs = (hi[axis] - lo[axis]) // 2 + 1
+    if n_slabs + 1 > slab_cap:
+        n_slabs = -1
+    else:
+        sort_into_slabs(active, n, x, inv_dx, axis, lo[axis], n_slabs, slab_of, slab_start, cursor, order)
+    o = lo - margin
+    return ti.Vector([o[0], o[1], o[2], dims[0], dims[1], dims[2], n_slabs, axis])
+
+
+@ti.kernel
+def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
+            x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM, Jp: NDF,
+            mass: NDF, vol: NDF, radius: NDF, kind: NDI, link: NDI, matid: NDI, mat_table: NDF2,
+            impulse: NDV, contact_id: NDI,
+            ox: ti.i32, oy: ti.i32, oz: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+            dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, damping: ti.f32,
+            grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_link: NDI, grid_dp: NDV,
+            link_poses: NDF2, alpha0: ti.f32, alpha1: ti.f32, walls: NDF2, n_walls: ti.i32,
+            contact_mode: ti.template(), n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
+            col_mu: NDF, col_sticky: NDI, sdf: NDF, sdf_info: NDI2, col_impulse: NDF2,
+            max_push: ti.f32, reach: ti.f32):
+    """One MLS-MPM substep: clear grid, P2G, grid update + BCs, contact, G2P.
+
+    ``contact_mode``: 0 no colliders, 1 particle-detected (grid-applied), 2 grid nodes.
+    """
+    inv_dx = 1.0 / dx
+    ncell = nx * ny * nz
+    clear_grid(ncell, grid_v, grid_m, grid_mk, grid_dp)
+    p2g(order, slab_start, n_slabs, x, v, C, tau, mass, vol, kind, link, ox, oy, oz, ny, nz, inv_dx, dt,
+        grid_v, grid_m, grid_mk, grid_link)
+    grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping,
+                grid_v, grid_m, grid_mk, grid_link, link_poses, alpha0, alpha1, walls, n_walls,
+                1 if ti.static(contact_mode == 2) else 0, n_col, col_kind, col_prm, col_pose, col_mu, col_sticky,
+                sdf, sdf_info, col_impulse)
+    if ti.static(contact_mode == 1):
+        contact_scatter(order, slab_start, n_slabs, x, kind, mass, radius, impulse, contact_id,
+                        ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_dp, n_col, col_kind, col_prm,
+                        col_pose, col_mu, col_sticky, sdf, sdf_info, alpha0, alpha1, max_push, reach)
+        contact_apply(ncell, ox, oy, oz, ny, nz, dx, grid_v, grid_m, grid_mk, grid_dp, walls, n_walls)
+    g2p(order, n, x, v, C, F, tau, Jp, kind, matid, mat_table, ox, oy, oz, ny, nz, inv_dx, dt, grid_v)

@@ -45,6 +45,7 @@ from .materials import material_table
 __all__ = ["MPMWorld", "StepInfo", "Group"]
 
 _NCHUNK = 16
+_SLAB_CAP = 1 << 16  # slabs are 2 cells: the active box may span 131072 cells along one axis
 _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id")
 
 
@@ -115,6 +116,9 @@ class MPMWorld:
         self._vmax = 0.0
         self._col_impulse = np.zeros((0, 6))
         self._last_dt_ctrl = 1.0
+        self._reach = 0.0
+        self._link_radius: list[float] = []
+        self._gravity = ti.math.vec3(*self.settings.gravity)
 
     # ------------------------------------------------------------------ building
     def add_link(self, name: str, pose) -> int:
@@ -372,15 +376,16 @@ class MPMWorld:
         g.awake = bool(awake)
         self._dirty = True
 
-    def plan_substeps(self, dt: float) -> tuple[int, float]:
+    def plan_substeps(self, dt: float, driver_speed: float | None = None) -> tuple[int, float]:
         """Substeps for a control step of ``dt`` seconds from the CFL bound.
 
         Raises:
             SimulationError: the bound needs more than ``settings.max_substeps``.
         """
+        self._push()
         s = self.settings
         c = self.wave_speed()
-        v = self._vmax + self._driver_speed(dt)
+        v = self._vmax + (self._driver_speed(dt) if driver_speed is None else driver_speed)
         dt_max = s.cfl * s.dx / max(c + v, 1e-12)
         n = max(1, math.ceil(dt / dt_max - 1e-9))
         if n > s.max_substeps:
@@ -398,8 +403,7 @@ class MPMWorld:
         for i in range(len(self.link_names)):
             a, b = self._link_prev[i], self._link_next[i]
             ang = _angle(a[:3, :3].T @ b[:3, :3])
-            mask = (h.get("link", np.zeros(0)) == i) & (h.get("kind", np.zeros(0)) == 1)
-            r = float(np.linalg.norm(h["X0"][mask], axis=1).max()) if mask.any() else 0.0
+            r = self._link_radius[i] if i < len(self._link_radius) else 0.0
             speed = max(speed, (np.linalg.norm(b[:3, 3] - a[:3, 3]) + ang * r) / dt)
         for c, a in zip(self.colliders, self._col_prev):
             b = c.pose
@@ -424,7 +428,10 @@ class MPMWorld:
             raise ConfigError(f"step(dt={dt!r}): dt must be a positive finite number of seconds")
         t0 = time.perf_counter()
         self._push()
-        n_sub, dt_sub = self.plan_substeps(float(dt))
+        driver = self._driver_speed(float(dt))
+        n_sub, dt_sub = self.plan_substeps(float(dt), driver)
+        # particles farther than this from a collider cannot reach it within a substep
+        self._reach = 2.0 * (self._vmax + driver) * dt_sub
         self._upload_poses()
         d = self._dev
         s = self.settings
@@ -456,48 +463,30 @@ class MPMWorld:
     def _substep(self, a0: float, a1: float, dt: float) -> int:
         d, s = self._dev, self.settings
         inv_dx = 1.0 / s.dx
-        if self._n_kin:
-            K.kinematic_update(d["active_kin"], self._n_kin, d["x"], d["v"], d["C"], d["F"], d["tau"],
-                               d["X0"], d["link"], d["group"], d["link_pose"], d["group_bind"], a0, a1, dt)
-        # active region: bounding box of stencil base cells, plus margin
-        K.chunk_bounds(d["active"], self._n_active, d["x"], inv_dx, _NCHUNK, d["bounds"])
-        b = d["bounds"].to_numpy()
-        lo, hi = b[:, :3].min(0), b[:, 3:].max(0)
-        m = s.grid_margin
-        origin = lo - m
-        dims = hi - lo + 3 + 2 * m
-        ncell = int(np.prod(dims.astype(np.int64)))
-        if ncell > s.max_grid_cells:
-            raise SimulationError(self._explode_message(lo, hi))
+        box = K.prepare(d["active"], self._n_active, d["active_kin"], self._n_kin, d["x"], d["v"], d["C"],
+                        d["F"], d["tau"], d["X0"], d["link"], d["group"], d["link_pose"], d["group_bind"],
+                        a0, a1, dt, inv_dx, s.grid_margin, d["bounds"], d["slab_of"], d["slab_start"],
+                        d["cursor"], d["order"], _SLAB_CAP)
+        ox, oy, oz, nx, ny, nz, n_slabs, _axis = (int(b) for b in box)
+        ncell = nx * ny * nz
+        if ncell > s.max_grid_cells or n_slabs < 0:
+            raise SimulationError(self._explode_message(np.array([ox, oy, oz]) + s.grid_margin,
+                                                        np.array([ox + nx, oy + ny, oz + nz]) - s.grid_margin - 3))
         if ncell > self._grid_cap:
             self._alloc_grid(int(min(ncell * 1.5, s.max_grid_cells)))
-        axis = int(np.argmax(dims))
-        n_slabs = int((hi[axis] - lo[axis]) // 2 + 1)
-        if n_slabs + 1 > self._slab_cap:
-            self._slab_cap = 2 * (n_slabs + 1)
-            d["slab_start"] = ti.ndarray(ti.i32, shape=self._slab_cap)
-            d["cursor"] = ti.ndarray(ti.i32, shape=self._slab_cap)
-        K.sort_into_slabs(d["active"], self._n_active, d["x"], inv_dx, axis, int(lo[axis]), n_slabs,
-                          d["slab_of"], d["slab_start"], d["cursor"], d["order"])
-        ox, oy, oz = (int(v) for v in origin)
-        nx, ny, nz = (int(v) for v in dims)
-        K.clear_grid(ncell, d["grid_v"], d["grid_m"], d["grid_mk"])
-        K.p2g(d["order"], d["slab_start"], n_slabs, d["x"], d["v"], d["C"], d["tau"], d["mass"],
-              d["vol"], d["kind"], d["link"], ox, oy, oz, ny, nz, inv_dx, dt,
-              d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_link"])
-        g = s.gravity
-        K.grid_update(ncell, ox, oy, oz, ny, nz, s.dx, dt, g[0], g[1], g[2], math.exp(-s.damping * dt),
-                      d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_link"], d["link_pose"], a0, a1,
-                      d["walls"], len(self._walls), int(self.contact == "grid"), len(self.colliders),
-                      d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"], d["col_sticky"],
-                      d["sdf"], d["sdf_info"], d["col_impulse"])
-        K.g2p(d["order"], self._n_active, d["x"], d["v"], d["C"], d["F"], d["tau"], d["Jp"],
-              d["kind"], d["matid"], d["mass"], d["radius"], d["impulse"], d["contact_id"],
-              d["mat_table"], ox, oy, oz, ny, nz, inv_dx, dt, d["grid_v"],
-              int(self.contact == "particle"), len(self.colliders), d["col_kind"], d["col_prm"],
-              d["col_pose"], d["col_mu"], d["col_sticky"], d["sdf"], d["sdf_info"], a0, a1,
-              0.3 * s.dx / dt)
+        mode = 0 if not self.colliders else (1 if self.contact == "particle" else 2)
+        K.advance(d["order"], d["slab_start"], n_slabs, self._n_active, d["x"], d["v"], d["C"], d["F"],
+                  d["tau"], d["Jp"], d["mass"], d["vol"], d["radius"], d["kind"], d["link"], d["matid"],
+                  d["mat_table"], d["impulse"], d["contact_id"], ox, oy, oz, nx, ny, nz, s.dx, dt,
+                  self._gravity, self._damp_factor(dt), d["grid_v"], d["grid_m"], d["grid_mk"],
+                  d["grid_link"], d["grid_dp"], d["link_pose"], a0, a1, d["walls"], len(self._walls),
+                  mode, len(self.colliders), d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"],
+                  d["col_sticky"], d["sdf"], d["sdf_info"], d["col_impulse"], 0.3 * s.dx / dt,
+                  s.dx + self._reach)
         return ncell
+
+    def _damp_factor(self, dt: float) -> float:
+        return math.exp(-self.settings.damping * dt)
 
     def _alloc_grid(self, cap: int) -> None:
         d = self._dev
@@ -505,6 +494,7 @@ class MPMWorld:
         d["grid_m"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_mk"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_link"] = ti.ndarray(ti.i32, shape=cap)
+        d["grid_dp"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         self._grid_cap = cap
 
     def _explode_message(self, lo, hi) -> str:
@@ -588,6 +578,9 @@ class MPMWorld:
         upload("active_kin", np.resize(active_kin, max(len(active_kin), 1)), ti.i32)
         for key in ("order", "slab_of"):
             d[key] = ti.ndarray(ti.i32, shape=n)
+        if "slab_start" not in d:
+            d["slab_start"] = ti.ndarray(ti.i32, shape=_SLAB_CAP)
+            d["cursor"] = ti.ndarray(ti.i32, shape=_SLAB_CAP)
         d["bounds"] = ti.ndarray(ti.i32, shape=(_NCHUNK, 6))
         d["first_bad"] = ti.ndarray(ti.i32, shape=_NCHUNK)
         d["vmax_chunk"] = ti.ndarray(ti.f32, shape=_NCHUNK)
@@ -619,6 +612,10 @@ class MPMWorld:
         d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
         if self._grid_cap == 0:
             self._alloc_grid(4096)
+        self._link_radius = []
+        for i in range(len(self.link_names)):
+            mask = (h["link"] == i) & (h["kind"] == 1) if self._n else np.zeros(0, bool)
+            self._link_radius.append(float(np.linalg.norm(h["X0"][mask], axis=1).max()) if mask.any() else 0.0)
         self._dirty = False
         self._host_stale = False
 

@@ -3,6 +3,8 @@
 from .gaussians import (SH_C0, GaussianSet, covariance_from_scale_rotation, load_ply,
                         num_sh_coeffs, quat_multiply, quat_to_rotmat, rgb_to_sh_dc,
                         rotmat_to_quat, save_ply, sh_dc_to_rgb)
+from .deform import (PosedGaussians, SoftBinding, polar_rotation, pose_gaussians,
+                     rigid_transform, soft_deform)
 from .rasterizer import (RenderOutput, intrinsics_from_fov, look_at, rasterize, render,
                          sapien_pose_to_opencv_extrinsic)
 
@@ -12,4 +14,6 @@ __all__ = [
     "covariance_from_scale_rotation",
     "RenderOutput", "rasterize", "render", "intrinsics_from_fov", "look_at",
     "sapien_pose_to_opencv_extrinsic",
+    "rigid_transform", "polar_rotation", "SoftBinding", "soft_deform", "PosedGaussians",
+    "pose_gaussians",
 ]

@@ -1,0 +1,255 @@
+"""Moving Gaussians with the simulation: rigid links and MPM particles (torch, vectorised).
+
+Two bindings, as in GaussTac:
+
+* **Rigid** — Gaussian g with ``link_id[g] = l`` is stored in link l's frame
+  (rest/link-local mean μ⁰ and rotation q⁰). With the link's world pose
+  ``T_l = [R_l | t_l]``: μ = R_l μ⁰ + t_l, q = q_l ⊗ q⁰ (so Σ = R_l Σ⁰ R_lᵀ),
+  and its SH frame turns with the link (view direction seen by the SH = R_lᵀ d).
+* **Soft** — Gaussian g is bound to one MPM particle p(g) (the particle nearest
+  to its rest mean, :meth:`SoftBinding.from_nearest`), with rest offset
+  o_g = μ⁰_g − X_p (X_p the particle's rest position). With the particle's
+  current position x_p and deformation gradient F_p::
+
+      μ_g = x_p + F_p o_g          (first-order deformation of the offset)
+      Σ_g = F_p Σ⁰_g F_pᵀ          (the ellipsoid is pushed forward by F)
+      SH evaluated at R(F_p)ᵀ d    (R = polar rotation of F_p, det R = +1)
+
+The result of :func:`pose_gaussians` is a :class:`PosedGaussians` with full
+world covariances, rendered by :func:`~gausstac_maniskill.splat.rasterizer.rasterize`
+through its ``covars`` and ``sh_rotations`` arguments.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..errors import ConfigError
+from .gaussians import GaussianSet, covariance_from_scale_rotation, quat_multiply, rotmat_to_quat
+
+__all__ = [
+    "rigid_transform",
+    "polar_rotation",
+    "SoftBinding",
+    "soft_deform",
+    "PosedGaussians",
+    "pose_gaussians",
+]
+
+
+def _check_poses(link_poses: torch.Tensor, link_id: torch.Tensor) -> torch.Tensor:
+    if not isinstance(link_poses, torch.Tensor) or link_poses.dim() not in (3, 4) \
+            or link_poses.shape[-2:] != (4, 4):
+        raise ConfigError(f"link_poses has shape {list(getattr(link_poses, 'shape', []))}, "
+                          "expected [L, 4, 4] or [B, L, 4, 4]")
+    if not torch.isfinite(link_poses).all():
+        raise ConfigError("link_poses contains NaN or inf")
+    n_links = link_poses.shape[-3]
+    if link_id.numel() and (link_id.min() < 0 or link_id.max() >= n_links):
+        raise ConfigError(f"link_id values must lie in [0, {n_links}) for {n_links} link poses, "
+                          f"got range [{int(link_id.min())}, {int(link_id.max())}]")
+    return link_poses
+
+
+def rigid_transform(means: torch.Tensor, quats: torch.Tensor, link_id: torch.Tensor,
+                    link_poses: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Move link-local Gaussians to the world with their links' poses.
+
+    Args:
+        means: [N, 3] link-local (rest) centres, metres.
+        quats: [N, 4] link-local rotations (w, x, y, z).
+        link_id: [N] int, index of each Gaussian's link in ``link_poses``.
+        link_poses: [L, 4, 4] or [B, L, 4, 4] link -> world transforms.
+
+    Returns:
+        (means [..., N, 3] = R_l μ⁰ + t_l, quats [..., N, 4] = q_l ⊗ q⁰), with
+        the leading batch dimension B when ``link_poses`` has one.
+    """
+    link_poses = _check_poses(link_poses, link_id)
+    T = link_poses.to(means.dtype)[..., link_id, :, :]  # [..., N, 4, 4]
+    R, t = T[..., :3, :3], T[..., :3, 3]
+    world_means = (R @ means.unsqueeze(-1)).squeeze(-1) + t
+    q_link = rotmat_to_quat(R)
+    return world_means, quat_multiply(q_link, quats.expand_as(q_link))
+
+
+def polar_rotation(F: torch.Tensor) -> torch.Tensor:
+    """Rotation R of the polar decomposition F = R S (S symmetric positive), [..., 3, 3].
+
+    Via the SVD F = U Σ Vᵀ: R = U Vᵀ, with the sign of U's last column flipped
+    when det(U Vᵀ) < 0 so that R is a proper rotation (det R = +1) even for
+    inverted elements.
+    """
+    U, _, Vh = torch.linalg.svd(F.to(torch.float64))
+    det = torch.linalg.det(U @ Vh)
+    U = U.clone()
+    U[..., :, 2] *= torch.where(det < 0, -1.0, 1.0).to(U.dtype).unsqueeze(-1)
+    return (U @ Vh).to(F.dtype)
+
+
+@dataclass
+class SoftBinding:
+    """Which MPM particle carries each soft Gaussian (Gaussian -> particle map).
+
+    Attributes:
+        gaussian_index: [G] int64, indices (into the GaussianSet) of the soft Gaussians.
+        particle_index: [G] int64, p(g): the particle each of them follows.
+        rest_offset: [G, 3] o_g = μ⁰_g − X_p(g), metres (world rest frame).
+        rest_covariance: [G, 3, 3] Σ⁰_g, m² (world rest frame).
+    """
+
+    gaussian_index: torch.Tensor
+    particle_index: torch.Tensor
+    rest_offset: torch.Tensor
+    rest_covariance: torch.Tensor
+
+    @classmethod
+    def from_nearest(cls, gaussians: GaussianSet, particle_rest: torch.Tensor,
+                     gaussian_index: torch.Tensor | None = None,
+                     max_distance: float | None = None) -> "SoftBinding":
+        """Bind each selected Gaussian to its nearest particle at rest (scipy cKDTree).
+
+        Args:
+            gaussians: the set; its means/quats/scales are the rest state, in
+                the same (world rest) frame as ``particle_rest``.
+            particle_rest: [P, 3] rest positions X of the MPM particles, metres.
+            gaussian_index: [G] indices of the soft Gaussians; default all of
+                them with ``group >= 0``.
+            max_distance: raise ConfigError if a Gaussian is farther than this
+                (metres) from every particle (a binding error, e.g. wrong frame).
+        """
+        from scipy.spatial import cKDTree
+
+        if gaussian_index is None:
+            gaussian_index = torch.nonzero(gaussians.group >= 0).flatten()
+        gaussian_index = torch.as_tensor(gaussian_index, dtype=torch.int64).flatten()
+        X = torch.as_tensor(particle_rest, dtype=torch.float32)
+        if X.dim() != 2 or X.shape[1] != 3 or X.shape[0] == 0:
+            raise ConfigError(f"particle_rest has shape {list(X.shape)}, expected [P, 3], P > 0")
+        mu0 = gaussians.means[gaussian_index].detach().cpu()
+        dist, idx = cKDTree(X.cpu().numpy()).query(mu0.numpy().astype(np.float64))
+        if max_distance is not None and len(dist) and dist.max() > max_distance:
+            g = int(np.argmax(dist))
+            raise ConfigError(f"soft Gaussian {int(gaussian_index[g])} is {dist[g]:.4g} m from the "
+                              f"nearest particle (max_distance={max_distance})")
+        idx = torch.as_tensor(idx, dtype=torch.int64)
+        dev = gaussians.device
+        sub = gaussians[gaussian_index.to(dev)]
+        return cls(gaussian_index.to(dev), idx.to(dev),
+                   (mu0 - X[idx]).to(dev), sub.covariances())
+
+    def __len__(self) -> int:
+        return self.gaussian_index.shape[0]
+
+
+def soft_deform(binding: SoftBinding, x: torch.Tensor, F: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Deform soft Gaussians with their particles.
+
+    Args:
+        binding: the Gaussian -> particle map.
+        x: [P, 3] or [B, P, 3] current particle positions, metres.
+        F: [P, 3, 3] or [B, P, 3, 3] particle deformation gradients.
+
+    Returns:
+        (means [..., G, 3] = x_p + F_p o_g, covariances [..., G, 3, 3] = F Σ⁰ Fᵀ,
+        sh_rotations [..., G, 3, 3] = polar(F_p)).
+    """
+    if x.dim() not in (2, 3) or x.shape[-1] != 3:
+        raise ConfigError(f"particle x has shape {list(x.shape)}, expected [P, 3] or [B, P, 3]")
+    if F.shape != x.shape + (3,):
+        raise ConfigError(f"particle F has shape {list(F.shape)}, expected {list(x.shape) + [3]}")
+    for name, t in (("particle x", x), ("particle F", F)):
+        if not torch.isfinite(t).all():
+            raise ConfigError(f"{name} contains NaN or inf")
+    p = binding.particle_index
+    if len(binding) and int(p.max()) >= x.shape[-2]:
+        raise ConfigError(f"binding refers to particle {int(p.max())} but x has "
+                          f"{x.shape[-2]} particles")
+    Fp = F[..., p, :, :]
+    means = x[..., p, :] + (Fp @ binding.rest_offset.unsqueeze(-1)).squeeze(-1)
+    covs = Fp @ binding.rest_covariance @ Fp.transpose(-1, -2)
+    return means, covs, polar_rotation(Fp)
+
+
+@dataclass
+class PosedGaussians:
+    """Gaussians in world space with full covariances, ready for the rasterizer.
+
+    Attributes:
+        means: [..., N, 3] world centres, metres.
+        covars: [..., N, 3, 3] world covariances, m².
+        sh_rotations: [..., N, 3, 3] rotation of each Gaussian's SH frame.
+        opacities: [N] in (0, 1).
+        sh: [N, K, 3] SH coefficients (in each Gaussian's own frame).
+
+    The optional leading dimension is the batch B of the poses.
+    """
+
+    means: torch.Tensor
+    covars: torch.Tensor
+    sh_rotations: torch.Tensor
+    opacities: torch.Tensor
+    sh: torch.Tensor
+
+    def __getitem__(self, b: int) -> "PosedGaussians":
+        """The poses of batch element (environment) ``b``."""
+        if self.means.dim() != 3:
+            raise ConfigError("PosedGaussians has no batch dimension to index")
+        return PosedGaussians(self.means[b], self.covars[b], self.sh_rotations[b],
+                              self.opacities, self.sh)
+
+    def render(self, viewmats, Ks, width, height, **kwargs):
+        """Render (unbatched) with :func:`rasterize`; kwargs as there."""
+        from .rasterizer import rasterize
+
+        if self.means.dim() != 2:
+            raise ConfigError("PosedGaussians.render needs one pose; index the batch first")
+        return rasterize(self.means, None, None, self.opacities, self.sh, viewmats, Ks, width,
+                         height, covars=self.covars, sh_rotations=self.sh_rotations, **kwargs)
+
+
+def pose_gaussians(gaussians: GaussianSet, link_poses: torch.Tensor | None = None,
+                   soft: SoftBinding | None = None, x: torch.Tensor | None = None,
+                   F: torch.Tensor | None = None) -> PosedGaussians:
+    """World-space Gaussians for the current link poses and particle state.
+
+    Gaussians listed in ``soft`` follow their particles (needs ``x`` and ``F``);
+    all others follow their link (``link_poses``; if ``None`` they stay where
+    they are, i.e. their means are already world coordinates).
+
+    Args:
+        gaussians: rest state (rigid Gaussians in link-local frames, soft ones
+            in the world rest frame of the particles).
+        link_poses: [L, 4, 4] or [B, L, 4, 4] link -> world transforms.
+        soft: Gaussian -> particle binding.
+        x: [P, 3] or [B, P, 3] particle positions; F: [P, 3, 3] or [B, P, 3, 3].
+
+    Returns:
+        :class:`PosedGaussians` (batched when the poses or particles are).
+    """
+    n = len(gaussians)
+    Rg = None
+    if link_poses is not None:
+        means, quats = rigid_transform(gaussians.means, gaussians.quats, gaussians.link_id,
+                                       link_poses)
+        Rg = link_poses.to(means.dtype)[..., gaussians.link_id, :3, :3]
+    else:
+        means, quats = gaussians.means, gaussians.quats
+        Rg = torch.eye(3, dtype=means.dtype, device=means.device).expand(n, 3, 3)
+    covars = covariance_from_scale_rotation(quats, gaussians.scales.expand(quats.shape[:-1] + (3,)))
+    if soft is not None and len(soft):
+        if x is None or F is None:
+            raise ConfigError("soft Gaussians need particle positions x and gradients F")
+        s_means, s_covs, s_rot = soft_deform(soft, x.to(means.dtype), F.to(means.dtype))
+        batch = torch.broadcast_shapes(means.shape[:-2], s_means.shape[:-2])
+        means = means.expand(batch + (n, 3)).clone()
+        covars = covars.expand(batch + (n, 3, 3)).clone()
+        Rg = Rg.expand(batch + (n, 3, 3)).clone()
+        i = soft.gaussian_index
+        means[..., i, :] = s_means.expand(batch + s_means.shape[-2:])
+        covars[..., i, :, :] = s_covs.expand(batch + s_covs.shape[-3:])
+        Rg[..., i, :, :] = s_rot.expand(batch + s_rot.shape[-3:])
+    return PosedGaussians(means, covars, Rg.contiguous(), gaussians.opacities, gaussians.sh)

@@ -1,0 +1,663 @@
+"""3D Gaussian Splatting forward rasterizer (Taichi; one code path for CPU and CUDA).
+
+The algorithm is the forward pass of Kerbl et al. (2023), written tile-first so
+that it runs well on a CPU:
+
+1. **Project** (one thread per camera × Gaussian): world -> camera, cull
+   z <= near or z >= far, EWA splatting Σ' = J W Σ Wᵀ Jᵀ (Zwicker et al. 2002)
+   with the perspective Jacobian J evaluated at x/z, y/z clamped to 1.3 ×
+   the half field of view, + 0.3 px² on the diagonal (anti-aliasing dilation),
+   conic = Σ'⁻¹, SH colour for the view direction, and the pixel box of the
+   Gaussian's support (see *Support* below).
+2. **Bin**: count the 16×16 tiles each box touches, exclusive prefix sum,
+   emit one 64-bit key ``(camera·tiles + tile) << 32 | float_bits(depth)`` per
+   (Gaussian, tile), a single stable ``torch.sort``, then each tile's
+   [start, end) range in the sorted list.
+3. **Rasterise** (one thread per camera × tile): the tile walks its Gaussians
+   front to back and, for each, only its pixels inside that Gaussian's support
+   ellipse (box ∩ tile, then per row the exact span of the ellipse; this
+   clipping is what makes a per-tile kernel fast on a CPU). T and the colour
+   sums of the tile's 256 pixels live in thread-local arrays.
+   Per pixel: α = min(0.99, o·exp(-½ dᵀ Σ'⁻¹ d)); α < 1/255 is skipped; if
+   T·(1-α) < 1e-4 the pixel is finished *without* this Gaussian (as in the
+   INRIA code); otherwise C += α·T·c, D += α·T·z, T *= 1-α. The tile stops
+   when all its pixels are finished.
+
+Conventions
+-----------
+* Cameras are pinhole, OpenCV convention: camera x right, y down, z forward.
+  ``viewmats`` [C, 4, 4] map world -> camera (``x_cam = R x_world + t``);
+  ``Ks`` [C, 3, 3] are ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` in pixels.
+  Pixel (u, v) covers [u, u+1) × [v, v+1); its centre is (u + 0.5, v + 0.5), so
+  ``cx = W/2`` puts the principal point at the image centre (SAPIEN's
+  convention). See :func:`sapien_pose_to_opencv_extrinsic` for SAPIEN poses.
+* ``depth`` is the camera-space z (metres, not the ray length).
+* Outputs: ``rgb`` = Σ wᵢ cᵢ + T·background, ``alpha`` = 1 - T,
+  ``depth`` = Σ wᵢ zᵢ with wᵢ = αᵢ Tᵢ, **not** normalised by alpha (it is 0
+  where nothing was drawn); :meth:`RenderOutput.normalized_depth` divides by
+  alpha, :meth:`RenderOutput.composited_depth` adds T × background depth.
+
+Support
+-------
+A Gaussian can only contribute where α ≥ 1/255, i.e. inside the ellipse
+dᵀΣ'⁻¹d ≤ k² with k = sqrt(2 ln(255·o)) (opacity-aware extent; k = 3.33 for
+o = 1, k < 3 for o < 0.35, no pixels at all for o < 1/255). The box is the
+exact axis-aligned bounding box of that ellipse, ±k·sqrt(Σ'ₓₓ), ±k·sqrt(Σ'ᵧᵧ)
+(never larger than the isotropic radius k·sqrt(λ_max) of the INRIA code).
+Unlike a fixed 3σ cut-off this box drops only pixels that the α ≥ 1/255 rule
+drops anyway, so the image does not depend on the tiling and equals a dense
+"every Gaussian at every pixel" evaluation (up to float rounding).
+
+Depth-aware compositing
+-----------------------
+With ``background_depth`` [C, H, W] (e.g. a mesh render's depth), a pixel is
+finished at the first Gaussian (in depth order) whose z exceeds the background
+depth there; the background colour is then composited with the remaining T.
+"""
+# no `from __future__ import annotations`: Taichi reads the kernels' annotations at runtime
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import taichi as ti
+import torch
+
+from .. import backend
+from ..errors import ConfigError
+from .gaussians import GaussianSet, sh_degree_from_coeffs
+
+__all__ = [
+    "TILE",
+    "RenderOutput",
+    "rasterize",
+    "render",
+    "intrinsics_from_fov",
+    "look_at",
+    "sapien_pose_to_opencv_extrinsic",
+]
+
+TILE = 16  #: tile edge in pixels
+ALPHA_MIN = 1.0 / 255.0  #: contributions below this α are skipped
+ALPHA_MAX = 0.99  #: α clamp (keeps T > 0)
+T_MIN = 1e-4  #: a pixel is finished when T would fall below this
+DILATION = 0.3  #: px² added to the 2D covariance's diagonal (anti-aliasing)
+FOV_CLAMP = 1.3  #: the Jacobian is evaluated at x/z clamped to 1.3 tan(fov/2)
+
+# real spherical harmonics constants (degree 1..3), as used by 3DGS
+SH_C0 = 0.28209479177387814
+SH_C1 = 0.4886025119029199
+SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
+         -1.0925484305920792, 0.5462742152960396)
+SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+         -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+
+_f32_1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
+_f32_2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+_f32_3 = ti.types.ndarray(dtype=ti.f32, ndim=3)
+_f32_4 = ti.types.ndarray(dtype=ti.f32, ndim=4)
+_i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+_i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+_i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+_i64_1 = ti.types.ndarray(dtype=ti.i64, ndim=1)
+
+
+# =========================================================================== kernels
+@ti.func
+def _sh_to_rgb(sh: ti.template(), g: ti.i32, degree: ti.i32, d: ti.math.vec3) -> ti.math.vec3:
+    """Colour of Gaussian g for unit view direction d: Σ_lm c_lm Y_lm(d) + 0.5, clamped >= 0."""
+    x, y, z = d[0], d[1], d[2]
+    rgb = ti.math.vec3(0.0)
+    for ch in ti.static(range(3)):
+        v = SH_C0 * sh[g, 0, ch]
+        if degree >= 1:
+            v += SH_C1 * (-y * sh[g, 1, ch] + z * sh[g, 2, ch] - x * sh[g, 3, ch])
+        if degree >= 2:
+            xx, yy, zz = x * x, y * y, z * z
+            v += (SH_C2[0] * x * y * sh[g, 4, ch]
+                  + SH_C2[1] * y * z * sh[g, 5, ch]
+                  + SH_C2[2] * (2.0 * zz - xx - yy) * sh[g, 6, ch]
+                  + SH_C2[3] * x * z * sh[g, 7, ch]
+                  + SH_C2[4] * (xx - yy) * sh[g, 8, ch])
+            if degree >= 3:
+                v += (SH_C3[0] * y * (3.0 * xx - yy) * sh[g, 9, ch]
+                      + SH_C3[1] * x * y * z * sh[g, 10, ch]
+                      + SH_C3[2] * y * (4.0 * zz - xx - yy) * sh[g, 11, ch]
+                      + SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * sh[g, 12, ch]
+                      + SH_C3[4] * x * (4.0 * zz - xx - yy) * sh[g, 13, ch]
+                      + SH_C3[5] * z * (xx - yy) * sh[g, 14, ch]
+                      + SH_C3[6] * x * (xx - 3.0 * yy) * sh[g, 15, ch])
+        rgb[ch] = ti.max(v + 0.5, 0.0)
+    return rgb
+
+
+@ti.func
+def _quat_scale_to_cov(q: ti.math.vec4, s: ti.math.vec3) -> ti.math.mat3:
+    """Σ = R S Sᵀ Rᵀ from a quaternion (w, x, y, z) and standard deviations s."""
+    q = q.normalized()
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R = ti.Matrix([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                   [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                   [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    M = R @ ti.Matrix([[s[0], 0.0, 0.0], [0.0, s[1], 0.0], [0.0, 0.0, s[2]]])
+    return M @ M.transpose()
+
+
+@ti.kernel
+def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, has_cov: ti.i32,
+             opac: _f32_1, sh: _f32_3, sh_rot: _f32_3,
+             has_sh_rot: ti.i32, degree: ti.i32, viewmats: _f32_3, Ks: _f32_3,
+             width: ti.i32, height: ti.i32, near: ti.f32, far: ti.f32,
+             # outputs, per camera c and Gaussian g
+             mean2d: _f32_3, conic: _f32_3, depth: _f32_2, color: _f32_3,
+             box: _i32_3, n_tiles: _i32_2):
+    """EWA projection of every Gaussian into every camera; n_tiles = 0 if culled.
+
+    Only Gaussians with n_tiles > 0 get their other outputs written.
+    """
+    for c, g in ti.ndrange(viewmats.shape[0], means.shape[0]):
+        n_tiles[c, g] = 0
+        W = ti.Matrix([[viewmats[c, i, j] for j in ti.static(range(3))]
+                       for i in ti.static(range(3))])  # world -> camera rotation
+        t = ti.math.vec3(viewmats[c, 0, 3], viewmats[c, 1, 3], viewmats[c, 2, 3])
+        mu = ti.math.vec3(means[g, 0], means[g, 1], means[g, 2])
+        p = W @ mu + t  # camera-space centre
+        o = opac[g]
+        if p.z > near and p.z < far and o >= ALPHA_MIN:
+            fx, fy, cx, cy = Ks[c, 0, 0], Ks[c, 1, 1], Ks[c, 0, 2], Ks[c, 1, 2]
+            # perspective Jacobian at the centre, with x/z, y/z clamped to 1.3 tan(fov/2)
+            # (the half-fov measured from the principal point on each side)
+            tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
+            lim_xp = (width - cx) / fx + (FOV_CLAMP - 1.0) * tan_x
+            lim_xn = cx / fx + (FOV_CLAMP - 1.0) * tan_x
+            lim_yp = (height - cy) / fy + (FOV_CLAMP - 1.0) * tan_y
+            lim_yn = cy / fy + (FOV_CLAMP - 1.0) * tan_y
+            iz = 1.0 / p.z
+            tx = ti.math.clamp(p.x * iz, -lim_xn, lim_xp) * p.z
+            ty = ti.math.clamp(p.y * iz, -lim_yn, lim_yp) * p.z
+            J = ti.Matrix([[fx * iz, 0.0, -fx * tx * iz * iz],
+                           [0.0, fy * iz, -fy * ty * iz * iz]])
+            S = ti.Matrix.zero(ti.f32, 3, 3)  # world covariance, m²
+            if has_cov:
+                S = ti.Matrix([[cov6[g, 0], cov6[g, 1], cov6[g, 2]],
+                               [cov6[g, 1], cov6[g, 3], cov6[g, 4]],
+                               [cov6[g, 2], cov6[g, 4], cov6[g, 5]]])
+            else:
+                S = _quat_scale_to_cov(
+                    ti.math.vec4(quats[g, 0], quats[g, 1], quats[g, 2], quats[g, 3]),
+                    ti.math.vec3(scales[g, 0], scales[g, 1], scales[g, 2]))
+            T = J @ W
+            S2 = T @ S @ T.transpose()  # EWA: 2D screen-space covariance, px²
+            a = S2[0, 0] + DILATION
+            b = S2[0, 1]
+            d = S2[1, 1] + DILATION
+            det = a * d - b * b
+            if det > 0.0:
+                # opacity-aware support: o·exp(-k²/2) = 1/255; +0.1 % so the box
+                # never clips a pixel that the α test would keep (rounding)
+                k = ti.sqrt(2.0 * ti.log(o * 255.0)) * 1.001
+                u = fx * p.x * iz + cx
+                v = fy * p.y * iz + cy
+                rx, ry = k * ti.sqrt(a), k * ti.sqrt(d)
+                # pixels whose centre (x + 0.5) lies within [u - rx, u + rx]
+                x0 = ti.max(ti.cast(ti.ceil(u - rx - 0.5), ti.i32), 0)
+                x1 = ti.min(ti.cast(ti.floor(u + rx - 0.5), ti.i32) + 1, width)
+                y0 = ti.max(ti.cast(ti.ceil(v - ry - 0.5), ti.i32), 0)
+                y1 = ti.min(ti.cast(ti.floor(v + ry - 0.5), ti.i32) + 1, height)
+                if x0 < x1 and y0 < y1:
+                    n_tiles[c, g] = (((x1 - 1) // TILE - x0 // TILE + 1)
+                                     * ((y1 - 1) // TILE - y0 // TILE + 1))
+                    box[c, g, 0], box[c, g, 1], box[c, g, 2], box[c, g, 3] = x0, y0, x1, y1
+                    mean2d[c, g, 0], mean2d[c, g, 1] = u, v
+                    conic[c, g, 0], conic[c, g, 1], conic[c, g, 2] = d / det, -b / det, a / det
+                    depth[c, g] = p.z
+                    # view direction (camera centre -> Gaussian), world frame; SH frame
+                    # of a deformed Gaussian is rotated by R: evaluate at Rᵀ dir
+                    cam = -(W.transpose() @ t)
+                    dirn = (mu - cam).normalized()
+                    if has_sh_rot:
+                        Rs = ti.Matrix([[sh_rot[g, i, j] for j in ti.static(range(3))]
+                                        for i in ti.static(range(3))])
+                        dirn = Rs.transpose() @ dirn
+                    rgb = _sh_to_rgb(sh, g, degree, dirn)
+                    color[c, g, 0], color[c, g, 1], color[c, g, 2] = rgb[0], rgb[1], rgb[2]
+
+
+@ti.kernel
+def _emit_keys(offsets: ti.types.ndarray(dtype=ti.i64, ndim=2), n_tiles: _i32_2,
+               box: _i32_3, depth: _f32_2,
+               tiles_x: ti.i32, tiles_per_cam: ti.i32, keys: _i64_1, ids: _i32_1):
+    """One key per (Gaussian, touched tile): (camera·tiles + tile) << 32 | depth bits.
+
+    Positive float32 depths compare like their bit patterns read as integers,
+    so sorting the keys sorts by tile, then front to back.
+    """
+    for c, g in ti.ndrange(offsets.shape[0], offsets.shape[1]):
+        off = offsets[c, g]
+        if n_tiles[c, g] > 0:
+            x0, y0, x1, y1 = box[c, g, 0], box[c, g, 1], box[c, g, 2], box[c, g, 3]
+            zbits = ti.cast(ti.bit_cast(depth[c, g], ti.i32), ti.i64)
+            for ty in range(y0 // TILE, (y1 - 1) // TILE + 1):
+                for tx in range(x0 // TILE, (x1 - 1) // TILE + 1):
+                    tile = ti.cast(c * tiles_per_cam + ty * tiles_x + tx, ti.i64)
+                    keys[off] = (tile << 32) | zbits
+                    ids[off] = g
+                    off += 1
+
+
+@ti.kernel
+def _tile_ranges(keys: _i64_1, ranges: _i32_2):
+    """ranges[tile] = [start, end) of the tile's entries in the sorted key list."""
+    n = keys.shape[0]
+    for j in range(n):
+        tile = ti.cast(keys[j] >> 32, ti.i32)
+        if j == 0 or ti.cast(keys[j - 1] >> 32, ti.i32) != tile:
+            ranges[tile, 0] = j
+        if j == n - 1 or ti.cast(keys[j + 1] >> 32, ti.i32) != tile:
+            ranges[tile, 1] = j + 1
+
+
+@ti.kernel
+def _rasterize_tiles(ranges: _i32_2, ids: _i32_1, mean2d: _f32_3, conic: _f32_3,
+                     depth: _f32_2, color: _f32_3, opac: _f32_1, box: _i32_3,
+                     background: _f32_4, bg_is_image: ti.i32,
+                     bg_depth: _f32_3, use_bg_depth: ti.i32, tiles_x: ti.i32,
+                     out_rgb: _f32_4, out_depth: _f32_3, out_alpha: _f32_3):
+    """Front-to-back α compositing, one thread per (camera, 16×16 tile).
+
+    The tile's transmittance T and colour/depth sums live in thread-local arrays
+    (pixel index li = row·16 + column); a finished pixel stores -T (T > 0
+    otherwise). Each tile owns its pixels: no atomics, deterministic.
+    """
+    C, H, Wd = out_rgb.shape[0], out_rgb.shape[1], out_rgb.shape[2]
+    tiles_y = (H + TILE - 1) // TILE
+    ti.loop_config(block_dim=1)  # tiles differ a lot in cost: hand them out one by one
+    for c, tile in ti.ndrange(C, tiles_y * tiles_x):
+        px0 = (tile % tiles_x) * TILE
+        py0 = (tile // tiles_x) * TILE
+        px1 = ti.min(px0 + TILE, Wd)
+        py1 = ti.min(py0 + TILE, H)
+        trans = ti.Vector([1.0] * (TILE * TILE), dt=ti.f32)  # T; -T once finished
+        acc_r = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)  # Σ w c
+        acc_g = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)
+        acc_b = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)
+        acc_z = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)  # Σ w z
+        alive = (px1 - px0) * (py1 - py0)
+        j = ranges[c * tiles_x * tiles_y + tile, 0]
+        end = ranges[c * tiles_x * tiles_y + tile, 1]
+        while j < end and alive > 0:  # Gaussians of this tile, front to back
+            g = ids[j]
+            j += 1
+            u, v = mean2d[c, g, 0], mean2d[c, g, 1]
+            A, B, Cc = conic[c, g, 0], conic[c, g, 1], conic[c, g, 2]
+            o, z = opac[g], depth[c, g]
+            # support: o·exp(-½d²) >= 1/255  <=>  d² <= k² = 2 ln(255 o) (+ slack for rounding)
+            k2 = 2.0 * ti.log(255.0 * o) * 1.002 + 1e-4
+            bx0, bx1 = ti.max(px0, box[c, g, 0]), ti.min(px1, box[c, g, 2])
+            for y in range(ti.max(py0, box[c, g, 1]), ti.min(py1, box[c, g, 3])):
+                # the row's span inside the ellipse A dx² + 2B dx dy + C dy² <= k²
+                dy = y + 0.5 - v
+                disc = B * B * dy * dy - A * (Cc * dy * dy - k2)
+                if disc > 0.0:
+                    r = ti.sqrt(disc)
+                    xb = ti.max(bx0, ti.cast(ti.ceil(u + (-B * dy - r) / A - 0.5), ti.i32))
+                    xe = ti.min(bx1, ti.cast(ti.floor(u + (-B * dy + r) / A - 0.5), ti.i32) + 1)
+                    for x in range(xb, xe):
+                        li = (y - py0) * TILE + (x - px0)
+                        T = trans[li]
+                        if T > 0.0:
+                            if use_bg_depth != 0 and z > bg_depth[c, y, x]:
+                                trans[li] = -T  # hidden behind the background surface
+                                alive -= 1
+                                continue
+                            # Gaussian falloff α = o·exp(-½ dᵀ Σ'⁻¹ d), clamped to 0.99
+                            dx = x + 0.5 - u
+                            power = -0.5 * (A * dx * dx + Cc * dy * dy) - B * dx * dy
+                            alpha = ti.min(ALPHA_MAX, o * ti.exp(power))
+                            if alpha >= ALPHA_MIN:
+                                T_next = T * (1.0 - alpha)
+                                if T_next < T_MIN:
+                                    trans[li] = -T  # saturated: stop *before* this Gaussian
+                                    alive -= 1
+                                else:
+                                    w = alpha * T  # blending weight
+                                    acc_r[li] += w * color[c, g, 0]
+                                    acc_g[li] += w * color[c, g, 1]
+                                    acc_b[li] += w * color[c, g, 2]
+                                    acc_z[li] += w * z
+                                    trans[li] = T_next
+        # write out, compositing the background with the remaining transmittance
+        for y, x in ti.ndrange((py0, py1), (px0, px1)):
+            li = (y - py0) * TILE + (x - px0)
+            T = ti.abs(trans[li])
+            by, bx = y * bg_is_image, x * bg_is_image
+            out_rgb[c, y, x, 0] = acc_r[li] + T * background[c, by, bx, 0]
+            out_rgb[c, y, x, 1] = acc_g[li] + T * background[c, by, bx, 1]
+            out_rgb[c, y, x, 2] = acc_b[li] + T * background[c, by, bx, 2]
+            out_depth[c, y, x] = acc_z[li]
+            out_alpha[c, y, x] = 1.0 - T
+
+
+# =========================================================================== Python API
+@dataclass
+class RenderOutput:
+    """Images rendered for C cameras of H × W pixels (float32 torch tensors).
+
+    Attributes:
+        rgb: [C, H, W, 3] colour, Gaussians composited over the background.
+        depth: [C, H, W] Σ wᵢ zᵢ, camera-space z in metres weighted by each
+            Gaussian's blending weight wᵢ = αᵢTᵢ; *not* normalised by alpha.
+        alpha: [C, H, W] accumulated opacity 1 - T_final (= Σ wᵢ).
+        stats: timings (ms: ``project``, ``bin_sort``, ``raster``) when asked
+            for, and ``n_keys`` (Gaussian-tile pairs).
+    """
+
+    rgb: torch.Tensor
+    depth: torch.Tensor
+    alpha: torch.Tensor
+    stats: dict = field(default_factory=dict)
+
+    def normalized_depth(self, eps: float = 1e-6) -> torch.Tensor:
+        """[C, H, W] expected depth Σ wᵢ zᵢ / alpha of the Gaussians (0 where alpha <= eps)."""
+        return torch.where(self.alpha > eps, self.depth / self.alpha.clamp_min(eps),
+                           torch.zeros_like(self.depth))
+
+    def composited_depth(self, background_depth: torch.Tensor) -> torch.Tensor:
+        """[C, H, W] Σ wᵢ zᵢ + T·background_depth (depth matching the composited rgb)."""
+        return self.depth + (1.0 - self.alpha) * background_depth
+
+
+def _check_finite(name: str, t: torch.Tensor) -> None:
+    # fast path: a sum of finite floats is finite (barring overflow, which the
+    # exact check below then clears); one pass, no boolean temporary
+    if t.numel() == 0 or torch.isfinite(t.sum()):
+        return
+    if not torch.isfinite(t).all():
+        bad = (~torch.isfinite(t)).nonzero()[0].tolist()
+        raise ConfigError(f"{name} contains NaN or inf (first at index {bad})")
+
+
+def _check_shape(name: str, t, shape: tuple, text: str) -> torch.Tensor:
+    if not isinstance(t, torch.Tensor):
+        raise ConfigError(f"{name} must be a torch.Tensor of shape {text}, got {type(t).__name__}")
+    if t.dim() != len(shape) or any(s is not None and s != ts for s, ts in zip(shape, t.shape)):
+        raise ConfigError(f"{name} has shape {list(t.shape)}, expected {text}")
+    _check_finite(name, t)
+    return t
+
+
+def _background_tensor(background, C: int, H: int, W: int, device) -> tuple[torch.Tensor, int]:
+    """Background as [C, 1, 1, 3] (constant) or [C, H, W, 3] (image) + the is-image flag."""
+    if background is None:
+        background = 0.0
+    bg = torch.as_tensor(background, dtype=torch.float32, device=device)
+    _check_finite("background", bg)
+    if bg.dim() == 0:
+        return bg.expand(C, 1, 1, 3).contiguous(), 0
+    if bg.shape == (3,):
+        return bg.expand(C, 1, 1, 3).contiguous(), 0
+    if bg.shape == (C, 3):
+        return bg.reshape(C, 1, 1, 3).contiguous(), 0
+    if bg.shape == (C, H, W, 3):
+        return bg.contiguous(), 1
+    raise ConfigError(f"background has shape {list(bg.shape)}, expected a scalar, [3], "
+                      f"[C, 3] or [C, H, W, 3] with C={C}, H={H}, W={W}")
+
+
+def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Tensor | None,
+              opacities: torch.Tensor, sh: torch.Tensor, viewmats: torch.Tensor,
+              Ks: torch.Tensor, width: int, height: int, *,
+              covars: torch.Tensor | None = None,
+              sh_rotations: torch.Tensor | None = None,
+              background=None, background_depth: torch.Tensor | None = None,
+              near: float = 0.01, far: float = 1e4,
+              timings: bool = False) -> RenderOutput:
+    """Render N Gaussians into C pinhole cameras (see the module docstring for the rules).
+
+    Args:
+        means: [N, 3] world-space centres, metres.
+        quats: [N, 4] rotations (w, x, y, z), normalised here. ``None`` with ``covars``.
+        scales: [N, 3] standard deviations along the Gaussian axes, metres
+            (exponentiated, not log-scales). ``None`` with ``covars``.
+        opacities: [N] peak opacities in [0, 1] (sigmoid of the logits).
+        sh: [N, K, 3] SH colour coefficients, K = (degree+1)², degree 0..3.
+        viewmats: [C, 4, 4] world -> camera transforms (OpenCV axes).
+        Ks: [C, 3, 3] pinhole intrinsics in pixels.
+        width, height: image size W, H in pixels.
+        covars: optional precomputed world covariances, [N, 3, 3] or [N, 6]
+            (xx, xy, xz, yy, yz, zz), m²; replaces ``quats``/``scales``.
+        sh_rotations: optional [N, 3, 3] rotation of each Gaussian's SH frame
+            (e.g. polar(F) of a deformed Gaussian): the SH are evaluated at
+            ``Rᵀ · view_dir``.
+        background: colour behind the Gaussians: scalar, [3], [C, 3] or an
+            image [C, H, W, 3]. Default black.
+        background_depth: optional [C, H, W] camera-z depth (metres) of the
+            background image for depth-aware compositing (Gaussians behind it
+            are hidden). Use ``inf`` where the background is empty.
+        near, far: clip distances along camera z, metres.
+        timings: record per-stage wall times (ms) in ``RenderOutput.stats``.
+
+    Returns:
+        :class:`RenderOutput` with rgb [C, H, W, 3], depth [C, H, W], alpha [C, H, W].
+
+    Raises:
+        ConfigError: a wrong shape (the message gives the expected one), NaN/inf
+            in any input, opacities outside [0, 1], or non-positive image size.
+    """
+    backend.ensure_init()
+    t_start = time.perf_counter()
+    if int(width) != width or int(height) != height or width <= 0 or height <= 0:
+        raise ConfigError(f"image size width={width!r}, height={height!r} must be positive ints")
+    width, height = int(width), int(height)
+    if not isinstance(means, torch.Tensor) or means.dim() != 2 or means.shape[1] != 3:
+        raise ConfigError(f"means has shape {list(getattr(means, 'shape', []))}, expected [N, 3]")
+    n = means.shape[0]
+    dev = means.device
+    f32 = dict(dtype=torch.float32, device=dev)
+    means = _check_shape("means", means, (n, 3), "[N, 3]").to(**f32).contiguous()
+    opacities = _check_shape("opacities", opacities, (n,), "[N]").to(**f32).contiguous()
+    if n and (opacities.min() < 0 or opacities.max() > 1):
+        raise ConfigError("opacities must lie in [0, 1] (pass sigmoid(opacity_logits))")
+    if not isinstance(sh, torch.Tensor) or sh.dim() != 3 or sh.shape[0] != n or sh.shape[2] != 3:
+        raise ConfigError(f"sh has shape {list(getattr(sh, 'shape', []))}, expected [N, K, 3], "
+                          f"K in (1, 4, 9, 16), N={n}")
+    degree = sh_degree_from_coeffs(sh.shape[1])
+    _check_finite("sh", sh)
+    sh = sh.to(**f32).contiguous()
+    viewmats = _check_shape("viewmats", viewmats, (None, 4, 4), "[C, 4, 4]").to(**f32).contiguous()
+    C = viewmats.shape[0]
+    Ks = _check_shape("Ks", Ks, (C, 3, 3), f"[C, 3, 3] with C={C}").to(**f32).contiguous()
+    if (Ks[:, 0, 0] <= 0).any() or (Ks[:, 1, 1] <= 0).any():
+        raise ConfigError("Ks: focal lengths fx, fy must be positive")
+    if covars is not None:
+        if quats is not None or scales is not None:
+            raise ConfigError("pass either covars or quats+scales, not both")
+        if covars.dim() == 3:
+            covars = _check_shape("covars", covars, (n, 3, 3), "[N, 3, 3] or [N, 6]")
+            i, j = (0, 0, 0, 1, 1, 2), (0, 1, 2, 1, 2, 2)
+            cov6 = covars[:, i, j]
+        else:
+            cov6 = _check_shape("covars", covars, (n, 6), "[N, 3, 3] or [N, 6]")
+    else:
+        if quats is None or scales is None:
+            raise ConfigError("quats and scales are required unless covars is given")
+        quats = _check_shape("quats", quats, (n, 4), "[N, 4]")
+        scales = _check_shape("scales", scales, (n, 3), "[N, 3]")
+        if n and (quats.abs().amax(dim=-1) == 0).any():
+            raise ConfigError("quats contains a zero quaternion")
+        quats, scales = quats.to(**f32).contiguous(), scales.to(**f32).contiguous()
+        cov6 = None
+    if cov6 is not None:
+        cov6 = cov6.to(**f32).contiguous()
+        quats = scales = torch.zeros(1, 4, **f32)
+    has_cov = int(cov6 is not None)
+    if cov6 is None:
+        cov6 = torch.zeros(1, 6, **f32)
+    if sh_rotations is not None:
+        sh_rot = _check_shape("sh_rotations", sh_rotations, (n, 3, 3), "[N, 3, 3]")
+        sh_rot = sh_rot.to(**f32).contiguous()
+    else:
+        sh_rot = torch.zeros(1, 3, 3, **f32)
+    bg, bg_is_image = _background_tensor(background, C, height, width, dev)
+    if background_depth is not None:
+        if not isinstance(background_depth, torch.Tensor) or \
+                tuple(background_depth.shape) != (C, height, width):
+            raise ConfigError(f"background_depth has shape "
+                              f"{list(getattr(background_depth, 'shape', []))}, expected "
+                              f"[C, H, W] = [{C}, {height}, {width}]")
+        if torch.isnan(background_depth).any():
+            raise ConfigError("background_depth contains NaN (use inf for empty pixels)")
+        bg_depth = background_depth.to(**f32).contiguous()
+    else:
+        bg_depth = torch.zeros(1, 1, 1, **f32)
+    if not (0 < near < far):
+        raise ConfigError(f"need 0 < near < far, got near={near}, far={far}")
+
+    tiles_x = (width + TILE - 1) // TILE
+    tiles_y = (height + TILE - 1) // TILE
+    n_tile_total = C * tiles_x * tiles_y
+    sync = ti.sync if timings else (lambda: None)
+
+    # 1. project -------------------------------------------------------------
+    # only entries of Gaussians with n_tiles > 0 are written and ever read
+    mean2d = torch.empty(C, n, 2, **f32)
+    conic = torch.empty(C, n, 3, **f32)
+    depth = torch.empty(C, n, **f32)
+    color = torch.empty(C, n, 3, **f32)
+    box = torch.empty(C, n, 4, dtype=torch.int32, device=dev)
+    n_tiles = torch.empty(C, n, dtype=torch.int32, device=dev)  # written for every Gaussian
+    if n:
+        _project(means, quats, scales, cov6, has_cov, opacities, sh, sh_rot,
+                 int(sh_rotations is not None), degree,
+                 viewmats, Ks, width, height, float(near), float(far),
+                 mean2d, conic, depth, color, box, n_tiles)
+    sync()
+    t_proj = time.perf_counter()
+
+    # 2. bin: one key per (Gaussian, tile), sort, per-tile ranges ---------------
+    counts = n_tiles.reshape(-1).to(torch.int64)
+    ends = torch.cumsum(counts, 0)
+    n_keys = int(ends[-1]) if n else 0
+    ranges = torch.zeros(n_tile_total, 2, dtype=torch.int32, device=dev)
+    if n_keys:
+        offsets = (ends - counts).reshape(C, n).contiguous()
+        keys = torch.empty(n_keys, dtype=torch.int64, device=dev)
+        ids = torch.empty(n_keys, dtype=torch.int32, device=dev)
+        _emit_keys(offsets, n_tiles, box, depth, tiles_x, tiles_x * tiles_y, keys, ids)
+        keys, order = torch.sort(keys, stable=True)
+        ids = ids[order].contiguous()
+        _tile_ranges(keys, ranges)
+    else:
+        ids = torch.zeros(1, dtype=torch.int32, device=dev)
+    sync()
+    t_bin = time.perf_counter()
+
+    # 3. rasterise ---------------------------------------------------------------
+    out_rgb = torch.empty(C, height, width, 3, **f32)
+    out_depth = torch.empty(C, height, width, **f32)
+    out_alpha = torch.empty(C, height, width, **f32)
+    if n == 0:  # keep the kernels' argument arrays non-empty
+        mean2d, conic, depth = (torch.zeros(C, 1, 2, **f32), torch.zeros(C, 1, 3, **f32),
+                                torch.zeros(C, 1, **f32))
+        color, opacities = torch.zeros(C, 1, 3, **f32), torch.zeros(1, **f32)
+        box = torch.zeros(C, 1, 4, dtype=torch.int32, device=dev)
+    _rasterize_tiles(ranges, ids, mean2d, conic, depth, color, opacities, box, bg, bg_is_image,
+                     bg_depth, int(background_depth is not None), tiles_x,
+                     out_rgb, out_depth, out_alpha)
+    sync()
+    t_end = time.perf_counter()
+    stats = {"n_keys": n_keys}
+    if timings:
+        stats.update(project=1e3 * (t_proj - t_start), bin_sort=1e3 * (t_bin - t_proj),
+                     raster=1e3 * (t_end - t_bin), total=1e3 * (t_end - t_start))
+    return RenderOutput(out_rgb, out_depth, out_alpha, stats)
+
+
+def render(gaussians: GaussianSet, viewmats: torch.Tensor, Ks: torch.Tensor, width: int,
+           height: int, **kwargs) -> RenderOutput:
+    """Render a :class:`GaussianSet` (activates scales/opacities); kwargs as :func:`rasterize`."""
+    return rasterize(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities,
+                     gaussians.sh, viewmats, Ks, width, height, **kwargs)
+
+
+# =========================================================================== cameras
+def intrinsics_from_fov(width: int, height: int, fovy: float, fovx: float | None = None,
+                        device=None) -> torch.Tensor:
+    """[3, 3] pinhole K for a vertical field of view ``fovy`` (radians).
+
+    ``fovx`` defaults to square pixels (fx = fy). The principal point is the
+    image centre (W/2, H/2), as in SAPIEN's cameras.
+    """
+    fy = 0.5 * height / math.tan(0.5 * fovy)
+    fx = fy if fovx is None else 0.5 * width / math.tan(0.5 * fovx)
+    return torch.tensor([[fx, 0.0, 0.5 * width], [0.0, fy, 0.5 * height], [0.0, 0.0, 1.0]],
+                        dtype=torch.float32, device=device)
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> torch.Tensor:
+    """[4, 4] OpenCV world -> camera matrix for a camera at ``eye`` looking at ``target``.
+
+    Camera z points to the target, x right and y down in the image, with
+    ``up`` (world) appearing upwards.
+    """
+    eye, target, up = (torch.as_tensor(v, dtype=torch.float64) for v in (eye, target, up))
+    z = target - eye
+    z = z / z.norm()
+    x = torch.linalg.cross(z, up)
+    if x.norm() < 1e-9:
+        raise ConfigError("look_at: viewing direction is parallel to up")
+    x = x / x.norm()
+    y = torch.linalg.cross(z, x)
+    R = torch.stack([x, y, z])  # rows: camera axes in world coordinates
+    M = torch.eye(4, dtype=torch.float64)
+    M[:3, :3] = R
+    M[:3, 3] = -R @ eye
+    return M.float()
+
+
+# camera axes (rows) of OpenCV expressed in the other conventions' axes
+_CV_FROM_SAPIEN = torch.tensor([[0.0, -1, 0], [0, 0, -1], [1, 0, 0]])  # x fwd, y left, z up
+_CV_FROM_OPENGL = torch.tensor([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # x right, y up, z back
+
+
+def sapien_pose_to_opencv_extrinsic(pose, convention: str = "sapien") -> torch.Tensor:
+    """World -> camera [..., 4, 4] OpenCV extrinsic from a SAPIEN camera pose.
+
+    Args:
+        pose: [..., 4, 4] camera -> world transform (array-like or
+            ``sapien.Pose``, whose ``to_transformation_matrix()`` is used).
+        convention: axes of ``pose``'s camera frame:
+
+            * ``"sapien"`` — the camera entity pose (``camera.entity_pose``,
+              ``camera.get_pose()``): x forward, y left, z up;
+            * ``"opengl"`` — ``camera.get_model_matrix()``: x right, y up, z backward.
+
+    Returns:
+        [..., 4, 4] float32 ``viewmat`` for :func:`rasterize` (x right, y down,
+        z forward). Equals SAPIEN's ``camera.get_extrinsic_matrix()`` (3×4) in
+        its top three rows.
+
+    The maths: with ``pose = [R | p]`` (camera -> world), the OpenCV axes are
+    ``x_cv = -y_s, y_cv = -z_s, z_cv = x_s`` (SAPIEN) or ``x_cv = x_gl,
+    y_cv = -y_gl, z_cv = -z_gl`` (OpenGL), i.e. ``R_cv = A`` with rows above;
+    extrinsic = ``[A Rᵀ | -A Rᵀ p]``.
+    """
+    if hasattr(pose, "to_transformation_matrix"):
+        pose = pose.to_transformation_matrix()
+    pose = torch.as_tensor(pose, dtype=torch.float64)
+    if pose.shape[-2:] != (4, 4):
+        raise ConfigError(f"pose has shape {list(pose.shape)}, expected [..., 4, 4]")
+    if convention == "sapien":
+        A = _CV_FROM_SAPIEN
+    elif convention == "opengl":
+        A = _CV_FROM_OPENGL
+    else:
+        raise ConfigError(f"convention={convention!r} must be 'sapien' or 'opengl'")
+    A = A.to(torch.float64)
+    R, p = pose[..., :3, :3], pose[..., :3, 3:]
+    Rw = A @ R.transpose(-1, -2)
+    out = torch.zeros(pose.shape, dtype=torch.float64)
+    out[..., :3, :3] = Rw
+    out[..., :3, 3:] = -Rw @ p
+    out[..., 3, 3] = 1.0
+    return out.float()

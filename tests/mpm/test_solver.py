@@ -1,0 +1,270 @@
+"""MLS-MPM solver: stability in hard cases, kinematic binding, state, sleeping, CFL."""
+import math
+
+import numpy as np
+import pytest
+from helpers import pad_world
+
+from gausstac_maniskill.config import Material, SolverSettings
+from gausstac_maniskill.errors import SimulationError
+from gausstac_maniskill.mpm import HalfSpace, MPMWorld, Sphere, box_particles
+from gausstac_maniskill.transforms import make_pose, rotation_about
+
+
+def press(world, R=4e-3, depth=1e-3, steps=30, dt=None, friction=0.0):
+    """Lower a sphere into the pad's top face (z = 0) to ``depth`` over ``steps`` steps."""
+    c = world.add_collider(Sphere(radius=R, pose=make_pose([0, 0, R]), friction=friction))
+    dt = dt or 20 * world.settings.cfl * world.settings.dx / world.wave_speed()
+    for k in range(steps):
+        world.set_collider_pose(c, make_pose([0, 0, R - depth * (k + 1) / steps]))
+        world.step(dt)
+    return c, dt
+
+
+def assert_healthy(world, n0):
+    x = world.positions()
+    assert len(x) == n0
+    assert np.all(np.isfinite(x)) and np.all(np.isfinite(world.velocities()))
+    assert np.all(np.isfinite(world.deformation_gradients()))
+
+
+# ----------------------------------------------------------------------------- hard cases
+
+def test_stiff_pad_10_mpa():
+    world = pad_world(material=Material(E=10e6, nu=0.45))
+    n0 = world.num_particles
+    c, _ = press(world, depth=0.5e-3)
+    assert_healthy(world, n0)
+    F, _ = world.collider_wrench(c)
+    assert F[2] > 0.1  # pushed up by a stiff pad
+    # the CFL bound picked many more substeps than for a 0.3 MPa pad
+    assert world.last_step.substeps >= 20
+
+
+def test_near_incompressible_nu_049():
+    world = pad_world(material=Material(E=3e5, nu=0.49))
+    n0 = world.num_particles
+    c, _ = press(world, depth=1e-3)
+    assert_healthy(world, n0)
+    J = np.linalg.det(world.deformation_gradients("pad"))
+    assert np.all(J > 0.8) and np.all(J < 1.2)  # volume nearly preserved
+    assert world.collider_wrench(c)[0][2] > 0
+
+
+def test_collider_sliding_at_1_m_per_s():
+    world = pad_world(size=(0.03, 0.012, 0.006))
+    n0 = world.num_particles
+    c, dt = press(world, depth=0.6e-3, steps=15, friction=0.5)
+    R = world.colliders[c].radius
+    x = -0.0
+    x_top_before = world.positions("pad")[:, 0].copy()
+    dt = 1e-3  # 1 mm per control step at 1 m/s
+    for k in range(10):
+        x += 1.0 * dt
+        world.set_collider_pose(c, make_pose([x, 0, R - 0.6e-3]))
+        world.step(dt)
+    assert_healthy(world, n0)
+    F, _ = world.collider_wrench(c)
+    assert F[0] < 0  # friction drags the sphere back (the pad is dragged forward)
+    drift = world.positions("pad")[:, 0] - x_top_before
+    assert drift.max() < 5e-3  # nothing flew off
+
+
+def test_kinematic_link_rotating_180_deg_in_one_second():
+    # quasi-static mass scaling keeps this at ~1400 substeps
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0), mass_scaling=100.0, max_substeps=100000)
+    world = MPMWorld(s)
+    world.add_link("finger", np.eye(4))
+    pts = box_particles([-0.005, -0.005, 0.0], [0.005, 0.005, 0.02], s.particle_spacing)
+    world.add_group("block", pts, Material(E=3e4, nu=0.45, density=1000), link="finger",
+                    kinematic=pts[:, 2] < 0.004)
+    n0 = world.num_particles
+    steps = 50
+    for k in range(steps):
+        world.set_link_pose("finger", make_pose(rotation=rotation_about([1, 0, 0], math.pi * (k + 1) / steps)))
+        world.step(1.0 / steps)
+    assert_healthy(world, n0)
+    x = world.positions("block")
+    # the soft tip followed the rotation: the block now points down (z < 0)
+    assert x[:, 2].mean() < -0.008
+    assert np.abs(x[:, 0].mean()) < 1e-3
+
+
+def test_long_run_2000_steps_energy_bounded():
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0))
+    world = MPMWorld(s)
+    pts = box_particles([0, 0, 0], [0.01, 0.01, 0.01], s.particle_spacing)
+    c = pts.mean(0)
+    vel = 0.5 * (pts - c) * np.array([1.0, -1.0, 0.0]) / 0.005  # a shearing/stretching mode
+    world.add_group("cube", pts, Material(E=1e5, nu=0.3, density=1000), velocity=vel * 0.1)
+    n0 = world.num_particles
+    e0 = sum(world.energy())
+    dt = 2 * s.cfl * s.dx / world.wave_speed()
+    worst = 0.0
+    for k in range(2000):
+        world.step(dt)
+        if k % 50 == 0:
+            worst = max(worst, sum(world.energy()))
+    assert_healthy(world, n0)
+    assert worst <= 1.01 * e0, (worst, e0)  # APIC dissipates; it must never gain energy
+    assert np.abs(world.positions().mean(0) - c).max() < 1e-4  # momentum conserved: no drift
+
+
+def test_gravity_drop_on_floor_stays_bounded():
+    s = SolverSettings(dx=2e-3)
+    world = MPMWorld(s)
+    pts = box_particles([0, 0, 0.002], [0.01, 0.01, 0.012], s.particle_spacing)
+    world.add_group("cube", pts, Material(E=5e4, nu=0.3, density=1000))
+    world.add_collider(HalfSpace(friction=0.5))
+    n0 = world.num_particles
+    for k in range(200):
+        world.step(2e-3)
+    assert_healthy(world, n0)
+    z = world.positions()[:, 2]
+    assert z.min() > -0.5e-3  # resting on the floor, not through it
+    assert z.max() < 0.013
+
+
+# ----------------------------------------------------------------------------- kinematics
+
+def test_kinematic_block_follows_link_exactly():
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0))
+    world = MPMWorld(s)
+    T0 = make_pose([0.01, 0.0, 0.02], rotation_about([0, 0, 1], 0.3))
+    world.add_link("link", T0)
+    pts = box_particles([0.0, 0.0, 0.01], [0.01, 0.008, 0.02], s.particle_spacing)
+    world.add_group("rigid", pts, Material(), link="link", kinematic=True)
+    X0 = world.rest_positions("rigid")
+    T = T0
+    for k in range(6):
+        T = make_pose([0.01 + 0.002 * k, 0.001 * k, 0.02], rotation_about([1, 1, 0], 0.4 * (k + 1)))
+        world.set_link_pose("link", T)
+        world.step(0.01)
+    # positions at the end of a step are the link pose at the start of its last substep; step
+    # once more without motion so the final pose is reached exactly
+    world.step(0.01)
+    x = world.positions("rigid")
+    np.testing.assert_allclose(x, X0 @ T[:3, :3].T + T[:3, 3], atol=2e-6)
+    F = world.deformation_gradients("rigid")
+    R_rel = T[:3, :3] @ T0[:3, :3].T
+    np.testing.assert_allclose(F, np.broadcast_to(R_rel, F.shape), atol=2e-6)
+    # undeformed: pairwise distances unchanged
+    d0 = np.linalg.norm(pts[1:] - pts[0], axis=1)
+    d1 = np.linalg.norm(x[1:] - x[0], axis=1)
+    np.testing.assert_allclose(d1, d0, atol=2e-6)
+
+
+def test_soft_block_moved_rigidly_by_its_base_stays_undeformed():
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0), mass_scaling=100.0, damping=20.0)
+    world = MPMWorld(s)
+    world.add_link("link", np.eye(4))
+    pts = box_particles([0, 0, 0], [0.008, 0.008, 0.012], s.particle_spacing)
+    world.add_group("soft", pts, Material(E=1e5, nu=0.4), link="link", kinematic=pts[:, 2] < 0.004)
+    for k in range(20):
+        world.set_link_pose("link", make_pose([0.0005 * k, 0, 0], rotation_about([0, 0, 1], 0.02 * k)))
+        world.step(0.02)
+    for k in range(10):
+        world.step(0.02)
+    F = world.deformation_gradients("soft")
+    U, S, Vt = np.linalg.svd(F)
+    assert np.abs(S - 1.0).max() < 0.02  # rotation only: stretches stay ~1
+
+
+# ----------------------------------------------------------------------------- state and sleep
+
+def test_state_dict_round_trip_is_bit_exact_and_deterministic():
+    world = pad_world(dx=1.5e-3)
+    c, dt = press(world, depth=0.6e-3, steps=5)
+    state = world.state_dict()
+    # continue 3 steps, remember, then restore and redo them
+    for _ in range(3):
+        world.step(dt)
+    x_a = world.positions()
+    world.load_state_dict(state)
+    again = world.state_dict()
+    for k, arr in state["particles"].items():
+        assert np.array_equal(arr, again["particles"][k]), k
+    for _ in range(3):
+        world.step(dt)
+    assert np.array_equal(world.positions(), x_a)  # bit-identical continuation
+
+
+def test_sleeping_group_is_bit_identical_and_costs_no_grid():
+    s = SolverSettings(dx=1.5e-3, gravity=(0, 0, -9.81))
+    world = MPMWorld(s)
+    a = box_particles([0, 0, 0], [0.006, 0.006, 0.006], s.particle_spacing)
+    world.add_group("a", a, Material())
+    world.add_group("b", a + [0.1, 0, 0], Material())  # 10 cm away
+    world.step(1e-3)
+    both_cells = world.last_step.grid_cells
+    world.set_awake("b", False)
+    xb = world.positions("b")
+    for _ in range(5):
+        world.step(1e-3)
+    assert np.array_equal(world.positions("b"), xb)
+    assert world.last_step.active_particles == len(a)
+    # both groups span ~70x13x13 cells; group a alone 13^3
+    assert world.last_step.grid_cells * 5 < both_cells  # the grid shrank to group a alone
+
+
+def test_waking_group_follows_link_motion_while_asleep():
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0))
+    world = MPMWorld(s)
+    world.add_link("tip", np.eye(4))
+    pts = box_particles([0, 0, 0], [0.008, 0.008, 0.008], s.particle_spacing)
+    world.add_group("pad", pts, Material(), link="tip", kinematic=pts[:, 2] < 0.003)
+    world.set_awake("pad", False)
+    T = make_pose([0.05, 0, 0], rotation_about([0, 0, 1], 0.5))
+    world.set_link_pose("tip", T)
+    world.step(1e-3)
+    world.set_awake("pad", True)
+    np.testing.assert_allclose(world.positions("pad"), pts @ T[:3, :3].T + T[:3, 3], atol=1e-6)
+
+
+def test_grid_covers_only_active_region():
+    world = pad_world(dx=1e-3, size=(0.01, 0.01, 0.006))
+    world.step(1e-5)
+    cells = world.last_step.grid_cells
+    # the pad spans 10x10x6 cells; the box adds the stencil and a 3-cell margin per side
+    assert cells <= (10 + 3 + 6) ** 2 * (6 + 3 + 6)
+
+
+# ----------------------------------------------------------------------------- CFL
+
+def test_cfl_substeps_scale_with_wave_speed():
+    soft = pad_world(material=Material(E=1e5, nu=0.3))
+    stiff = pad_world(material=Material(E=4e5, nu=0.3))
+    n_soft, _ = soft.plan_substeps(1e-3)
+    n_stiff, _ = stiff.plan_substeps(1e-3)
+    assert 1.8 < n_stiff / n_soft < 2.2  # c ∝ √E
+    scaled = pad_world(material=Material(E=4e5, nu=0.3), mass_scaling=4.0)
+    assert scaled.plan_substeps(1e-3)[0] <= n_soft + 1  # mass scaling by 4 halves c
+
+
+def test_impossible_step_is_refused_with_advice():
+    world = pad_world(material=Material(E=10e6, nu=0.49), max_substeps=50)
+    with pytest.raises(SimulationError, match=r"max_substeps=50.*mass_scaling"):
+        world.step(0.05)
+    assert np.all(np.isfinite(world.positions()))  # nothing was lost
+
+
+def test_nan_is_detected_and_named():
+    world = pad_world(dx=2e-3)
+    world.step(1e-5)
+    world._pull()
+    world._host["v"][5] = np.nan
+    world._dirty = True
+    with pytest.raises(SimulationError, match=r"group 'pad'.*NaN"):
+        world.step(1e-5)
+
+
+def test_exploding_particles_raise_instead_of_leaving_the_grid():
+    s = SolverSettings(dx=1e-3, gravity=(0, 0, 0), max_grid_cells=20000, max_substeps=10**6)
+    world = MPMWorld(s)
+    pts = box_particles([0, 0, 0], [0.004, 0.004, 0.004], s.particle_spacing)
+    # two bodies flying apart at 10 m/s: the active box must grow until the limit
+    world.add_group("left", pts, Material(E=1e4, nu=0.3), velocity=[-10.0, 0, 0])
+    world.add_group("right", pts + [0.006, 0, 0], Material(E=1e4, nu=0.3), velocity=[10.0, 0, 0])
+    with pytest.raises(SimulationError, match=r"max_grid_cells.*'left'.*'right'"):
+        for _ in range(100):
+            world.step(1e-3)
