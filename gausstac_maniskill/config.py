@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from .errors import ConfigError
 
-__all__ = ["Material", "SolverSettings", "MODELS"]
+__all__ = ["Material", "SolverSettings", "SensorLayout", "PadSpec", "MODELS"]
 
 #: Constitutive models understood by the MPM solver.
 MODELS = ("neo_hookean", "fixed_corotated", "foam")
@@ -165,3 +165,84 @@ class SolverSettings:
     def particle_spacing(self) -> float:
         """Distance between seeded particles [m]."""
         return self.dx / self.particles_per_axis
+
+
+@dataclass(frozen=True)
+class SensorLayout:
+    """A taxel grid on a pad: ``rows`` × ``cols`` cells covering ``size`` [m].
+
+    The grid lies in the sensor frame's x–y plane (x along the finger, y across,
+    z out of the pad); row index grows with y, column index with x.
+    """
+
+    rows: int = 16
+    cols: int = 16
+    size: tuple = (0.016, 0.016)
+
+    def __post_init__(self) -> None:
+        for name in ("rows", "cols"):
+            v = getattr(self, name)
+            if int(v) != v or not (1 <= v <= 1024):
+                raise ConfigError(f"SensorLayout.{name}={v!r} must be an integer in 1..1024")
+        size = tuple(self.size)
+        if len(size) != 2:
+            raise ConfigError(f"SensorLayout.size={self.size!r} must be (size_x, size_y) in metres")
+        object.__setattr__(self, "size", tuple(_finite("SensorLayout.size", v) for v in size))
+        if min(self.size) <= 0:
+            raise ConfigError(f"SensorLayout.size={self.size!r} m must be positive")
+
+    @property
+    def pitch(self) -> tuple:
+        """Taxel pitch (x, y) [m]."""
+        return (self.size[0] / self.cols, self.size[1] / self.rows)
+
+
+@dataclass(frozen=True)
+class PadSpec:
+    """A soft tactile pad on a hand link.
+
+    The pad is the part of the link's (watertight) collision mesh that lies within
+    ``cone_deg`` of ``axis`` (seen from the mesh centre) and within ``thickness`` of
+    the surface: that shell is soft silicone. The next grid cell inwards is bound
+    kinematically to the link (it carries the pad); deeper material is rigid and
+    not simulated.
+
+    Attributes:
+        link: name of the link the pad sits on (e.g. ``"link_3.0_tip"``).
+        name: pad id used in observations; default: the link name.
+        axis: outward direction of the pad centre in the link frame (Allegro: +x is palmar).
+        cone_deg: half-angle [deg] of the pad region around ``axis``.
+        thickness: soft layer thickness [m].
+        material: the silicone (default E = 0.3 MPa, ν = 0.45).
+        layout: taxel grid of the tactile maps.
+        mesh: optional mesh file (link frame) overriding the URDF collision mesh.
+    """
+
+    link: str
+    name: str = ""
+    axis: tuple = (1.0, 0.0, 0.0)
+    cone_deg: float = 60.0
+    thickness: float = 2.0e-3
+    material: Material = field(default_factory=lambda: Material(E=3e5, nu=0.45, density=1100.0))
+    layout: SensorLayout = field(default_factory=SensorLayout)
+    mesh: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.link, str) or not self.link:
+            raise ConfigError(f"PadSpec.link={self.link!r} must be a link name")
+        if not self.name:
+            object.__setattr__(self, "name", self.link)
+        a = tuple(_finite("PadSpec.axis", v) for v in self.axis)
+        n = math.sqrt(sum(v * v for v in a)) if len(a) == 3 else 0.0
+        if n < 1e-9:
+            raise ConfigError(f"PadSpec.axis={self.axis!r} must be a non-zero 3-vector")
+        object.__setattr__(self, "axis", tuple(v / n for v in a))
+        c = _finite("PadSpec.cone_deg", self.cone_deg)
+        if not (0 < c <= 180):
+            raise ConfigError(f"PadSpec.cone_deg={self.cone_deg!r} must lie in (0, 180]")
+        if _finite("PadSpec.thickness", self.thickness) <= 0:
+            raise ConfigError(f"PadSpec.thickness={self.thickness!r} m must be > 0")
+        if not isinstance(self.material, Material):
+            raise ConfigError("PadSpec.material must be a Material")
+        if not isinstance(self.layout, SensorLayout):
+            raise ConfigError("PadSpec.layout must be a SensorLayout")

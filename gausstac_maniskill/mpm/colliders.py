@@ -174,8 +174,9 @@ class MeshCollider(Collider):
             raise ConfigError(f"{label}: SDF grid {tuple(n)} is too large; increase sdf_dx")
         axes = [lo[d] + h * np.arange(n[d]) for d in range(3)]
         pts = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-        # trimesh's signed distance is positive inside; ours is negative inside.
-        dist = -trimesh.proximity.signed_distance(mesh, pts)
+        from .mesh_query import signed_distance_to_mesh
+
+        dist = signed_distance_to_mesh(mesh, pts)
         self.sdf = dist.reshape(tuple(n)).astype(np.float32)
         self.sdf_origin = lo.astype(np.float32)
         self.sdf_dx = h

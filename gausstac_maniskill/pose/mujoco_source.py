@@ -9,7 +9,6 @@ stay bodies with their own poses). The hand's root is welded to the world at
 """
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
@@ -62,10 +61,12 @@ class MujocoPoseSource(PoseSource):
         base_pose: ``[4, 4]`` world transform of the root link (metres); default identity.
         kp: actuator stiffness, N·m/rad. The Allegro's distal links have ~2e-5 kg·m²
             joint inertia, so kp = 3 gives ~60 Hz joint bandwidth while staying
-            stable at the 2 ms explicit-stiffness time step.
+            stable at the 2 ms time step (measured: kp = 10 stable, 30 diverges).
         dampratio: actuator damping as a fraction of critical (1 = critically damped).
         timestep: MuJoCo time step, seconds.
         gravity: world gravity, m/s² (the hand is welded to the world).
+        gravity_compensation: cancel gravity on the hand's links (as the Allegro's
+            own controller does), so targets are tracked without a steady sag.
         contact_excludes: body-name pairs never in contact; default the Allegro palm
             <-> finger-base pairs (pairs naming absent bodies are skipped only for the default).
 
@@ -75,7 +76,8 @@ class MujocoPoseSource(PoseSource):
 
     def __init__(self, urdf_path=None, base_pose=None, kp: float = 3.0,
                  dampratio: float = 1.0, timestep: float = 0.002,
-                 gravity=(0.0, 0.0, -9.81), contact_excludes=None):
+                 gravity=(0.0, 0.0, -9.81), gravity_compensation: bool = True,
+                 contact_excludes=None):
         for name, value in (("kp", kp), ("dampratio", dampratio), ("timestep", timestep)):
             if not (np.isfinite(value) and value > 0):
                 raise ConfigError(f"MujocoPoseSource.{name} must be a positive number, got {value}")
@@ -86,6 +88,9 @@ class MujocoPoseSource(PoseSource):
         spec.option.gravity = np.asarray(gravity, dtype=np.float64)
 
         body_names = {b.name for b in spec.bodies}
+        if gravity_compensation:
+            for body in spec.bodies:
+                body.gravcomp = 1.0
         pairs = ALLEGRO_CONTACT_EXCLUDES if contact_excludes is None else contact_excludes
         for a, b in pairs:
             if a in body_names and b in body_names:
@@ -102,8 +107,9 @@ class MujocoPoseSource(PoseSource):
             act.trntype = mujoco.mjtTrn.mjTRN_JOINT
             act.target = j.name
             act.set_to_position(kp=float(kp), dampratio=float(dampratio))
-            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            act.ctrlrange = np.asarray(j.range, dtype=np.float64)
+            if j.range[0] < j.range[1]:  # URDF "continuous" joints have no range
+                act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+                act.ctrlrange = np.asarray(j.range, dtype=np.float64)
         try:
             self.model = spec.compile()
         except ValueError as err:
@@ -116,11 +122,12 @@ class MujocoPoseSource(PoseSource):
         jid = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in self.joint_names]
         self._qadr = m.jnt_qposadr[jid].copy()
         self._vadr = m.jnt_dofadr[jid].copy()
-        self.joint_limits = m.jnt_range[jid].copy()
+        self.joint_limits = np.where(m.jnt_limited[jid, None].astype(bool), m.jnt_range[jid],
+                                     np.array([-np.inf, np.inf]))
         self.link_names = [m.body(i).name for i in range(1, m.nbody)]  # body 0 is the world
         self._root = int(m.body_rootid[1])
         self.set_base_pose(np.eye(4) if base_pose is None else base_pose)
-        self.set_joint_positions(np.clip(np.zeros(len(jid)), *self.joint_limits.T))
+        self.set_joint_positions(np.clip(np.zeros(len(jid)), *self.joint_limits.T))  # in-limit rest
 
     # --- state ------------------------------------------------------------------
     @property
@@ -171,12 +178,17 @@ class MujocoPoseSource(PoseSource):
     def step(self, n: int = 1) -> None:
         """Advance the dynamics by ``n`` time steps (``n * model.opt.timestep`` seconds).
 
-        Raises SimulationError if the state becomes non-finite.
+        Raises SimulationError if the state diverges. (MuJoCo itself would only
+        print a warning and silently reset the state to the rest pose.)
         """
-        for _ in range(int(n)):
+        bad = self.data.warning[mujoco.mjtWarning.mjWARN_BADQACC]
+        before = int(bad.number)
+        for k in range(int(n)):
             mujoco.mj_step(self.model, self.data)
-        if not (np.all(np.isfinite(self.data.qpos)) and np.all(np.isfinite(self.data.qvel))):
-            raise SimulationError(f"MuJoCo state became non-finite at t = {self.time:.4f} s")
+            if bad.number != before:
+                raise SimulationError(
+                    f"MuJoCo diverged (NaN/huge acceleration) at step {k + 1} of {n}; "
+                    "the state was reset to the rest pose. Lower kp or the time step")
 
     # --- PoseSource -------------------------------------------------------------
     def all_link_poses(self) -> torch.Tensor:

@@ -1,0 +1,58 @@
+"""Command line: ``gausstac demo | bench <name> | build-asset``.
+
+* ``gausstac demo`` — the main demo (see README); writes PNG/MP4 files under ``out/``.
+* ``gausstac bench hertz|splat [options]`` — benchmarks that print what they measured.
+* ``gausstac build-asset [options]`` — hand Gaussians (``gaussians.ply`` + ``links.json``)
+  from a URDF's visual meshes, or aligned from a scan.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def _demo(argv: list[str]) -> int:
+    from . import demo
+
+    return demo.main(argv)
+
+
+def _bench(argv: list[str]) -> int:
+    from .bench.__main__ import main as bench_main
+
+    return bench_main(argv)
+
+
+def _build_asset(argv: list[str]) -> int:
+    from .splat import build
+
+    return build.main(argv)
+
+
+COMMANDS = {"demo": _demo, "bench": _bench, "build-asset": _build_asset}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(prog="gausstac", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("command", choices=sorted(COMMANDS))
+    if not argv or argv[0] in ("-h", "--help"):
+        parser.print_help()
+        return 0 if argv else 2
+    args, rest = parser.parse_known_args(argv[:1])
+    try:
+        return int(COMMANDS[args.command](argv[1:]) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:  # noqa: BLE001 - our own errors print as one clear line
+        from .errors import GaussTacError
+
+        if isinstance(exc, GaussTacError):
+            print(f"gausstac {args.command}: error: {exc}", file=sys.stderr)
+            return 1
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())
