@@ -177,7 +177,7 @@ class SensorLayout:
 
     rows: int = 16
     cols: int = 16
-    size: tuple = (0.016, 0.016)
+    size: tuple = (0.02, 0.02)
 
     def __post_init__(self) -> None:
         for name in ("rows", "cols"):

@@ -123,7 +123,7 @@ def clear_grid(ncell: ti.template(), grid_v: ti.template(), grid_m: ti.template(
 
 
 @ti.func
-def p2g(order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
+def p2g(gravity: ti.template(), gravity_scale: ti.template(), order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
         x: ti.template(), v: ti.template(), C: ti.template(), tau: ti.template(),
         mass: ti.template(), vol: ti.template(), kind: ti.template(), link: ti.template(),
         ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
@@ -147,7 +147,9 @@ def p2g(order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
                 w = bspline_weights(fx)
                 m = mass[p]
                 affine = m * C[p] - (dt * vol[p] * 4.0 * inv_dx * inv_dx) * tau[p]
-                mv = m * v[p]
+                # momentum plus this substep's weight impulse; weight uses the physical
+                # mass (mass scaling slows inertia, it does not add weight)
+                mv = m * v[p] + (dt * m * gravity_scale) * gravity
                 is_kin = kind[p] == KINEMATIC
                 lk = link[p]
                 for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
@@ -173,7 +175,7 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         col_kind: ti.template(), col_prm: ti.template(), col_pose: ti.template(),
         col_mu: ti.template(), col_sticky: ti.template(), sdf: ti.template(),
         sdf_info: ti.template(), col_impulse: ti.template()):
-    """Momentum -> velocity, gravity, damping, then boundary conditions per node.
+    """Momentum -> velocity, damping, then boundary conditions per node (gravity is in P2G).
 
     * Nodes where kinematic mass is at least half the node mass move exactly with
       their link (Dirichlet), so a kinematic layer is rigid, not a viscous drag.
@@ -190,7 +192,7 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
             j = (idx // nz) % ny
             i = idx // (ny * nz)
             xi = ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
-            vel = grid_v[idx] / m + dt * g
+            vel = grid_v[idx] / m
             vel *= damping
             if grid_mk[idx] >= 0.5 * m:
                 l = grid_link[idx]
@@ -470,7 +472,7 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
             mass: NDF, vol: NDF, radius: NDF, kind: NDI, link: NDI, matid: NDI, mat_table: NDF2,
             impulse: NDV, contact_id: NDI,
             ox: ti.i32, oy: ti.i32, oz: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
-            dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, damping: ti.f32,
+            dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, gravity_scale: ti.f32, damping: ti.f32,
             grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_link: NDI, grid_dp: NDV,
             link_poses: NDF2, alpha0: ti.f32, alpha1: ti.f32, walls: NDF2, n_walls: ti.i32,
             contact_mode: ti.template(), n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
@@ -483,7 +485,7 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
     inv_dx = 1.0 / dx
     ncell = nx * ny * nz
     clear_grid(ncell, grid_v, grid_m, grid_mk, grid_dp)
-    p2g(order, slab_start, n_slabs, x, v, C, tau, mass, vol, kind, link, ox, oy, oz, ny, nz, inv_dx, dt,
+    p2g(gravity, gravity_scale, order, slab_start, n_slabs, x, v, C, tau, mass, vol, kind, link, ox, oy, oz, ny, nz, inv_dx, dt,
         grid_v, grid_m, grid_mk, grid_link)
     grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping,
                 grid_v, grid_m, grid_mk, grid_link, link_poses, alpha0, alpha1, walls, n_walls,

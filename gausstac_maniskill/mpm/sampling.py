@@ -27,8 +27,11 @@ def box_particles(lo, hi, spacing: float) -> np.ndarray:
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
 
-def mesh_particles(mesh, spacing: float, name: str = "mesh") -> np.ndarray:
+def mesh_particles(mesh, spacing: float, name: str = "mesh", with_query: bool = False):
     """Lattice points [N, 3] inside a watertight trimesh mesh (its own frame).
+
+    With ``with_query=True`` also returns each point's distance to the surface [m]
+    and the outward normal of the nearest face ([N], [N, 3]).
 
     Raises:
         AssetError: the mesh is not watertight or encloses no lattice point.
@@ -43,8 +46,12 @@ def mesh_particles(mesh, spacing: float, name: str = "mesh") -> np.ndarray:
     n = np.maximum(np.ceil((hi - lo) / spacing).astype(int), 1)
     axes = [lo[d] + (np.arange(n[d]) + 0.5) * spacing for d in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    inside = mesh.contains(pts)
+    from .mesh_query import query_mesh
+
+    dist, normal, inside = query_mesh(mesh.vertices, mesh.faces, pts)  # winding number, in Taichi
     if not inside.any():
         raise AssetError(f"{name}: no particle fits inside the mesh at spacing {spacing:g} m "
                          f"(extents {np.round(mesh.extents, 5).tolist()} m); use a smaller spacing")
+    if with_query:
+        return pts[inside], dist[inside], normal[inside]
     return pts[inside]

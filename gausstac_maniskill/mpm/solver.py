@@ -478,7 +478,7 @@ class MPMWorld:
         K.advance(d["order"], d["slab_start"], n_slabs, self._n_active, d["x"], d["v"], d["C"], d["F"],
                   d["tau"], d["Jp"], d["mass"], d["vol"], d["radius"], d["kind"], d["link"], d["matid"],
                   d["mat_table"], d["impulse"], d["contact_id"], ox, oy, oz, nx, ny, nz, s.dx, dt,
-                  self._gravity, self._damp_factor(dt), d["grid_v"], d["grid_m"], d["grid_mk"],
+                  self._gravity, 1.0 / s.mass_scaling, self._damp_factor(dt), d["grid_v"], d["grid_m"], d["grid_mk"],
                   d["grid_link"], d["grid_dp"], d["link_pose"], a0, a1, d["walls"], len(self._walls),
                   mode, len(self.colliders), d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"],
                   d["col_sticky"], d["sdf"], d["sdf_info"], d["col_impulse"], 0.3 * s.dx / dt,

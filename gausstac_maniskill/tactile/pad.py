@@ -1,0 +1,127 @@
+"""Soft tactile pads built from a hand link's collision mesh.
+
+A :class:`Pad` is a :class:`~gausstac_maniskill.config.PadSpec` turned into MPM
+particles in the link frame: a lattice filling the link's (watertight) mesh, cut
+to the region within ``cone_deg`` of the pad axis and within ``thickness`` (soft)
+plus one grid cell (kinematic, carried by the link) of the surface. Each particle
+also records its depth below the surface and the outward normal of the nearest
+surface point, which the tactile maps use.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import PadSpec
+from ..errors import AssetError, ConfigError
+from ..mpm.sampling import mesh_particles
+
+__all__ = ["Pad", "build_pad", "allegro_pad_specs", "ALLEGRO_TIPS"]
+
+#: Fingertip links of ManiSkill's Allegro right hand (thumb, index, middle, ring).
+ALLEGRO_TIPS = ("link_15.0_tip", "link_3.0_tip", "link_7.0_tip", "link_11.0_tip")
+
+
+@dataclass
+class Pad:
+    """A pad's particles and sensor geometry, all in the link frame (metres).
+
+    Attributes:
+        spec: the description it was built from.
+        rest: [N, 3] particle rest positions in the link frame.
+        kinematic: [N] bool, particles bound to the link.
+        depth: [N] distance below the link surface at rest.
+        normal: [N, 3] outward unit normal of the nearest surface point.
+        surface: [N] bool, the outermost particle layer (depth < spacing).
+        sensor_frame: 4x4 sensor frame in the link frame (z out of the pad, x along the finger).
+        spacing: particle spacing [m].
+    """
+
+    spec: PadSpec
+    rest: np.ndarray
+    kinematic: np.ndarray
+    depth: np.ndarray
+    normal: np.ndarray
+    surface: np.ndarray
+    sensor_frame: np.ndarray
+    spacing: float
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def num_particles(self) -> int:
+        return len(self.rest)
+
+    def sensor_coords(self) -> np.ndarray:
+        """[N, 3] rest positions in the sensor frame."""
+        S = self.sensor_frame
+        return (self.rest - S[:3, 3]) @ S[:3, :3]
+
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """(centre [3], radius) of the pad's particles in the link frame, metres."""
+        c = self.rest.mean(0)
+        return c, float(np.linalg.norm(self.rest - c, axis=1).max() + self.spacing)
+
+
+def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "") -> Pad:
+    """Fill ``spec``'s region of ``mesh`` (link frame) with particles.
+
+    Args:
+        spec: the pad description.
+        mesh: watertight ``trimesh.Trimesh`` of the link, in the link frame.
+        spacing: particle spacing [m] (the MPM grid spacing / particles per axis).
+        dx: MPM grid spacing [m]; the kinematic layer is one cell thick.
+
+    Raises:
+        AssetError: the mesh is not watertight / has no volume.
+        ConfigError: the region selects no soft or no kinematic particle.
+    """
+    label = mesh_name or f"collision mesh of {spec.link!r}"
+    key = (hash(mesh.vertices.tobytes()), hash(mesh.faces.tobytes()), spec.axis, spec.cone_deg,
+           spec.thickness, float(spacing), float(dx))
+    if key in _CACHE:
+        rest, kin, dist, nrm, surface, S = _CACHE[key]
+        return Pad(spec, rest.copy(), kin.copy(), dist.copy(), nrm.copy(), surface.copy(), S.copy(), spacing)
+    if not mesh.is_watertight or not mesh.volume > 0:
+        raise AssetError(f"{label}: the pad mesh must be watertight with positive volume "
+                         f"(watertight={mesh.is_watertight}, volume={mesh.volume:.3g} m^3)")
+    pts, dist, nrm = mesh_particles(mesh, spacing, name=label, with_query=True)
+    keep = dist <= spec.thickness + dx
+    axis = np.asarray(spec.axis)
+    centre = mesh.center_mass if mesh.is_volume else mesh.bounds.mean(0)
+    direction = pts - centre
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+    keep &= direction @ axis >= math.cos(math.radians(spec.cone_deg))
+    soft = keep & (dist <= spec.thickness)
+    kin = keep & ~soft
+    if not soft.any() or not kin.any():
+        raise ConfigError(
+            f"pad {spec.name!r} on {spec.link!r}: the region (axis={spec.axis}, cone_deg={spec.cone_deg}, "
+            f"thickness={spec.thickness} m) selects {int(soft.sum())} soft and {int(kin.sum())} kinematic "
+            f"particles at spacing {spacing:g} m; widen the cone, change the axis or refine the spacing")
+    rest, dist, nrm = pts[keep], dist[keep], nrm[keep]
+    # sensor frame: origin at the surface point furthest along the axis, z = axis,
+    # x = the link's z (along the finger) made orthogonal to the axis
+    apex_v = mesh.vertices[np.argmax(mesh.vertices @ axis)]
+    origin = centre + axis * float((apex_v - centre) @ axis)
+    x = np.array([0.0, 0.0, 1.0]) - axis * axis[2]
+    if np.linalg.norm(x) < 1e-6:
+        x = np.array([1.0, 0.0, 0.0]) - axis * axis[0]
+    x /= np.linalg.norm(x)
+    S = np.eye(4)
+    S[:3, 0], S[:3, 1], S[:3, 2], S[:3, 3] = x, np.cross(axis, x), axis, origin
+    pad = Pad(spec, rest, kin[keep], dist, nrm, dist < spacing, S, spacing)
+    _CACHE[key] = (pad.rest, pad.kinematic, pad.depth, pad.normal, pad.surface, pad.sensor_frame)
+    return pad
+
+
+_CACHE: dict = {}  # pads from the same mesh and geometry (e.g. the four Allegro tips) are built once
+
+
+def allegro_pad_specs(**overrides) -> list[PadSpec]:
+    """Default pads on the Allegro right hand's four fingertips (palmar side = +x)."""
+    return [PadSpec(link=name, **overrides) for name in ALLEGRO_TIPS]

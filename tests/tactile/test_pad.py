@@ -1,0 +1,57 @@
+"""Pads from the Allegro URDF and bad pad descriptions."""
+import numpy as np
+import pytest
+import trimesh
+
+from gausstac_maniskill.config import PadSpec, SensorLayout
+from gausstac_maniskill.errors import AssetError, ConfigError
+from gausstac_maniskill.tactile import ALLEGRO_TIPS, allegro_pad_specs, build_pad
+from gausstac_maniskill.urdf import default_hand_urdf, link_mesh
+
+DX = 1.5e-3
+H = DX / 2
+
+
+@pytest.mark.parametrize("spec", allegro_pad_specs(), ids=lambda s: s.link)
+def test_pads_build_for_all_four_allegro_tips(spec):
+    mesh = link_mesh(default_hand_urdf(), spec.link)
+    pad = build_pad(spec, mesh, H, DX)
+    assert pad.num_particles > 500
+    soft = ~pad.kinematic
+    # soft layer within `thickness` of the surface, kinematic layer one cell below it
+    assert pad.depth[soft].max() <= spec.thickness + 1e-9
+    assert pad.depth[pad.kinematic].min() > spec.thickness
+    assert pad.depth[pad.kinematic].max() <= spec.thickness + DX + 1e-9
+    # all on the palmar side (+x), inside the cone
+    assert np.all(pad.rest[:, 0] > 0)
+    # the sensor frame is a rotation whose z is the pad axis
+    S = pad.sensor_frame
+    np.testing.assert_allclose(S[:3, :3] @ S[:3, :3].T, np.eye(3), atol=1e-9)
+    np.testing.assert_allclose(S[:3, 2], spec.axis, atol=1e-9)
+    assert spec.link in ALLEGRO_TIPS
+
+
+def test_wrong_link_name_suggests_the_right_one():
+    with pytest.raises(ConfigError, match=r"'link_3.0_tipp' is not in allegro_hand_right.urdf.*link_3.0_tip"):
+        link_mesh(default_hand_urdf(), "link_3.0_tipp")
+
+
+def test_mesh_with_no_volume(tmp_path):
+    flat = trimesh.Trimesh(vertices=[[0, 0, 0], [0.01, 0, 0], [0, 0.01, 0]], faces=[[0, 1, 2]])
+    with pytest.raises(AssetError, match="watertight"):
+        build_pad(PadSpec(link="x"), flat, H, DX, mesh_name="flat.obj")
+
+
+def test_region_selecting_no_particles():
+    mesh = link_mesh(default_hand_urdf(), "link_3.0_tip")
+    with pytest.raises(ConfigError, match=r"pad 'link_3.0_tip'.*selects 0 soft"):
+        build_pad(PadSpec(link="link_3.0_tip", thickness=1e-9, cone_deg=1.0), mesh, H, DX)
+
+
+def test_bad_pad_fields():
+    with pytest.raises(ConfigError, match=r"PadSpec\.axis"):
+        PadSpec(link="a", axis=(0, 0, 0))
+    with pytest.raises(ConfigError, match=r"PadSpec\.thickness"):
+        PadSpec(link="a", thickness=-1)
+    with pytest.raises(ConfigError, match=r"SensorLayout\.rows"):
+        SensorLayout(rows=0)

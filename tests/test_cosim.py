@@ -1,0 +1,101 @@
+"""The co-simulator on the Allegro fingertips: tactile maps of a press, sleeping pads."""
+import numpy as np
+import pytest
+
+from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.mpm import Sphere
+from gausstac_maniskill.pose import MujocoPoseSource
+from gausstac_maniskill.tactile import allegro_pad_specs
+from gausstac_maniskill.transforms import make_pose
+
+INDEX = "link_3.0_tip"
+
+
+@pytest.fixture(scope="module")
+def hand_poses():
+    src = MujocoPoseSource()
+    names = [s.link for s in allegro_pad_specs()]
+    return dict(zip(names, src.link_poses(names)[0].numpy()))
+
+
+def make_sim(hand_poses):
+    return GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=1.5e-3))
+
+
+def apex_frame(sim, poses):
+    T = poses[INDEX]
+    S = sim.pads[INDEX].sensor_frame
+    return T @ S  # world pose of the index pad's sensor frame
+
+
+@pytest.fixture(scope="module")
+def pressed(hand_poses):
+    """A sphere (R = 6 mm) pressed 0.8 mm into the centre of the index pad."""
+    sim = make_sim(hand_poses)
+    W = apex_frame(sim, hand_poses)
+    z = W[:3, 2]
+    R = 6e-3
+    centre = lambda d: make_pose(W[:3, 3] + z * (R - d))  # noqa: E731
+    sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3), friction=0.0))
+    before = {n: sim.pad_particles(n)[0] for n in sim.pads}
+    for k in range(12):
+        maps = sim.step(hand_poses, 0.02, {"ball": centre(0.8e-3 * min(1.0, (k + 1) / 8))})
+    return sim, maps, before
+
+
+def test_only_the_pad_near_the_object_is_awake(pressed):
+    sim, _, _ = pressed
+    assert sim.is_awake(INDEX)
+    assert [n for n in sim.pads if sim.is_awake(n)] == [INDEX]
+
+
+def test_sleeping_pads_stay_bit_identical(pressed):
+    sim, _, before = pressed
+    for n in sim.pads:
+        if n != INDEX:
+            assert np.array_equal(sim.pad_particles(n)[0], before[n])
+            assert float(sim.tactile()[n]["force"].abs().sum()) == 0.0
+
+
+def test_force_map_sums_to_the_collider_reaction(pressed):
+    sim, maps, _ = pressed
+    F, _ = sim.object_wrench("ball")
+    W = apex_frame(sim, {INDEX: sim._link_pose[INDEX]})
+    reaction_along_normal = float(F @ W[:3, 2])  # the ball is pushed out of the pad
+    total = float(maps[INDEX]["force"].sum())
+    assert total > 0.05
+    assert abs(total - reaction_along_normal) <= 0.02 * reaction_along_normal
+
+
+def test_centred_press_map_is_symmetric(pressed):
+    _, maps, _ = pressed
+    depth = maps[INDEX]["depth"].numpy()
+    H, W = depth.shape
+    assert depth.max() > 0.5e-3
+    # peak at the centre taxels
+    r, c = np.unravel_index(np.argmax(depth), depth.shape)
+    assert abs(r - (H - 1) / 2) <= 1.5 and abs(c - (W - 1) / 2) <= 1.5
+    # mirror symmetry across the finger's axis (rows), and roughly along it
+    assert np.abs(depth - depth[::-1, :]).max() < 0.1 * depth.max()
+    assert np.abs(depth - depth[:, ::-1]).max() < 0.25 * depth.max()
+    force = maps[INDEX]["force"].numpy()
+    rr, cc = np.mgrid[0:H, 0:W]
+    cy, cx = (force * rr).sum() / force.sum(), (force * cc).sum() / force.sum()
+    assert abs(cy - (H - 1) / 2) < 0.5 and abs(cx - (W - 1) / 2) < 1.0
+
+
+def test_maps_have_documented_shapes(pressed):
+    _, maps, _ = pressed
+    m = maps[INDEX]
+    lay = allegro_pad_specs()[0].layout
+    assert m["depth"].shape == (lay.rows, lay.cols)
+    assert m["shear"].shape == (lay.rows, lay.cols, 2)
+    assert m["force"].shape == (lay.rows, lay.cols)
+
+
+def test_missing_link_pose_is_refused(hand_poses):
+    poses = dict(hand_poses)
+    poses.pop(INDEX)
+    with pytest.raises(ConfigError, match=r"no pose for pad link 'link_3.0_tip'"):
+        make_sim(poses)
