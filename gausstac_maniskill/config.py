@@ -203,9 +203,9 @@ class PadSpec:
 
     The pad is the part of the link's (watertight) collision mesh that lies within
     ``cone_deg`` of ``axis`` (seen from the mesh centre) and within ``thickness`` of
-    the surface: that shell is soft silicone. The next grid cell inwards is bound
-    kinematically to the link (it carries the pad); deeper material is rigid and
-    not simulated.
+    the surface: that shell is soft silicone. The next two grid cells inwards are
+    bound kinematically to the link (they carry the pad); deeper material is rigid
+    and not simulated.
 
     Attributes:
         link: name of the link the pad sits on (e.g. ``"link_3.0_tip"``).

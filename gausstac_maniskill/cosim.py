@@ -169,24 +169,58 @@ class GaussTacSim:
         return self.pads[name]
 
     def tactile(self) -> dict[str, dict[str, torch.Tensor]]:
-        """``{pad: {"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N}}`` of the last step."""
+        """``{pad: {"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N,
+        "pressure": [H, W] Pa}}`` of the last step; a sleeping pad reads all zeros."""
         if not self._maps:
             x_all = self.world.positions()
             f_all = self.world.contact_forces()
+            s_all = self.world.stresses()
             for name, pad in self.pads.items():
                 g = self.world.group(name)
-                self._maps[name] = tactile_maps(pad, self._binning[name], x_all[g.start:g.stop],
-                                                self._link_pose[pad.spec.link], f_all[g.start:g.stop])
+                if not self._awake[name]:
+                    lay = pad.spec.layout
+                    z = torch.zeros(lay.rows, lay.cols)
+                    self._maps[name] = {"depth": z, "shear": torch.zeros(lay.rows, lay.cols, 2),
+                                        "force": z.clone(), "pressure": z.clone()}
+                    continue
+                sl = slice(g.start, g.stop)
+                self._maps[name] = tactile_maps(pad, self._binning[name], x_all[sl],
+                                                self._link_pose[pad.spec.link], f_all[sl], s_all[sl])
         return self._maps
+
+    def pad_pressure_force(self, pad: str) -> float:
+        """Normal force [N] on ``pad`` estimated from its stress (pressure map × taxel area);
+        unlike :meth:`pad_normal_force` it includes contacts with soft objects."""
+        p = self._pad(pad)
+        px, py = p.spec.layout.pitch
+        return float(self.tactile()[p.name]["pressure"].sum()) * px * py
 
     def pad_normal_force(self, pad: str) -> float:
         """Total normal contact force [N] on ``pad`` in the last step (sum of its force map)."""
         return float(self.tactile()[self._pad(pad).name]["force"].sum())
 
     def pad_particles(self, pad: str) -> tuple[np.ndarray, np.ndarray]:
-        """Current world positions [N, 3] and deformation gradients [N, 3, 3] of a pad's particles."""
+        """Current world positions [N, 3] and deformation gradients [N, 3, 3] of a pad's particles.
+
+        A sleeping pad is not simulated; it is reported carried rigidly by its link."""
         name = self._pad(pad).name
-        return self.world.positions(name), self.world.deformation_gradients(name)
+        return self._carried(name, self.world.positions(name), self.world.deformation_gradients(name))
+
+    def particles(self) -> tuple[np.ndarray, np.ndarray]:
+        """World positions [P, 3] and F [P, 3, 3] of every particle of the world (pads, soft
+        objects), in group order, sleeping pads carried by their links (for rendering)."""
+        x, F = self.world.positions(), self.world.deformation_gradients()
+        for name in self.pads:
+            g = self.world.group(name)
+            x[g.start:g.stop], F[g.start:g.stop] = self._carried(name, x[g.start:g.stop], F[g.start:g.stop])
+        return x, F
+
+    def _carried(self, name: str, x: np.ndarray, F: np.ndarray):
+        g = self.world.group(name)
+        if g.awake or g.sleep_pose is None:
+            return x, F
+        D = self._link_pose[self.pads[name].spec.link] @ np.linalg.inv(g.sleep_pose)
+        return (x @ D[:3, :3].T + D[:3, 3]).astype(np.float32), (D[:3, :3] @ F).astype(np.float32)
 
     def state_dict(self) -> dict:
         """Full state (MPM world, link poses, sleep flags); restore with :meth:`load_state_dict`."""

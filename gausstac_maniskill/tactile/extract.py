@@ -8,7 +8,10 @@ position x:
 
 * displacement u = x − X;
 * normal depth d = −u·z (positive when pushed into the pad) [m];
-* shear s = (u·x, u·y) [m].
+* shear s = (u·x, u·y) [m];
+* pressure p = −zᵀσz, the compressive normal stress on the sensor axis, averaged
+  over the soft particles of a taxel through the pad's thickness [Pa]. Unlike
+  ``force`` it sees every contact, soft objects included.
 
 Particles are assigned to taxels by the projection of their rest position on the
 sensor plane; depth and shear are averaged over the surface particles of a taxel
@@ -47,7 +50,7 @@ class TaxelBinning:
 
 
 def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_pose: np.ndarray,
-                 contact_forces: np.ndarray) -> dict[str, torch.Tensor]:
+                 contact_forces: np.ndarray, stresses: np.ndarray | None = None) -> dict[str, torch.Tensor]:
     """Tactile maps of one pad.
 
     Args:
@@ -56,9 +59,11 @@ def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_po
         positions: [N, 3] current world positions of the pad's particles [m].
         link_pose: 4x4 current world pose of the pad's link.
         contact_forces: [N, 3] world contact force on each particle [N].
+        stresses: optional [N, 3, 3] world Cauchy stress of each particle [Pa].
 
     Returns:
-        ``{"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N}`` float32 tensors.
+        ``{"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N, "pressure": [H, W] Pa}``
+        float32 tensors (pressure is zero without ``stresses``).
     """
     R, t = link_pose[:3, :3], link_pose[:3, 3]
     local = (np.asarray(positions, np.float64) - t) @ R
@@ -77,7 +82,15 @@ def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_po
     sy = np.bincount(idx[surf], weights=shear[surf, 1], minlength=n_tax) / safe
     inside = idx >= 0
     force = np.bincount(idx[inside], weights=fn[inside], minlength=n_tax)
+    pressure = np.zeros(n_tax)
+    if stresses is not None:
+        zw = R @ S[:, 2]
+        snn = np.einsum("i,nij,j->n", zw, np.asarray(stresses, np.float64), zw)
+        soft = (idx >= 0) & ~pad.kinematic
+        cnt = np.maximum(np.bincount(idx[soft], minlength=n_tax), 1)
+        pressure = np.bincount(idx[soft], weights=-snn[soft], minlength=n_tax) / cnt
     as_t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
     return {"depth": as_t(depth.reshape(H, W)),
             "shear": as_t(np.stack([sx, sy], -1).reshape(H, W, 2)),
-            "force": as_t(force.reshape(H, W))}
+            "force": as_t(force.reshape(H, W)),
+            "pressure": as_t(pressure.reshape(H, W))}

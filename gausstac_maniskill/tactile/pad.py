@@ -3,7 +3,7 @@
 A :class:`Pad` is a :class:`~gausstac_maniskill.config.PadSpec` turned into MPM
 particles in the link frame: a lattice filling the link's (watertight) mesh, cut
 to the region within ``cone_deg`` of the pad axis and within ``thickness`` (soft)
-plus one grid cell (kinematic, carried by the link) of the surface. Each particle
+plus two grid cells (kinematic, carried by the link) of the surface. Each particle
 also records its depth below the surface and the outward normal of the nearest
 surface point, which the tactile maps use.
 """
@@ -90,7 +90,7 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
         raise AssetError(f"{label}: the pad mesh must be watertight with positive volume "
                          f"(watertight={mesh.is_watertight}, volume={mesh.volume:.3g} m^3)")
     pts, dist, nrm = mesh_particles(mesh, spacing, name=label, with_query=True)
-    keep = dist <= spec.thickness + dx
+    keep = dist <= spec.thickness + KINEMATIC_CELLS * dx
     axis = np.asarray(spec.axis)
     centre = mesh.center_mass if mesh.is_volume else mesh.bounds.mean(0)
     direction = pts - centre
@@ -119,7 +119,12 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
     return pad
 
 
-_CACHE: dict = {}  # pads from the same mesh and geometry (e.g. the four Allegro tips) are built once
+_CACHE: dict = {}
+
+#: Thickness of the kinematic layer in grid cells. With one cell, the grid nodes at the
+#: soft/kinematic interface get only ~half their mass from kinematic particles and stay
+#: free, and the soft layer was seen to slip 0.5 mm after a frictional slide; two cells pin them.
+KINEMATIC_CELLS = 2  # pads from the same mesh and geometry (e.g. the four Allegro tips) are built once
 
 
 def allegro_pad_specs(**overrides) -> list[PadSpec]:
