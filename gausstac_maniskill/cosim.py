@@ -13,8 +13,6 @@ takes about a hundred substeps; gravity acts with the physical mass. Units: SI.
 """
 from __future__ import annotations
 
-import dataclasses
-import math
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -23,7 +21,7 @@ import torch
 from .config import Material, PadSpec, SolverSettings
 from .errors import ConfigError
 from .mpm import MPMWorld
-from .mpm.colliders import Collider, signed_distance
+from .mpm.colliders import Collider
 from .tactile import Pad, TaxelBinning, build_pad, tactile_maps
 from .transforms import as_pose_matrix
 from .urdf import default_hand_urdf, link_mesh
@@ -147,10 +145,7 @@ class GaussTacSim:
             c = T[:3, :3] @ c_local + T[:3, 3]
             near = False
             for idx in self._objects.values():
-                collider = self.world.colliders[idx]
-                d = float(signed_distance(collider, c[None])[0][0]) if _cheap(collider) else \
-                    float(np.linalg.norm(collider.pose[:3, 3] - c)) - _radius(collider)
-                near |= d - r < self.sleep_margin
+                near |= _distance(self.world.colliders[idx], c) - r < self.sleep_margin
             for lo, hi in soft_boxes:
                 d = float(np.linalg.norm(np.maximum(np.maximum(lo - c, c - hi), 0.0)))
                 near |= d - r < self.sleep_margin
@@ -172,9 +167,10 @@ class GaussTacSim:
         """``{pad: {"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N,
         "pressure": [H, W] Pa}}`` of the last step; a sleeping pad reads all zeros."""
         if not self._maps:
-            x_all = self.world.positions()
-            f_all = self.world.contact_forces()
-            s_all = self.world.stresses()
+            awake = any(self._awake.values())
+            x_all = self.world.positions() if awake else None
+            f_all = self.world.contact_forces() if awake else None
+            s_all = self.world.stresses() if awake else None
             for name, pad in self.pads.items():
                 g = self.world.group(name)
                 if not self._awake[name]:
@@ -246,14 +242,22 @@ def _load_mesh(path: str):
     return trimesh.load(path, force="mesh")
 
 
-def _cheap(collider: Collider) -> bool:
+def _distance(collider: Collider, point: np.ndarray) -> float:
+    """Signed distance [m] from ``point`` to ``collider`` (exact for analytic shapes, a
+    bounding-sphere lower bound for meshes), in numpy: cheap enough for every step."""
     from .mpm import colliders as col
 
-    return collider.kind != col.MESH
-
-
-def _radius(collider: Collider) -> float:
-    from .mpm.solver import _collider_radius
-
-    r = _collider_radius(collider)
-    return r if math.isfinite(r) else 0.0
+    T = collider.pose
+    q = (point - T[:3, 3]) @ T[:3, :3]
+    if collider.kind == col.SPHERE:
+        return float(np.linalg.norm(q) - collider.radius)
+    if collider.kind == col.BOX:
+        d = np.abs(q) - np.asarray(collider.half_extents)
+        return float(np.linalg.norm(np.maximum(d, 0.0)) + min(d.max(), 0.0))
+    if collider.kind == col.CAPSULE:
+        z = np.clip(q[2], -collider.half_length, collider.half_length)
+        return float(np.linalg.norm(q - [0.0, 0.0, z]) - collider.radius)
+    if collider.kind == col.HALFSPACE:
+        return float(q[2])
+    lo, hi = collider.mesh.bounds
+    return float(np.linalg.norm(np.maximum(np.maximum(lo - q, q - hi), 0.0)))

@@ -11,6 +11,7 @@ import sys
 BENCHMARKS = {
     "hertz": "gausstac_maniskill.bench.hertz",
     "splat": "gausstac_maniskill.bench.splat",
+    "hand": "gausstac_maniskill.bench.hand",
 }
 
 

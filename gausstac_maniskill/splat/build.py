@@ -16,10 +16,10 @@ Two ways to build one:
    box/cylinder/sphere primitives) with blue-noise samples at density
    ``1 / spacing²`` and puts one flat Gaussian on every sample.
 2. :func:`build_from_scan` aligns a point cloud or Gaussian scene in an
-   arbitrary frame to the URDF hand at a reference pose (centroid + PCA axes with
-   the four proper sign flips, then ICP, lowest residual wins), gives every
-   point the link of the nearest posed link surface and moves it into that
-   link's frame.
+   arbitrary frame to the URDF hand at a reference pose (centroids + principal
+   axes matched in every proper order/sign flip, then trimmed ICP, lowest
+   residual wins), gives every point the link of the nearest posed link surface
+   and moves it into that link's frame (means, rotations and SH).
 
 Splat shape (path 1). Samples come from area-uniform candidates at 4/spacing²
 thinned so that no two samples with agreeing normals are closer than
@@ -855,9 +855,12 @@ def align_point_clouds(scan: np.ndarray, reference: np.ndarray, reference_normal
         scan: [n, 3] points in an arbitrary frame.
         reference: [m, 3] dense samples of the target surface; reference_normals [m, 3].
         init: ``"pca"`` — centroids matched, principal axes matched in each of
-            the 24 proper orders/sign flips (a partial scan can reorder them); ``"identity"`` — start where the scan is
-            (and also from the centroid-matched identity); or a [4, 4] guess of
-            scan -> hand. Every start runs ICP; the lowest trimmed RMS wins.
+            the 24 proper orders/sign flips (a partial scan can reorder them);
+            ``"identity"`` — start where the scan is (and also from the
+            centroid-matched identity); or a [4, 4] guess of scan -> hand.
+            Every start runs coarse point-to-point ICP on a subset; the
+            ``refine`` best continue with point-to-plane ICP and the lowest
+            trimmed RMS wins.
         trim: fraction of closest correspondences used per iteration (robust
             to partial overlap and stray points).
         max_points: scan points used by ICP (random subset).
