@@ -234,7 +234,7 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
 
 
 @ti.func
-def g2p(order: ti.template(), n: ti.template(), x: ti.template(), v: ti.template(),
+def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.template(), v: ti.template(),
         C: ti.template(), F: ti.template(), tau: ti.template(), Jp: ti.template(),
         kind: ti.template(), matid: ti.template(), mat_table: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(),
@@ -259,11 +259,14 @@ def g2p(order: ti.template(), n: ti.template(), x: ti.template(), v: ti.template
             # deformation gradient: F <- (I + Δt ∇v) F, then the material's return map
             Fn = (ti.Matrix.identity(ti.f32, 3) + dt * new_C) @ F[p]
             mi = matid[p]
-            model = ti.cast(mat_table[mi, 2], ti.i32)
             jp = Jp[p]
-            if model == mat.FOAM:
-                Fn, jp = mat.plastic_return(Fn, jp, mat_table[mi, 3], mat_table[mi, 4])
-            tau[p] = mat.kirchhoff_stress(Fn, jp, mat_table[mi, 0], mat_table[mi, 1], model, mat_table[mi, 5])
+            if ti.static(nh_only):  # every material Neo-Hookean: no SVD code compiled in
+                tau[p] = mat.neo_hookean_stress(Fn, mat_table[mi, 0], mat_table[mi, 1])
+            else:
+                model = ti.cast(mat_table[mi, 2], ti.i32)
+                if model == mat.FOAM:
+                    Fn, jp = mat.plastic_return(Fn, jp, mat_table[mi, 3], mat_table[mi, 4])
+                tau[p] = mat.kirchhoff_stress(Fn, jp, mat_table[mi, 0], mat_table[mi, 1], model, mat_table[mi, 5])
             v[p] = new_v
             C[p] = new_C
             F[p] = Fn
@@ -475,7 +478,7 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
             dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, gravity_scale: ti.f32, damping: ti.f32,
             grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_link: NDI, grid_dp: NDV,
             link_poses: NDF2, alpha0: ti.f32, alpha1: ti.f32, walls: NDF2, n_walls: ti.i32,
-            contact_mode: ti.template(), n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
+            contact_mode: ti.template(), nh_only: ti.template(), n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
             col_mu: NDF, col_sticky: NDI, sdf: NDF, sdf_info: NDI2, col_impulse: NDF2,
             max_push: ti.f32, reach: ti.f32):
     """One MLS-MPM substep: clear grid, P2G, grid update + BCs, contact, G2P.
@@ -496,4 +499,4 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
                         ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_dp, n_col, col_kind, col_prm,
                         col_pose, col_mu, col_sticky, sdf, sdf_info, alpha0, alpha1, max_push, reach)
         contact_apply(ncell, ox, oy, oz, ny, nz, dx, grid_v, grid_m, grid_mk, grid_dp, walls, n_walls)
-    g2p(order, n, x, v, C, F, tau, Jp, kind, matid, mat_table, ox, oy, oz, ny, nz, inv_dx, dt, grid_v)
+    g2p(nh_only, order, n, x, v, C, F, tau, Jp, kind, matid, mat_table, ox, oy, oz, ny, nz, inv_dx, dt, grid_v)

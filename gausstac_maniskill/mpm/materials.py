@@ -48,6 +48,13 @@ def polar_rotation(F):
 
 
 @ti.func
+def neo_hookean_stress(F, mu, lam):
+    """Kirchhoff stress of the compressible Neo-Hookean model (J clamped at MIN_J)."""
+    J = ti.max(F.determinant(), MIN_J)
+    return mu * (F @ F.transpose() - ti.Matrix.identity(ti.f32, 3)) + lam * ti.log(J) * ti.Matrix.identity(ti.f32, 3)
+
+
+@ti.func
 def kirchhoff_stress(F, Jp, mu0, lam0, model, hardening):
     """Kirchhoff stress τ [Pa] of deformation gradient F (3x3) for one material."""
     tau = ti.Matrix.zero(ti.f32, 3, 3)

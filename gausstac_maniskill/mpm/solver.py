@@ -480,7 +480,7 @@ class MPMWorld:
                   d["mat_table"], d["impulse"], d["contact_id"], ox, oy, oz, nx, ny, nz, s.dx, dt,
                   self._gravity, 1.0 / s.mass_scaling, self._damp_factor(dt), d["grid_v"], d["grid_m"], d["grid_mk"],
                   d["grid_link"], d["grid_dp"], d["link_pose"], a0, a1, d["walls"], len(self._walls),
-                  mode, len(self.colliders), d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"],
+                  mode, all(m.model == "neo_hookean" for m in self.materials), len(self.colliders), d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"],
                   d["col_sticky"], d["sdf"], d["sdf_info"], d["col_impulse"], 0.3 * s.dx / dt,
                   s.dx + self._reach)
         return ncell
