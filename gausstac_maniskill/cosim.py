@@ -121,10 +121,10 @@ class GaussTacSim:
             if spec.link not in link_poses:
                 raise ConfigError(f"step: link_poses has no pose for pad link {spec.link!r}")
         for link, T in link_poses.items():
+            T = as_pose_matrix(T, f"link_poses[{link!r}]")
+            self._link_pose[link] = T  # every link is kept: the renderer poses the whole hand
             if link in self.world.link_names:
-                T = as_pose_matrix(T, f"link_poses[{link!r}]")
                 self.world.set_link_pose(link, T)
-                self._link_pose[link] = T
         for name, T in (object_poses or {}).items():
             self.set_object_pose(name, T)
         self._update_sleep()
@@ -152,6 +152,31 @@ class GaussTacSim:
             if near != self._awake[name]:
                 self.world.set_awake(name, near)
                 self._awake[name] = near
+
+    # ------------------------------------------------------------------ rendering
+    def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None) -> None:
+        """Give the scene its 3D Gaussians (see :class:`gausstac_maniskill.render.SceneGaussians`).
+
+        Call it with the pads and soft objects at rest (before stepping into contact):
+        their soft Gaussians are placed on the current particles.
+
+        Args:
+            hand: rigid hand Gaussians, link-local (e.g. ``load_ply(assets/.../gaussians.ply)``).
+            hand_links: their link names (``links.json["link_names"]``); every one of them
+                must then be in the ``link_poses`` passed to :meth:`step`.
+            objects: rigid object name -> Gaussians in the object frame.
+        """
+        from .render import SceneGaussians
+
+        self._scene = SceneGaussians(self, hand, hand_links, objects)
+
+    def render(self, viewmats, Ks, width: int, height: int, **kwargs):
+        """Render the scene with the splat camera: ``viewmats`` [C, 4, 4] world-to-camera
+        (OpenCV convention), ``Ks`` [C, 3, 3] pixel intrinsics; returns a ``RenderOutput``
+        (``rgb`` [C, H, W, 3], ``depth`` [C, H, W] m, ``alpha`` [C, H, W])."""
+        if getattr(self, "_scene", None) is None:
+            raise ConfigError("GaussTacSim.render: call attach_gaussians(...) first")
+        return self._scene.render(viewmats, Ks, width, height, **kwargs)
 
     # ------------------------------------------------------------------ readout
     def is_awake(self, pad: str) -> bool:

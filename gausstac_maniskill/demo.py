@@ -54,60 +54,14 @@ def load_hand_gaussians(asset_dir: Path = ASSET_DIR):
     return load_ply(ply), names
 
 
-def box_gaussians(half_extents, pose, spacing, link_id):
-    """Checkered flat Gaussians on a box's surface (box frame), labelled ``link_id``."""
-    import trimesh
-
-    from .splat.build import gaussians_from_surface
-
-    mesh = trimesh.creation.box(extents=2 * np.asarray(half_extents))
-    pts, face = trimesh.sample.sample_surface_even(mesh, int(mesh.area / spacing ** 2), seed=0)
-    check = (np.floor(pts / 0.01).astype(int).sum(1) % 2).astype(float)
-    rgb = np.stack([0.75 - 0.35 * check, 0.25 + 0.1 * check, 0.2 + 0.05 * check], 1)
-    return gaussians_from_surface(pts, mesh.face_normals[face], rgb, spacing, link_id=link_id)
-
-
-def particle_gaussians(sim, spacing):
-    """Soft Gaussians on the surface particles of the pads and the sponge (world rest frame)."""
-    from .splat.build import gaussians_from_surface
-
-    x0 = sim.world.positions()
-    sets = []
-    for name, pad in sim.pads.items():
-        g = sim.world.group(name)
-        T = sim._link_pose[pad.spec.link]
-        sel = np.flatnonzero(pad.surface)
-        pts = x0[g.start:g.stop][sel]
-        nrm = pad.normal[sel] @ T[:3, :3].T
-        sets.append((pts + 0.5 * pad.spacing * nrm, nrm, np.tile([0.55, 0.62, 0.78], (len(sel), 1))))
-    if "sponge" in sim._soft:
-        g = sim.world.group("sponge")
-        pts = x0[g.start:g.stop]
-        lo, hi = pts.min(0), pts.max(0)
-        h = sim.settings.particle_spacing
-        outer = np.any((pts < lo + h) | (pts > hi - h), axis=1) & (pts[:, 2] > lo[2] + h)
-        p = pts[outer]
-        nrm = np.zeros_like(p)
-        for d in range(3):
-            nrm[p[:, d] > hi[d] - h, d] = 1.0
-            nrm[p[:, d] < lo[d] + h, d] = -1.0
-        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-        rng = np.random.default_rng(1)
-        rgb = np.clip(np.array([0.95, 0.8, 0.25]) + 0.08 * rng.standard_normal((len(p), 1)), 0, 1)
-        sets.append((p + 0.5 * h * nrm, nrm, rgb))
-    pts = np.concatenate([s[0] for s in sets])
-    nrm = np.concatenate([s[1] for s in sets])
-    rgb = np.concatenate([s[2] for s in sets])
-    return gaussians_from_surface(pts, nrm, rgb, spacing, link_id=0, group=np.zeros(len(pts), np.int64))
-
-
 def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int = 240) -> dict:
     """Run the demo; returns timing statistics (seconds)."""
     from .config import Material
     from .cosim import GaussTacSim, default_hand_settings
     from .mpm import Box, box_particles
     from .pose import MujocoPoseSource
-    from .splat import GaussianSet, SoftBinding, look_at, intrinsics_from_fov, pose_gaussians
+    from .render import box_gaussians
+    from .splat import intrinsics_from_fov, look_at
     from .tactile import allegro_pad_specs
     from .transforms import make_pose
 
@@ -174,16 +128,10 @@ def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int
     path += [path[-1]] * (2 * n)
     path += lin(path[-1], path[-1] - down * 12e-3, 5 * n)                # release
 
-    # Gaussians: hand (rigid, link-local), cube (one more "link"), pads + sponge (soft)
+    # Gaussians: hand (rigid, link-local), cube (object frame), pads + sponge (soft, automatic)
     hand, hand_links = load_hand_gaussians()
-    link_index = [names_all.index(nm) for nm in hand_links]
-    hand = _drop_pad_regions(hand, hand_links, sim)
-    cube = box_gaussians(cube_half, cube_pose, 1.5e-3 if not fast else 2.5e-3, link_id=len(hand_links))
-    soft = particle_gaussians(sim, h)
-    scene = GaussianSet.cat([hand, cube, soft])
-    n_rigid = len(hand) + len(cube)
-    binding = SoftBinding.from_nearest(scene, torch.as_tensor(sim.world.positions()),
-                                       gaussian_index=torch.arange(n_rigid, len(scene)))
+    sim.attach_gaussians(hand, hand_links, {"cube": box_gaussians(cube_half, 1.5e-3 if not fast else 2.5e-3)})
+    n_gauss = len(sim._scene.gaussians)
     target = 0.5 * sponge_c + np.array([0.0, 0.0, 0.005])
     eye = target + 0.20 * finger_dir + 0.09 * np.array([0, 0, 1.0]) - 0.03 * side
     view = look_at(eye, target)
@@ -200,13 +148,10 @@ def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int
     for k, off in enumerate(steps):
         P = hand_at(start + off)
         t0 = time.perf_counter()
-        maps = sim.step(pad_pose(P), 0.05)
+        maps = sim.step(dict(zip(names_all, P)), 0.05)
         t_sim += time.perf_counter() - t0
         t0 = time.perf_counter()
-        x, F = sim.particles()
-        link_poses = torch.as_tensor(np.concatenate([P[link_index], cube_pose[None]]), dtype=torch.float32)
-        posed = pose_gaussians(scene, link_poses, binding, torch.as_tensor(x), torch.as_tensor(F))
-        img = posed.render(view[None], K[None], width, height, background=(1.0, 1.0, 1.0)).rgb[0]
+        img = sim.render(view[None], K[None], width, height, background=(1.0, 1.0, 1.0)).rgb[0]
         t_render += time.perf_counter() - t0
         forces = {nm: sim.pad_pressure_force(nm) for nm in maps}
         log.append(dict(step=k, substeps=sim.world.last_step.substeps, awake=[nm for nm in sim.pads if sim.is_awake(nm)],
@@ -215,30 +160,15 @@ def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int
         frames.append(_panel(img.numpy(), maps, forces, k))
     _write_outputs(out, frames, log)
     stats = dict(steps=len(path), sim_s=t_sim, render_s=t_render, total_s=time.perf_counter() - t_start,
-                 gaussians=len(scene), particles=sim.world.num_particles)
+                 gaussians=n_gauss, particles=sim.world.num_particles)
     print(f"[demo] {len(path)} control steps: MPM {t_sim:.1f} s ({1e3 * t_sim / len(path):.0f} ms/step), "
-          f"3DGS {t_render:.1f} s ({1e3 * t_render / len(path):.0f} ms/frame, {len(scene)} Gaussians), "
+          f"3DGS {t_render:.1f} s ({1e3 * t_render / len(path):.0f} ms/frame, {n_gauss} Gaussians), "
           f"{sim.world.num_particles} particles; total {stats['total_s']:.0f} s")
     peak = max(log, key=lambda r: r["force_from_stress"][INDEX])
     print(f"[demo] peak index-pad force {peak['force_from_stress'][INDEX]:.2f} N (from pad stress) at step "
           f"{peak['step']}; "
           f"wrote {out}/demo.mp4, {out}/demo_strip.png, {out}/demo_log.json")
     return stats
-
-
-def _drop_pad_regions(hand, hand_links, sim):
-    """Remove the rigid Gaussians that the soft pads replace (near a pad's particles)."""
-    from scipy.spatial import cKDTree
-
-    keep = torch.ones(len(hand), dtype=torch.bool)
-    for pad in sim.pads.values():
-        if pad.spec.link not in hand_links:
-            continue
-        lid = hand_links.index(pad.spec.link)
-        sel = torch.nonzero(hand.link_id == lid).flatten()
-        d, _ = cKDTree(pad.rest[~pad.kinematic]).query(hand.means[sel].numpy())
-        keep[sel[torch.as_tensor(d < 2.5 * pad.spacing)]] = False
-    return hand[torch.nonzero(keep).flatten()]
 
 
 def _panel(rgb, maps, forces, step):
@@ -280,9 +210,9 @@ def _panel(rgb, maps, forces, step):
 def _write_outputs(out, frames, log):
     import imageio.v2 as imageio
 
-    with imageio.get_writer(os.path.join(out, "demo.mp4"), fps=10, macro_block_size=1) as w:
-        for f in frames:
-            w.append_data(f)
+    from .tactile import write_video
+
+    write_video(os.path.join(out, "demo.mp4"), frames, fps=10)
     keys = np.linspace(0, len(frames) - 1, 4).astype(int)
     imageio.imwrite(os.path.join(out, "demo_strip.png"), np.concatenate([frames[k] for k in keys], 0))
     with open(os.path.join(out, "demo_log.json"), "w") as f:
@@ -293,10 +223,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="gausstac demo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="out/demo", help="output folder")
-    ap.add_argument("--fast", action="store_true", help="coarser and shorter (about a minute)")
+    ap.add_argument("--fine", action="store_true",
+                    help="1.5 mm grid and twice the steps (about 7 minutes on 2 cores; default: 2 mm, ~1.5 min)")
     ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
     args = ap.parse_args(argv)
     print(f"[demo] Taichi backend: {backend.init(args.arch)}")
     torch.set_num_threads(1)  # small torch ops: one thread avoids contention with Taichi's pool
-    run(args.out, fast=args.fast)
+    run(args.out, fast=not args.fine)
     return 0

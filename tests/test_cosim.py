@@ -99,3 +99,59 @@ def test_missing_link_pose_is_refused(hand_poses):
     poses.pop(INDEX)
     with pytest.raises(ConfigError, match=r"no pose for pad link 'link_3.0_tip'"):
         make_sim(poses)
+
+
+def test_render_without_gaussians_is_refused(pressed):
+    sim, _, _ = pressed
+    with pytest.raises(ConfigError, match="attach_gaussians"):
+        sim.render(np.eye(4)[None], np.eye(3)[None], 8, 8)
+
+
+def test_scene_renders_hand_pads_and_object():
+    from gausstac_maniskill.render import box_gaussians
+    from gausstac_maniskill.splat import intrinsics_from_fov, load_ply, look_at
+    from gausstac_maniskill.demo import ASSET_DIR
+    import json
+
+    src = MujocoPoseSource()
+    all_poses = dict(zip(src.link_names, src.link_poses()[0].numpy()))
+    sim = GaussTacSim(allegro_pad_specs(), all_poses, settings=default_hand_settings(dx=2e-3))
+    cube_pose = make_pose([0.08, -0.06, 0.05])  # between the camera and the hand, in view
+    sim.add_rigid_object("cube", Sphere(radius=0.01, pose=cube_pose))
+    hand = load_ply(ASSET_DIR / "gaussians.ply")
+    links = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]
+    sim.attach_gaussians(hand, links, {"cube": box_gaussians((0.01, 0.01, 0.01), 2e-3)})
+    n_soft = len(sim._scene.binding)
+    assert n_soft > 100  # the four pads' surfaces
+    view = look_at([0.25, 0.0, 0.05], [0.0, 0.0, 0.05])
+    K = intrinsics_from_fov(64, 48, 1.0)
+    out = sim.render(view[None], K[None], 64, 48, background=(1.0, 1.0, 1.0))
+    cover = float((out.alpha[0] > 0.5).float().mean())
+    assert 0.05 < cover < 0.9, cover
+    # moving the cube far away changes the image; the hand stays
+    sim.step(all_poses, 1e-3, {"cube": make_pose([5.0, 0.0, 0.0])})
+    out2 = sim.render(view[None], K[None], 64, 48, background=(1.0, 1.0, 1.0))
+    assert float((out2.alpha[0] > 0.5).float().mean()) < cover
+
+
+def test_tactile_pictures(pressed, tmp_path):
+    from gausstac_maniskill.tactile import maps_figure, save_maps_png, write_video
+
+    _, maps, _ = pressed
+    img = maps_figure(maps, pads=[INDEX, "link_7.0_tip"])
+    assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3
+    assert img.std() > 10  # not a blank canvas
+    save_maps_png(str(tmp_path / "maps.png"), maps)
+    write_video(str(tmp_path / "maps.mp4"), [img, img])
+    assert (tmp_path / "maps.png").stat().st_size > 1000
+    assert (tmp_path / "maps.mp4").stat().st_size > 1000
+
+
+def test_pads_for_any_link_list():
+    from gausstac_maniskill.tactile import pad_specs_for_links
+
+    specs = pad_specs_for_links(["link_3.0_tip", "link_7.0_tip"], thickness=3e-3)
+    assert [s.name for s in specs] == ["link_3.0_tip", "link_7.0_tip"]
+    assert all(s.thickness == 3e-3 for s in specs)
+    with pytest.raises(ConfigError, match="non-empty list"):
+        pad_specs_for_links("link_3.0_tip")

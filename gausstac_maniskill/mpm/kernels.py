@@ -41,6 +41,16 @@ def bspline_weights(fx):
 
 
 @ti.func
+def stencil(xp, inv_dx, origin):
+    """Base node (box coordinates), offset from it in cells, and B-spline weights of
+    the 3x3x3 stencil of a particle at world position xp."""
+    Xp = xp * inv_dx - origin
+    base = ti.cast(ti.floor(Xp - 0.5), ti.i32)
+    fx = Xp - base
+    return base, fx, bspline_weights(fx)
+
+
+@ti.func
 def kinematic_update(kin: ti.template(), n: ti.template(), x: ti.template(),
         v: ti.template(), C: ti.template(), F: ti.template(), tau: ti.template(),
         X0: ti.template(), link: ti.template(), group: ti.template(), link_poses: ti.template(),
@@ -141,10 +151,7 @@ def p2g(gravity: ti.template(), gravity_scale: ti.template(), order: ti.template
             s = 2 * h + color
             for ii in range(slab_start[s], slab_start[s + 1]):
                 p = order[ii]
-                Xp = x[p] * inv_dx - origin
-                base = ti.cast(ti.floor(Xp - 0.5), ti.i32)
-                fx = Xp - base
-                w = bspline_weights(fx)
+                base, fx, w = stencil(x[p], inv_dx, origin)
                 m = mass[p]
                 affine = m * C[p] - (dt * vol[p] * 4.0 * inv_dx * inv_dx) * tau[p]
                 # momentum plus this substep's weight impulse; weight uses the physical
@@ -244,10 +251,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
     for ii in range(n):
         p = order[ii]
         if kind[p] == DYNAMIC:
-            Xp = x[p] * inv_dx - origin
-            base = ti.cast(ti.floor(Xp - 0.5), ti.i32)
-            fx = Xp - base
-            w = bspline_weights(fx)
+            base, fx, w = stencil(x[p], inv_dx, origin)
             new_v = vec3(0.0)
             new_C = ti.Matrix.zero(ti.f32, 3, 3)
             for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
@@ -313,10 +317,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                         if phi - radius[p] < reach:
                             near = True
                     if near:
-                        Xp = x[p] * inv_dx - origin
-                        base = ti.cast(ti.floor(Xp - 0.5), ti.i32)
-                        fx = Xp - base
-                        w = bspline_weights(fx)
+                        base, fx, w = stencil(x[p], inv_dx, origin)
                         v0 = vec3(0.0)
                         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                             v0 += w[i][0] * w[j][1] * w[k][2] * grid_v[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]

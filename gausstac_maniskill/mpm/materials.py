@@ -58,19 +58,22 @@ def neo_hookean_stress(F, mu, lam):
 def kirchhoff_stress(F, Jp, mu0, lam0, model, hardening):
     """Kirchhoff stress τ [Pa] of deformation gradient F (3x3) for one material."""
     tau = ti.Matrix.zero(ti.f32, 3, 3)
-    I = ti.Matrix.identity(ti.f32, 3)
     if model == NEO_HOOKEAN:
-        J = ti.max(F.determinant(), MIN_J)
-        tau = mu0 * (F @ F.transpose() - I) + lam0 * ti.log(J) * I
+        tau = neo_hookean_stress(F, mu0, lam0)
     else:
-        mu, lam = mu0, lam0
-        if model == FOAM:
-            h = ti.exp(hardening * (1.0 - Jp))
-            mu, lam = mu0 * h, lam0 * h
-        R = polar_rotation(F)
-        J = F.determinant()
-        tau = 2.0 * mu * (F - R) @ F.transpose() + lam * (J - 1.0) * J * I
+        mu, lam, R, J = _corotated_terms(F, Jp, mu0, lam0, model, hardening)
+        tau = 2.0 * mu * (F - R) @ F.transpose() + lam * (J - 1.0) * J * ti.Matrix.identity(ti.f32, 3)
     return tau
+
+
+@ti.func
+def _corotated_terms(F, Jp, mu0, lam0, model, hardening):
+    """(μ, λ) with foam hardening, polar rotation R and J of F, for the corotated models."""
+    mu, lam = mu0, lam0
+    if model == FOAM:
+        h = ti.exp(hardening * (1.0 - Jp))
+        mu, lam = mu0 * h, lam0 * h
+    return mu, lam, polar_rotation(F), F.determinant()
 
 
 @ti.func
@@ -95,12 +98,7 @@ def strain_energy_density(F, Jp, mu0, lam0, model, hardening):
         lnJ = ti.log(J)
         psi = 0.5 * mu0 * ((F.transpose() @ F).trace() - 3.0) - mu0 * lnJ + 0.5 * lam0 * lnJ * lnJ
     else:
-        mu, lam = mu0, lam0
-        if model == FOAM:
-            h = ti.exp(hardening * (1.0 - Jp))
-            mu, lam = mu0 * h, lam0 * h
-        R = polar_rotation(F)
-        J = F.determinant()
+        mu, lam, R, J = _corotated_terms(F, Jp, mu0, lam0, model, hardening)
         D = F - R
         psi = mu * (D * D).sum() + 0.5 * lam * (J - 1.0) ** 2
     return psi

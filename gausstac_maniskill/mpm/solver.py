@@ -383,6 +383,8 @@ class MPMWorld:
             SimulationError: the bound needs more than ``settings.max_substeps``.
         """
         self._push()
+        if self._n_active == 0:
+            return 1, dt  # nothing awake: nothing to resolve, whatever moves around
         s = self.settings
         c = self.wave_speed()
         v = self._vmax + (self._driver_speed(dt) if driver_speed is None else driver_speed)

@@ -18,7 +18,7 @@ from ..config import PadSpec
 from ..errors import AssetError, ConfigError
 from ..mpm.sampling import mesh_particles
 
-__all__ = ["Pad", "build_pad", "allegro_pad_specs", "ALLEGRO_TIPS"]
+__all__ = ["Pad", "build_pad", "allegro_pad_specs", "pad_specs_for_links", "ALLEGRO_TIPS"]
 
 #: Fingertip links of ManiSkill's Allegro right hand (thumb, index, middle, ring).
 ALLEGRO_TIPS = ("link_15.0_tip", "link_3.0_tip", "link_7.0_tip", "link_11.0_tip")
@@ -104,10 +104,11 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
             f"thickness={spec.thickness} m) selects {int(soft.sum())} soft and {int(kin.sum())} kinematic "
             f"particles at spacing {spacing:g} m; widen the cone, change the axis or refine the spacing")
     rest, dist, nrm = pts[keep], dist[keep], nrm[keep]
-    # sensor frame: origin at the surface point furthest along the axis, z = axis,
-    # x = the link's z (along the finger) made orthogonal to the axis
-    apex_v = mesh.vertices[np.argmax(mesh.vertices @ axis)]
-    origin = centre + axis * float((apex_v - centre) @ axis)
+    # sensor frame: origin on the pad's particle surface (outermost particles plus half
+    # a spacing) where it is furthest along the axis, so zero depth is first contact
+    # whatever the lattice's alignment with the mesh; z = axis, x = the link's z (along
+    # the finger) made orthogonal to the axis
+    origin = centre + axis * (float(((rest - centre) @ axis).max()) + 0.5 * spacing)
     x = np.array([0.0, 0.0, 1.0]) - axis * axis[2]
     if np.linalg.norm(x) < 1e-6:
         x = np.array([1.0, 0.0, 0.0]) - axis * axis[0]
@@ -127,6 +128,17 @@ _CACHE: dict = {}
 KINEMATIC_CELLS = 2  # pads from the same mesh and geometry (e.g. the four Allegro tips) are built once
 
 
+def pad_specs_for_links(links, **fields) -> list[PadSpec]:
+    """One pad per link name — the drop-in tactile sensor for any hand agent.
+
+    ``fields`` are :class:`PadSpec` fields shared by all pads (``axis``, ``thickness``,
+    ``material``, ...). Link names are checked against the URDF when the pads are built.
+    """
+    if isinstance(links, str) or not links:
+        raise ConfigError(f"pad_specs_for_links needs a non-empty list of link names, got {links!r}")
+    return [PadSpec(link=name, **fields) for name in links]
+
+
 def allegro_pad_specs(**overrides) -> list[PadSpec]:
     """Default pads on the Allegro right hand's four fingertips (palmar side = +x)."""
-    return [PadSpec(link=name, **overrides) for name in ALLEGRO_TIPS]
+    return pad_specs_for_links(ALLEGRO_TIPS, **overrides)

@@ -268,3 +268,11 @@ def test_exploding_particles_raise_instead_of_leaving_the_grid():
     with pytest.raises(SimulationError, match=r"max_grid_cells.*'left'.*'right'"):
         for _ in range(100):
             world.step(1e-3)
+
+
+def test_world_with_nothing_awake_takes_one_substep():
+    world = pad_world(dx=2e-3)
+    c = world.add_collider(Sphere(radius=4e-3, pose=make_pose([0, 0, 0.05])))
+    world.set_awake("pad", False)
+    world.set_collider_pose(c, make_pose([5.0, 0, 0.05]))  # 5 km/s: irrelevant, nothing is awake
+    assert world.step(1e-3).substeps == 1

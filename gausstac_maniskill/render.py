@@ -1,0 +1,145 @@
+"""The co-simulated scene as 3D Gaussians, posed every frame for the splat camera.
+
+:class:`SceneGaussians` gathers
+
+* the hand's rigid Gaussians (link-local, from ``assets/<hand>/gaussians.ply``),
+  minus those that sit where a soft pad replaces the rigid link surface;
+* rigid objects' Gaussians (in the object frame), following the object's pose;
+* soft Gaussians on the surface particles of the pads and soft objects, bound to
+  those particles (Σ = F Σ0 Fᵀ, SH view direction rotated by polar(F)ᵀ).
+
+and renders them with :func:`gausstac_maniskill.splat.rasterize`. Units: metres.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+import torch
+
+from .errors import ConfigError
+from .splat import GaussianSet, SoftBinding, pose_gaussians
+
+__all__ = ["SceneGaussians", "box_gaussians", "particle_gaussians"]
+
+PAD_RGB = (0.55, 0.62, 0.78)      # translucent-looking blue-grey silicone
+SOFT_RGB = (0.95, 0.80, 0.25)     # foam yellow
+
+
+def box_gaussians(half_extents, spacing: float, link_id: int = 0) -> GaussianSet:
+    """Checkered flat Gaussians on the surface of a box (box frame, metres)."""
+    import trimesh
+
+    from .splat.build import gaussians_from_surface
+
+    mesh = trimesh.creation.box(extents=2 * np.asarray(half_extents, float))
+    pts, face = trimesh.sample.sample_surface_even(mesh, max(int(mesh.area / spacing ** 2), 1), seed=0)
+    check = (np.floor(pts / 0.01).astype(int).sum(1) % 2).astype(float)
+    rgb = np.stack([0.75 - 0.35 * check, 0.25 + 0.1 * check, 0.2 + 0.05 * check], 1)
+    return gaussians_from_surface(pts, mesh.face_normals[face], rgb, spacing, link_id=link_id)
+
+
+def particle_gaussians(sim) -> tuple[GaussianSet, np.ndarray]:
+    """Soft Gaussians on the outer particles of every pad and soft object of ``sim``,
+    in the world rest frame; returns them and the world particle index of each."""
+    from .splat.build import gaussians_from_surface
+
+    x0 = sim.world.positions()
+    h = sim.settings.particle_spacing
+    pts, nrm, rgb, idx = [], [], [], []
+    for name, pad in sim.pads.items():
+        g = sim.world.group(name)
+        T = sim._link_pose[pad.spec.link]
+        sel = np.flatnonzero(pad.surface)
+        n = pad.normal[sel] @ T[:3, :3].T
+        pts.append(x0[g.start + sel] + 0.5 * pad.spacing * n)
+        nrm.append(n)
+        rgb.append(np.tile(PAD_RGB, (len(sel), 1)))
+        idx.append(g.start + sel)
+    for name in sim._soft:
+        g = sim.world.group(name)
+        p = x0[g.start:g.stop]
+        lo, hi = p.min(0), p.max(0)
+        outer = np.any((p < lo + h) | (p > hi - h), axis=1)
+        n = np.zeros((int(outer.sum()), 3))
+        q = p[outer]
+        for d in range(3):
+            n[q[:, d] > hi[d] - h, d] = 1.0
+            n[q[:, d] < lo[d] + h, d] = -1.0
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        shade = 0.08 * np.random.default_rng(1).standard_normal((len(q), 1))
+        pts.append(q + 0.5 * h * n)
+        nrm.append(n)
+        rgb.append(np.clip(np.asarray(SOFT_RGB) + shade, 0, 1))
+        idx.append(g.start + np.flatnonzero(outer))
+    if not pts:
+        return GaussianSet.empty(), np.zeros(0, np.int64)
+    pts, nrm, rgb = np.concatenate(pts), np.concatenate(nrm), np.concatenate(rgb)
+    gs = gaussians_from_surface(pts, nrm, rgb, h, link_id=0, group=np.zeros(len(pts), np.int64))
+    return gs, np.concatenate(idx)
+
+
+class SceneGaussians:
+    """Gaussians of a :class:`~gausstac_maniskill.cosim.GaussTacSim` scene.
+
+    Args:
+        sim: the co-simulator (its pads and soft objects get soft Gaussians).
+        hand: rigid hand Gaussians in link-local frames (``link_id`` indexes ``hand_links``).
+        hand_links: link names of the hand Gaussians.
+        objects: rigid object name -> its Gaussians in the object frame.
+    """
+
+    def __init__(self, sim, hand: GaussianSet | None = None, hand_links: Sequence[str] = (),
+                 objects: Mapping[str, GaussianSet] | None = None):
+        self.sim = sim
+        self.hand_links = list(hand_links)
+        sets = []
+        if hand is not None and len(hand):
+            sets.append(self._drop_pad_regions(hand))
+        self.object_names = list(objects or {})
+        for i, name in enumerate(self.object_names):
+            if name not in sim._objects:
+                raise ConfigError(f"Gaussians given for unknown rigid object {name!r}")
+            g = objects[name]
+            sets.append(g.replace(link_id=torch.full_like(g.link_id, len(self.hand_links) + i)))
+        soft, self.particle_index = particle_gaussians(sim)
+        self.n_rigid = sum(len(s) for s in sets)
+        sets.append(soft)
+        self.gaussians = GaussianSet.cat(sets)
+        rest = torch.as_tensor(sim.world.positions())
+        self.binding = SoftBinding.from_nearest(self.gaussians, rest,
+                                                gaussian_index=torch.arange(self.n_rigid, len(self.gaussians)))
+
+    def _drop_pad_regions(self, hand: GaussianSet) -> GaussianSet:
+        """Remove rigid Gaussians where a soft pad replaces the link's surface."""
+        from scipy.spatial import cKDTree
+
+        keep = torch.ones(len(hand), dtype=torch.bool)
+        for pad in self.sim.pads.values():
+            if pad.spec.link not in self.hand_links:
+                continue
+            sel = torch.nonzero(hand.link_id == self.hand_links.index(pad.spec.link)).flatten()
+            d, _ = cKDTree(pad.rest[~pad.kinematic]).query(hand.means[sel].numpy())
+            keep[sel[torch.as_tensor(d < 2.5 * pad.spacing)]] = False
+        return hand[torch.nonzero(keep).flatten()]
+
+    def posed(self):
+        """World-space Gaussians for the simulator's current link, object and particle state."""
+        sim = self.sim
+        poses = []
+        for name in self.hand_links:
+            if name not in sim._link_pose:
+                raise ConfigError(f"render: no pose for hand link {name!r}; pass every hand link's "
+                                  "pose to GaussTacSim.step (link_poses)")
+            poses.append(sim._link_pose[name])
+        for name in self.object_names:
+            poses.append(sim.world.colliders[sim._objects[name]].pose)
+        link_poses = torch.as_tensor(np.array(poses) if poses else np.zeros((1, 4, 4)), dtype=torch.float32)
+        x, F = sim.particles()
+        return pose_gaussians(self.gaussians, link_poses, self.binding, torch.as_tensor(x), torch.as_tensor(F))
+
+    def render(self, viewmats, Ks, width: int, height: int, **kwargs):
+        """Render; ``viewmats`` [C, 4, 4] world-to-camera (OpenCV), ``Ks`` [C, 3, 3].
+        Keyword arguments go to :func:`~gausstac_maniskill.splat.rasterize` (e.g. ``background``)."""
+        return self.posed().render(torch.as_tensor(viewmats, dtype=torch.float32),
+                                   torch.as_tensor(Ks, dtype=torch.float32), width, height, **kwargs)
