@@ -30,20 +30,23 @@ def link_names(urdf_path: str) -> list[str]:
     return [l.get("name") for l in _parse(urdf_path).findall("link")]
 
 
+def rpy_matrix(rpy) -> np.ndarray:
+    """URDF fixed-axis roll-pitch-yaw [rad] -> 3x3 rotation, R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    r, p, y = (float(v) for v in rpy)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
 def _origin(elem) -> np.ndarray:
     from .transforms import make_pose
 
-    T = np.eye(4)
     o = elem.find("origin") if elem is not None else None
-    if o is not None:
-        xyz = np.array([float(v) for v in o.get("xyz", "0 0 0").split()])
-        r, p, y = (float(v) for v in o.get("rpy", "0 0 0").split())
-        cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-        R = np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                      [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                      [-sp, cp * sr, cp * cr]])
-        T = make_pose(xyz, R)
-    return T
+    if o is None:
+        return np.eye(4)
+    xyz = [float(v) for v in o.get("xyz", "0 0 0").split()]
+    return make_pose(xyz, rpy_matrix(o.get("rpy", "0 0 0").split()))
 
 
 def link_mesh(urdf_path: str, link: str, kind: str = "collision"):

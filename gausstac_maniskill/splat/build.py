@@ -53,6 +53,7 @@ import numpy as np
 import torch
 
 from ..errors import AssetError, ConfigError
+from ..urdf import default_hand_urdf, rpy_matrix
 from .gaussians import GaussianSet, load_ply, rgb_to_sh_dc, rotmat_to_quat, save_ply
 
 __all__ = [
@@ -96,19 +97,7 @@ PadRegions = Mapping[str, Callable[[np.ndarray], np.ndarray]]
 # =========================================================================== URDF
 def default_urdf() -> Path:
     """ManiSkill's ``allegro_hand_right.urdf`` (the ``.obj`` visual meshes)."""
-    from mani_skill import PACKAGE_ASSET_DIR
-
-    return Path(PACKAGE_ASSET_DIR) / "robots" / "allegro" / "allegro_hand_right.urdf"
-
-
-def rpy_matrix(rpy) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw -> 3x3 rotation, R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), \
-        math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
+    return Path(default_hand_urdf())
 
 
 def _axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
