@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="out/demo", help="output folder")
     ap.add_argument("--fine", action="store_true",
-                    help="1.5 mm grid and twice the steps (about 7 minutes on 2 cores; default: 2 mm, ~1.5 min)")
+                    help="1.5 mm grid and twice the steps (about 7 minutes on 2 cores; default: 2 mm, ~1 min)")
     ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
     args = ap.parse_args(argv)
     print(f"[demo] Taichi backend: {backend.init(args.arch)}")
