@@ -32,6 +32,7 @@ NDM = ti.types.ndarray(dtype=mat3, ndim=1)
 
 DYNAMIC, KINEMATIC = 0, 1
 BIG = 1 << 29
+NCHUNK = 16  # particle chunks of the bounds/health reductions (rows of their output arrays)
 
 
 @ti.func
@@ -448,10 +449,10 @@ def prepare(active: NDI, n: ti.i32, kin: NDI, n_kin: ti.i32, x: NDV, v: NDV, C: 
     -1 if it would exceed ``slab_cap`` (nothing is sorted then).
     """
     kinematic_update(kin, n_kin, x, v, C, F, tau, X0, link, group, link_poses, group_bind, alpha0, alpha1, dt)
-    chunk_bounds(active, n, x, inv_dx, 16, bounds)
+    chunk_bounds(active, n, x, inv_dx, NCHUNK, bounds)
     lo = ti.Vector([BIG, BIG, BIG])
     hi = ti.Vector([-BIG, -BIG, -BIG])
-    for c in ti.static(range(16)):  # tiny reduction, unrolled (serial)
+    for c in ti.static(range(NCHUNK)):  # tiny reduction, unrolled (serial)
         for d in ti.static(range(3)):
             lo[d] = ti.min(lo[d], bounds[c, d])
             hi[d] = ti.max(hi[d], bounds[c, 3 + d])

@@ -44,7 +44,6 @@ from .materials import material_table
 
 __all__ = ["MPMWorld", "StepInfo", "Group"]
 
-_NCHUNK = 16
 _SLAB_CAP = 1 << 16  # slabs are 2 cells: the active box may span 131072 cells along one axis
 _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id")
 
@@ -111,7 +110,6 @@ class MPMWorld:
         self._host: dict[str, np.ndarray] = {}
         self._dev: dict[str, object] = {}
         self._grid_cap = 0
-        self._slab_cap = 0
         self._dirty = True
         self._vmax = 0.0
         self._col_impulse = np.zeros((0, 6))
@@ -436,11 +434,11 @@ class MPMWorld:
         self._reach = 2.0 * (self._vmax + driver) * dt_sub
         self._upload_poses()
         d = self._dev
-        s = self.settings
         if self._n_active:
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
         col_imp = np.zeros((max(len(self.colliders), 1), 6), np.float32)
         d["col_impulse"].from_numpy(col_imp)
+        self._host_stale = True  # from here on the device holds the newer state
         cells = 0
         for k in range(n_sub):
             if self._n_active == 0:
@@ -454,7 +452,6 @@ class MPMWorld:
         for i in range(len(self.link_names)):
             self._link_prev[i] = self._link_next[i].copy()
         self._col_prev = [c.pose.copy() for c in self.colliders]
-        self._host_stale = True
         self._last_dt_ctrl = float(dt)
         self.time += float(dt)
         self.step_count += 1
@@ -500,7 +497,6 @@ class MPMWorld:
         self._grid_cap = cap
 
     def _explode_message(self, lo, hi) -> str:
-        self._dirty = False
         x = self._dev["x"].to_numpy()
         parts = []
         for g in self.groups:
@@ -518,7 +514,7 @@ class MPMWorld:
             self._vmax = 0.0
             return
         d = self._dev
-        K.chunk_health(d["active"], self._n_active, d["x"], d["v"], d["F"], d["kind"], _NCHUNK,
+        K.chunk_health(d["active"], self._n_active, d["x"], d["v"], d["F"], d["kind"], K.NCHUNK,
                        d["first_bad"], d["vmax_chunk"])
         bad = d["first_bad"].to_numpy()
         self._vmax = float(d["vmax_chunk"].to_numpy().max())
@@ -583,9 +579,9 @@ class MPMWorld:
         if "slab_start" not in d:
             d["slab_start"] = ti.ndarray(ti.i32, shape=_SLAB_CAP)
             d["cursor"] = ti.ndarray(ti.i32, shape=_SLAB_CAP)
-        d["bounds"] = ti.ndarray(ti.i32, shape=(_NCHUNK, 6))
-        d["first_bad"] = ti.ndarray(ti.i32, shape=_NCHUNK)
-        d["vmax_chunk"] = ti.ndarray(ti.f32, shape=_NCHUNK)
+        d["bounds"] = ti.ndarray(ti.i32, shape=(K.NCHUNK, 6))
+        d["first_bad"] = ti.ndarray(ti.i32, shape=K.NCHUNK)
+        d["vmax_chunk"] = ti.ndarray(ti.f32, shape=K.NCHUNK)
         upload("mat_table", material_table(self.materials, self.settings.mass_scaling), ti.f32)
         walls = np.array(self._walls, np.float32).reshape(-1, 3)
         upload("walls", walls if len(walls) else np.zeros((1, 3), np.float32), ti.f32)

@@ -256,6 +256,8 @@ def test_nan_is_detected_and_named():
     world._dirty = True
     with pytest.raises(SimulationError, match=r"group 'pad'.*NaN"):
         world.step(1e-5)
+    # the error leaves the state as the solver found it, so the bad particle can be inspected
+    assert np.isnan(world.positions("pad")[5]).any()
 
 
 def test_exploding_particles_raise_instead_of_leaving_the_grid():
