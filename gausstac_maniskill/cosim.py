@@ -248,7 +248,56 @@ class GaussTacSim:
         return {"world": self.world.state_dict(), "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
                 "awake": dict(self._awake)}
 
+    def flat_state(self) -> dict[str, np.ndarray]:
+        """The state of :meth:`state_dict` as a flat dict of fixed-shape numpy arrays
+        (no ``None``, no nesting), so that several identical scenes stack along a batch
+        axis — the form ManiSkill's ``get_state_dict`` and ``RecordEpisode`` store."""
+        w = self.world.state_dict()
+        out = {f"p_{k}": v for k, v in w["particles"].items()}
+        n_groups = len(w["awake"])
+        sleep = np.tile(np.eye(4), (n_groups, 1, 1))
+        has_sleep = np.zeros(n_groups, bool)
+        for i, T in enumerate(w["sleep_pose"]):
+            if T is not None:
+                sleep[i], has_sleep[i] = T, True
+        out.update(
+            link_prev=np.asarray(w["link_prev"], np.float64).reshape(-1, 4, 4),
+            link_next=np.asarray(w["link_next"], np.float64).reshape(-1, 4, 4),
+            collider_prev=np.asarray(w["collider_prev"], np.float64).reshape(-1, 4, 4),
+            collider_pose=np.asarray(w["collider_pose"], np.float64).reshape(-1, 4, 4),
+            collider_impulse=np.asarray(w["collider_impulse"], np.float64),
+            group_awake=np.asarray(w["awake"], bool), group_sleep_pose=sleep, group_has_sleep_pose=has_sleep,
+            scalars=np.array([w["time"], w["step_count"], w["vmax"], w["last_dt_ctrl"]], np.float64),
+            link_pose=np.stack([self._link_pose[k] for k in sorted(self._link_pose)]),
+            pad_awake=np.array([self._awake[k] for k in self.pads], bool),
+        )
+        return out
+
+    def load_flat_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore a :meth:`flat_state` of a scene built the same way (bit-exact)."""
+        names = sorted(self._link_pose)
+        if len(state["link_pose"]) != len(names):
+            raise ConfigError(f"load_flat_state: state has {len(state['link_pose'])} link poses, this scene "
+                              f"tracks {len(names)} links ({names})")
+        sc = np.asarray(state["scalars"], np.float64)
+        world = {
+            "particles": {k[2:]: np.asarray(v) for k, v in state.items() if k.startswith("p_")},
+            "link_prev": list(np.asarray(state["link_prev"], np.float64)),
+            "link_next": list(np.asarray(state["link_next"], np.float64)),
+            "collider_prev": list(np.asarray(state["collider_prev"], np.float64)),
+            "collider_pose": list(np.asarray(state["collider_pose"], np.float64)),
+            "collider_impulse": np.asarray(state["collider_impulse"], np.float64),
+            "awake": np.asarray(state["group_awake"], bool),
+            "sleep_pose": [np.asarray(T, np.float64) if h else None
+                           for T, h in zip(state["group_sleep_pose"], state["group_has_sleep_pose"])],
+            "time": float(sc[0]), "step_count": int(sc[1]), "vmax": float(sc[2]), "last_dt_ctrl": float(sc[3]),
+        }
+        self.load_state_dict({"world": world,
+                              "link_pose": {k: np.asarray(T, np.float64) for k, T in zip(names, state["link_pose"])},
+                              "awake": {k: bool(a) for k, a in zip(self.pads, state["pad_awake"])}})
+
     def load_state_dict(self, state: dict) -> None:
+        """Restore a :meth:`state_dict` of a scene built the same way (bit-exact)."""
         self.world.load_state_dict(state["world"])
         self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
         self._awake = dict(state["awake"])

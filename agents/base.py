@@ -1,0 +1,132 @@
+"""What a ManiSkill hand agent needs to carry GaussTac pads, and a wrapper that adds
+them to any registered hand agent by link names.
+
+An agent becomes a GaussTac agent by having the class attributes of
+:class:`GaussTacAgent`: the pads (:class:`~gausstac_maniskill.config.PadSpec`), the URDF
+their collision meshes come from, and optionally a folder of hand Gaussians
+(``gaussians.ply`` + ``links.json``) for the splat camera. Nothing else about the
+agent changes: same URDF, controllers and keyframes in SAPIEN.
+"""
+from __future__ import annotations
+
+import difflib
+import json
+import os
+from functools import lru_cache
+from typing import Mapping, Sequence
+
+from mani_skill.agents.base_agent import BaseAgent
+from mani_skill.agents.registration import REGISTERED_AGENTS, register_agent
+
+from ..config import PadSpec
+from ..errors import AssetError, ConfigError
+from ..urdf import link_names
+
+__all__ = ["GaussTacAgent", "add_gausstac_pads", "load_hand_gaussians"]
+
+
+class GaussTacAgent:
+    """Mixin of hand agents with soft GaussTac pads (put it before the ManiSkill agent class).
+
+    Attributes:
+        gausstac_pads: the pads; ``PadSpec.name`` is the key in ``obs["tactile"]``.
+        gausstac_urdf: URDF with the pad links' collision meshes (default: ``urdf_path``).
+        gausstac_gaussians: folder holding the hand's ``gaussians.ply`` and ``links.json``
+            (link-local Gaussians); ``None``: the splat camera draws pads and soft objects
+            over SAPIEN's render of the rigid hand.
+    """
+
+    gausstac_pads: tuple = ()
+    gausstac_urdf: str | None = None
+    gausstac_gaussians: str | None = None
+
+    @classmethod
+    def pad_urdf(cls) -> str:
+        """The URDF the pads are built from."""
+        return cls.gausstac_urdf or cls.urdf_path
+
+
+def _check_pad_links(agent_uid: str, urdf: str, pads: Sequence[PadSpec]) -> None:
+    if not os.path.isfile(urdf):
+        raise AssetError(f"{urdf}: URDF of agent {agent_uid!r} not found (GaussTacAgent.gausstac_urdf)")
+    names = link_names(urdf)
+    for p in pads:
+        if p.link not in names:
+            near = difflib.get_close_matches(p.link, names, n=3)
+            hint = f"; did you mean {near}?" if near else ""
+            raise ConfigError(f"pad link {p.link!r} is not a link of agent {agent_uid!r} ({urdf}){hint} "
+                              f"Links: {names}")
+    pad_names = [p.name for p in pads]
+    if len(set(pad_names)) != len(pad_names):
+        raise ConfigError(f"agent {agent_uid!r}: pad names must be unique, got {pad_names}")
+
+
+def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str, str], *,
+                      uid: str | None = None, urdf: str | None = None, gaussians: str | None = None,
+                      axes: Mapping[str, Sequence[float]] | None = None, register: bool = True,
+                      **pad_fields) -> type:
+    """A new agent class: ``agent`` (a registered uid or an agent class) with soft pads.
+
+    Args:
+        agent: the ManiSkill hand agent, e.g. ``"floating_ability_hand_right"``.
+        pad_links: link names that get a pad, or ``{pad name: link name}``.
+        uid: uid of the new agent (default ``<agent uid>_gausstac``).
+        urdf: URDF with the collision meshes of the pad links (default: the agent's).
+        gaussians: optional folder with the hand's ``gaussians.ply`` and ``links.json``.
+        axes: per-link outward pad direction in the link frame (default ``pad_fields["axis"]``
+            or +x).
+        register: register the class with ManiSkill under ``uid``.
+        pad_fields: other :class:`PadSpec` fields shared by all pads (``thickness``, ``cone_deg``,
+            ``material``, ``layout``).
+
+    Raises:
+        ConfigError: unknown agent uid, a link the agent's URDF does not have, duplicate names.
+    """
+    if isinstance(agent, str):
+        if agent not in REGISTERED_AGENTS:
+            near = difflib.get_close_matches(agent, list(REGISTERED_AGENTS), n=3)
+            raise ConfigError(f"add_gausstac_pads: no registered ManiSkill agent {agent!r}"
+                              + (f"; did you mean {near}?" if near else ""))
+        base = REGISTERED_AGENTS[agent].agent_cls
+    elif isinstance(agent, type) and issubclass(agent, BaseAgent):
+        base = agent
+    else:
+        raise ConfigError(f"add_gausstac_pads: agent must be a registered uid or a BaseAgent class, got {agent!r}")
+    if isinstance(pad_links, str) or not pad_links:
+        raise ConfigError(f"add_gausstac_pads: pad_links must be a non-empty list of link names, got {pad_links!r}")
+    named = dict(pad_links) if isinstance(pad_links, Mapping) else {link: link for link in pad_links}
+    axes = dict(axes or {})
+    pads = []
+    for name, link in named.items():
+        fields = dict(pad_fields)
+        if link in axes:
+            fields["axis"] = tuple(axes[link])
+        pads.append(PadSpec(link=link, name=name, **fields))
+    new_uid = uid or f"{base.uid}_gausstac"
+    pad_urdf = urdf or base.urdf_path
+    _check_pad_links(base.uid, pad_urdf, pads)
+    cls = type(base.__name__ + "GaussTac", (GaussTacAgent, base), {
+        "uid": new_uid, "gausstac_pads": tuple(pads), "gausstac_urdf": pad_urdf, "gausstac_gaussians": gaussians,
+        "__doc__": f"ManiSkill agent {base.uid!r} with GaussTac pads on {list(named.values())}.",
+        "__module__": __name__,
+    })
+    if register:
+        register_agent(override=True)(cls)
+    return cls
+
+
+@lru_cache(maxsize=8)
+def load_hand_gaussians(folder: str):
+    """``(GaussianSet, link names)`` of a hand Gaussians folder (cached per process)."""
+    from ..splat import load_ply
+
+    ply, links = os.path.join(folder, "gaussians.ply"), os.path.join(folder, "links.json")
+    for path in (ply, links):
+        if not os.path.isfile(path):
+            raise AssetError(f"{path}: hand Gaussians file not found (GaussTacAgent.gausstac_gaussians); "
+                             "build it with `gausstac build-asset --urdf <hand.urdf> --out <folder>`")
+    try:
+        names = json.loads(open(links).read())["link_names"]
+    except (ValueError, KeyError) as e:
+        raise AssetError(f"{links}: expected a JSON object with a 'link_names' list ({e})") from None
+    return load_ply(ply), list(names)

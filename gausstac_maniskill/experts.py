@@ -1,0 +1,244 @@
+"""Scripted experts for the GaussTac tasks (for imitation-learning data and tests).
+
+``make_expert(env)`` returns the expert of ``env``'s task; ``expert.act(obs)`` gives a
+batched action ``[B, A]`` for the env's control mode (``pd_joint_pos`` or
+``pd_joint_delta_pos``/``pd_joint_target_delta_pos``). Experts read the env's
+privileged state (targets, tactile force sums), not only the observation.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+import torch
+
+from .errors import ConfigError
+
+__all__ = ["Expert", "register_expert", "make_expert", "joint_targets_to_action", "EXPERTS"]
+
+EXPERTS: dict[str, Callable] = {}
+
+
+def register_expert(env_id: str):
+    """Class decorator: the expert of task ``env_id``."""
+    def deco(cls):
+        EXPERTS[env_id] = cls
+        return cls
+    return deco
+
+
+def make_expert(env) -> "Expert":
+    """The scripted expert of ``env`` (a ``gym.make`` env, wrapped or not)."""
+    base = env.unwrapped
+    env_id = base.spec.id if base.spec is not None else None
+    if env_id not in EXPERTS:
+        raise ConfigError(f"no scripted expert for env {env_id!r}; experts exist for {sorted(EXPERTS)}")
+    return EXPERTS[env_id](base)
+
+
+def _action_to_qpos_index(base) -> list[int]:
+    """Index into articulation qpos of each controlled joint, in action order."""
+    names = [j.name for j in base.agent.robot.get_active_joints()]
+    return [names.index(n) for n in base.agent.controller.config.joint_names]
+
+
+def joint_targets_to_action(base, q_target: torch.Tensor) -> torch.Tensor:
+    """Absolute joint targets ``[B, J]`` (action joint order, rad) -> action of ``base``'s
+    control mode (delta modes: the step is clipped to the controller's limit)."""
+    ctrl = base.agent.controller
+    cfg = ctrl.config
+    q_target = torch.as_tensor(q_target, dtype=torch.float32, device=base.device)
+    if not getattr(cfg, "use_delta", False):
+        return q_target
+    idx = _action_to_qpos_index(base)
+    ref = ctrl._target_qpos if getattr(cfg, "use_target", False) else base.agent.robot.get_qpos()[:, idx]
+    low, high = float(np.min(cfg.lower)), float(np.max(cfg.upper))
+    delta = (q_target - ref).clamp(low, high)
+    if getattr(cfg, "normalize_action", True):
+        delta = (delta - low) / (high - low) * 2 - 1
+    return delta
+
+
+class Expert:
+    """Base of the scripted experts: ``reset()`` at episode start, ``act(obs)`` each step."""
+
+    def __init__(self, env):
+        self.env = env
+
+    def reset(self) -> None:
+        """Called after ``env.reset``."""
+
+    def act(self, obs=None) -> torch.Tensor:  # pragma: no cover
+        raise NotImplementedError
+
+
+@register_expert("GaussTac-Gesture-v1")
+class GestureExpert(Expert):
+    """Drive the joints straight to the gesture."""
+
+    def act(self, obs=None):
+        return joint_targets_to_action(self.env, self.env.target_qpos)
+
+
+class TipIK:
+    """Position inverse kinematics of a pad's apex over some of the hand's joints.
+
+    Damped least squares on a finite-difference Jacobian; forward kinematics from MuJoCo
+    on the same URDF (:class:`~gausstac_maniskill.pose.MujocoPoseSource`), so the env's
+    SAPIEN state is never touched. Positions are in the hand root frame [m].
+
+    Args:
+        env: a GaussTac env (unwrapped); its agent's pad URDF is loaded into MuJoCo.
+        pad: pad id whose apex is placed.
+        joints: names of the joints IK may move (others keep their value).
+    """
+
+    def __init__(self, env, pad: str, joints):
+        from .pose import MujocoPoseSource
+
+        geo = env.pad_geometry(pad)
+        self.S = geo.sensor_frame
+        self.src = _mujoco_source(type(env.agent).pad_urdf())
+        self.link = self.src.link_names.index(geo.spec.link)
+        self.action_names = list(env.agent.controller.config.joint_names)
+        self.to_mj = [self.action_names.index(n) for n in self.src.joint_names]
+        self.dofs = [self.action_names.index(j) for j in joints]
+        low_high = env.agent.robot.get_qlimits()[0].detach().cpu().numpy()
+        names = [j.name for j in env.agent.robot.get_active_joints()]
+        self.limits = np.array([low_high[names.index(n)] for n in self.action_names])
+
+    def frame(self, q: np.ndarray) -> np.ndarray:
+        """4x4 pad sensor frame in the root frame for joint angles ``q`` (action order)."""
+        self.src.set_joint_positions(np.asarray(q, np.float64)[self.to_mj])
+        T = self.src.all_link_poses()[0, self.link].numpy()
+        return T @ self.S
+
+    def solve(self, q: np.ndarray, target: np.ndarray, iters: int = 8, damping: float = 1e-3) -> np.ndarray:
+        """Joint angles (action order) close to ``q`` putting the apex at ``target``."""
+        q = np.asarray(q, np.float64).copy()
+        for _ in range(iters):
+            x = self.frame(q)[:3, 3]
+            err = np.asarray(target, np.float64) - x
+            if np.linalg.norm(err) < 2e-5:
+                break
+            J = np.zeros((3, len(self.dofs)))
+            for k, j in enumerate(self.dofs):
+                dq = q.copy()
+                dq[j] += 1e-4
+                J[:, k] = (self.frame(dq)[:3, 3] - x) / 1e-4
+            step = J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(3), err)
+            q[self.dofs] += step
+            q = np.clip(q, self.limits[:, 0], self.limits[:, 1])
+        return q
+
+
+_MJ_CACHE: dict = {}
+
+
+def _mujoco_source(urdf: str):
+    from .pose import MujocoPoseSource
+
+    if urdf not in _MJ_CACHE:
+        _MJ_CACHE[urdf] = MujocoPoseSource(urdf)
+    return _MJ_CACHE[urdf]
+
+
+def _q_action_order(env) -> np.ndarray:
+    """[B, J] current joint angles in action order."""
+    return env.agent.robot.get_qpos()[:, _action_to_qpos_index(env)].detach().cpu().double().numpy()
+
+
+def _world_to_root(env) -> np.ndarray:
+    from .pose.sapien_source import vec7_to_matrix
+
+    T = vec7_to_matrix(env.agent.robot.pose.raw_pose).detach().cpu().double().numpy()
+    return np.linalg.inv(T)
+
+
+class _IndexFaceExpert(Expert):
+    """Moves the index apex in the cube face frame: ``s`` along the face normal (0: touching
+    the face, > 0: pressed in), ``t`` along the face's y axis (across the finger)."""
+
+    joints = ("joint_0.0", "joint_1.0", "joint_2.0", "joint_3.0")
+    approach_step = 1.0e-3   # m per control step before contact
+    gain = 1.2e-4            # m of commanded depth per N of force error
+    max_depth_step = 3.0e-4  # m per step
+
+    def reset(self):
+        self.ik = TipIK(self.env, "index", self.joints)
+        self.q_cmd = _q_action_order(self.env)
+        a = self.env.apex_in_face().numpy()
+        self.s = a[:, 2].copy()
+        self.t = a[:, 1].copy()
+        self.touched = np.zeros(len(self.s), bool)
+
+    def track_force(self, target_force: np.ndarray) -> None:
+        force = self.env.pad_force("index").cpu().numpy()
+        self.touched |= force > 0.03
+        for b in range(len(self.s)):
+            if not self.touched[b]:
+                self.s[b] = min(self.s[b] + self.approach_step, 0.25e-3 if self.s[b] < 0 else self.s[b] + 0.25e-3)
+            else:
+                self.s[b] += np.clip(self.gain * (target_force[b] - force[b]), -self.max_depth_step,
+                                     self.max_depth_step)
+
+    def command(self) -> torch.Tensor:
+        env = self.env
+        W2R = _world_to_root(env)
+        for b in range(len(self.s)):
+            face = env.face_frame[b].numpy()
+            target_w = face[:3, 3] + face[:3, 2] * self.s[b] + face[:3, 1] * self.t[b]
+            target = W2R[b, :3, :3] @ target_w + W2R[b, :3, 3]
+            self.q_cmd[b] = self.ik.solve(self.q_cmd[b], target)
+        return joint_targets_to_action(env, torch.as_tensor(self.q_cmd, dtype=torch.float32))
+
+
+@register_expert("GaussTac-PressCube-v1")
+class PressExpert(_IndexFaceExpert):
+    """Approach the face, then servo the commanded depth on the pad's force."""
+
+    def act(self, obs=None):
+        self.track_force(self.env.target_force.cpu().numpy())
+        return self.command()
+
+
+@register_expert("GaussTac-SlideCube-v1")
+class SlideExpert(_IndexFaceExpert):
+    """Press to ``hold_force``, then move across the face 0.75 mm per step while servoing
+    the force, until the slide distance (plus a margin) is covered."""
+
+    hold_force = 1.0
+    speed = 0.75e-3
+
+    def reset(self):
+        super().reset()
+        self.sliding = np.zeros(len(self.s), bool)
+        self.t0 = self.t.copy()
+
+    def act(self, obs=None):
+        env = self.env
+        self.track_force(np.full(len(self.s), self.hold_force))
+        force = env.pad_force("index").cpu().numpy()
+        goal = env.slide_distance.numpy() + 1.0e-3
+        for b in range(len(self.s)):
+            if not self.sliding[b] and force[b] > 0.6 * self.hold_force:
+                self.sliding[b] = True
+            if self.sliding[b] and self.t[b] - self.t0[b] < goal[b]:
+                self.t[b] += self.speed
+        return self.command()
+
+
+@register_expert("GaussTac-SqueezeSponge-v1")
+class SqueezeExpert(_IndexFaceExpert):
+    """Advance the apex into the sponge, servoing the measured compression."""
+
+    def act(self, obs=None):
+        env = self.env
+        c = env.compression().numpy()
+        target = env.target_compression.numpy()
+        for b in range(len(self.s)):
+            if self.s[b] < 0:
+                self.s[b] = min(self.s[b] + self.approach_step, 0.0)
+            else:
+                self.s[b] += np.clip(0.8 * (target[b] - c[b]) * env.sponge_thickness, -0.5e-3, 0.75e-3)
+        return self.command()

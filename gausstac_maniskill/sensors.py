@@ -1,0 +1,223 @@
+"""ManiSkill sensors: the 3D Gaussian Splatting camera and the soft-pad tactile sensor.
+
+* :class:`GaussianSplatCamera` is a ManiSkill :class:`~mani_skill.sensors.camera.Camera`
+  (so ``obs["sensor_data"][uid]`` holds its ``rgb`` [B, H, W, 3] uint8 and ``depth``
+  [B, H, W, 1] int16 millimetres, exactly like a SAPIEN camera, and ``get_params`` gives
+  ``extrinsic_cv`` / ``cam2world_gl`` / ``intrinsic_cv``). Its picture is the scene's
+  Gaussians — hand links, pads and soft objects deformed by the MPM — composited with
+  depth over SAPIEN's render of the rest of the scene (the hand hidden there), or over
+  a plain colour. Configure it with :class:`GaussianSplatCameraConfig`, a
+  ``CameraConfig`` with one more field, anywhere a ``CameraConfig`` goes (task sensors,
+  human render cameras).
+* :class:`TactileSensor` gives the per-pad maps ``{pad: {"depth" [B, H, W] m,
+  "shear" [B, H, W, 2] m, "force" [B, H, W] N}}`` that :class:`GaussTacEnv
+  <gausstac_maniskill.tasks.base.GaussTacEnv>` puts in the top-level ``obs["tactile"]``.
+
+Both read a *scene source* owned by the environment (one
+:class:`~gausstac_maniskill.cosim.GaussTacSim` per parallel env); they do not step
+anything themselves.
+"""
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+import torch
+from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
+from mani_skill.sensors.camera import Camera, CameraConfig
+
+from .errors import ConfigError
+
+__all__ = ["GaussianSplatCameraConfig", "GaussianSplatCamera", "TactileSensor", "TactileSensorConfig",
+           "TACTILE_KEYS"]
+
+#: The maps a :class:`TactileSensor` puts in the observation, per pad.
+TACTILE_KEYS = ("depth", "shear", "force")
+
+
+@dataclass
+class GaussianSplatCameraConfig(CameraConfig):
+    """A ``CameraConfig`` (uid, pose or mount, width, height, fov or intrinsic, near, far)
+    for a :class:`GaussianSplatCamera`.
+
+    Attributes:
+        background: ``"sapien"`` composites the Gaussians, with depth, over SAPIEN's
+            render of the scene without the hand (tables, rigid objects, anything with no
+            Gaussians); an RGB triple in [0, 1] composites them over that plain colour.
+    """
+
+    background: object = "sapien"
+
+    def __post_init__(self):
+        super().__post_init__()
+        bg = self.background
+        if isinstance(bg, str):
+            if bg != "sapien":
+                raise ConfigError(f"GaussianSplatCameraConfig({self.uid!r}).background={bg!r}: use 'sapien' "
+                                  "or an RGB triple in [0, 1]")
+        else:
+            rgb = np.asarray(bg, dtype=np.float64).reshape(-1)
+            if rgb.shape != (3,) or not np.all(np.isfinite(rgb)) or rgb.min() < 0 or rgb.max() > 1:
+                raise ConfigError(f"GaussianSplatCameraConfig({self.uid!r}).background={bg!r} must be 'sapien' "
+                                  "or an RGB triple in [0, 1]")
+            self.background = tuple(float(v) for v in rgb)
+
+
+class SplatSource:
+    """What a :class:`GaussianSplatCamera` renders; the environment implements it.
+
+    ``render(viewmats [B,4,4], Ks [B,3,3], width, height, background, background_depth)``
+    returns ``(rgb [B,H,W,3] float in [0,1], depth [B,H,W] m (inf where empty))`` and
+    ``hidden()`` is a context manager during which SAPIEN does not draw what the
+    Gaussians replace (the hand).
+    """
+
+    def render(self, viewmats, Ks, width, height, background, background_depth):  # pragma: no cover
+        raise NotImplementedError
+
+    def hidden(self):  # pragma: no cover
+        return contextlib.nullcontext()
+
+
+class GaussianSplatCamera(Camera):
+    """A ManiSkill camera whose picture comes from the 3D Gaussian Splatting rasterizer.
+
+    It owns a SAPIEN camera like any ``Camera`` (pose, mount, intrinsics and, with
+    ``background="sapien"``, the picture of the rest of the scene). The environment
+    attaches the scene with :meth:`attach`; until then, capturing raises a clear error.
+    Output keys and dtypes follow SAPIEN's minimal shader: ``rgb`` uint8 [B, H, W, 3],
+    ``depth`` int16 [B, H, W, 1] in millimetres (0 where nothing is seen). With
+    ``background="sapien"``, ``position``/``segmentation`` (if asked for) are SAPIEN's,
+    of the scene without the hand.
+    """
+
+    config: GaussianSplatCameraConfig
+
+    def __init__(self, camera_config: GaussianSplatCameraConfig, scene, articulation=None):
+        super().__init__(camera_config, scene, articulation)
+        self.source: SplatSource | None = None
+        self._images: dict[str, torch.Tensor] | None = None
+        self._background_obs: dict[str, torch.Tensor] = {}
+
+    @classmethod
+    def adopt(cls, camera: Camera) -> "GaussianSplatCamera":
+        """Turn a ``Camera`` that ManiSkill built from a :class:`GaussianSplatCameraConfig`
+        into a splat camera, reusing its SAPIEN camera (ManiSkill's ``_setup_sensors``
+        builds a plain ``Camera`` for every ``CameraConfig``)."""
+        obj = cls.__new__(cls)
+        obj.__dict__.update(camera.__dict__)
+        obj.source, obj._images, obj._background_obs = None, None, {}
+        return obj
+
+    def attach(self, source: SplatSource) -> None:
+        """Render ``source``'s Gaussians from now on."""
+        self.source = source
+
+    def capture(self):
+        if self.source is None:
+            raise ConfigError(f"GaussianSplatCamera {self.config.uid!r} has no scene attached; it works in "
+                              "GaussTac environments (gausstac_maniskill.tasks.base.GaussTacEnv)")
+        self._images = None
+        self._background_obs = {}
+        if self.config.background == "sapien":
+            with self.source.hidden():
+                super().capture()
+                # read the picture now, while the hand is hidden
+                self._background_obs = super().get_obs(rgb=True, depth=True, position=True, segmentation=True)
+
+    def _render(self) -> dict[str, torch.Tensor]:
+        if self._images is not None:
+            return self._images
+        cfg = self.config
+        params = self.get_params()
+        ext = torch.as_tensor(params["extrinsic_cv"], dtype=torch.float32).reshape(-1, 3, 4)
+        B = ext.shape[0]
+        view = torch.eye(4).repeat(B, 1, 1)
+        view[:, :3, :] = ext.cpu()
+        K = torch.as_tensor(params["intrinsic_cv"], dtype=torch.float32).reshape(-1, 3, 3).cpu()
+        if cfg.background == "sapien":
+            bg = self._background_obs["rgb"][..., :3].cpu().float() / 255.0
+            d = self._background_obs["depth"][..., 0].cpu().float() / 1000.0
+            bg_depth = torch.where(d > 0, d, torch.full_like(d, float("inf")))
+        else:
+            bg, bg_depth = cfg.background, None
+        rgb, depth = self.source.render(view, K, cfg.width, cfg.height, bg, bg_depth)
+        device = ext.device if not isinstance(params["extrinsic_cv"], torch.Tensor) else params["extrinsic_cv"].device
+        mm = torch.where(torch.isfinite(depth), depth * 1000.0, torch.zeros_like(depth))
+        self._images = {
+            "rgb": (rgb.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).to(device),
+            "depth": mm.round().clamp(0, 32767).to(torch.int16)[..., None].to(device),
+        }
+        return self._images
+
+    def get_obs(self, rgb: bool = True, depth: bool = True, position: bool = True, segmentation: bool = True,
+                normal: bool = False, albedo: bool = False, apply_texture_transforms: bool = True):
+        out = {}
+        images = self._render() if (rgb or depth) else {}
+        if rgb:
+            out["rgb"] = images["rgb"]
+        if depth:
+            out["depth"] = images["depth"]
+        for key, want in (("position", position), ("segmentation", segmentation)):
+            if want and key in self._background_obs:
+                out[key] = self._background_obs[key]
+        return out
+
+
+@dataclass
+class TactileSensorConfig(BaseSensorConfig):
+    """Configuration of a :class:`TactileSensor`: its ``uid`` and the map names it reports."""
+
+    keys: tuple = TACTILE_KEYS
+
+
+class TactileSensor(BaseSensor):
+    """Dense tactile maps of every soft pad, batched over the parallel envs.
+
+    Args:
+        config: uid and map names (default ``depth``, ``shear``, ``force``).
+        maps_fn: returns, for each env, ``{pad: {map name: [H, W(, 2)] tensor}}``
+            (the co-simulators' :meth:`~gausstac_maniskill.cosim.GaussTacSim.tactile`).
+        pad_names: pad ids in observation order.
+        device: torch device of the observations (the env's).
+
+    :meth:`get_obs` returns ``{pad: {"depth": [B, H, W] m, "shear": [B, H, W, 2] m,
+    "force": [B, H, W] N}}`` float32. Depth is positive into the pad; shear is the
+    surface displacement along the sensor's x (along the finger) and y; force is the
+    normal contact force per taxel.
+    """
+
+    def __init__(self, config: TactileSensorConfig, maps_fn: Callable[[], Sequence[dict]],
+                 pad_names: Sequence[str], device=None):
+        super().__init__(config)
+        bad = [k for k in config.keys if k not in ("depth", "shear", "force", "pressure")]
+        if bad:
+            raise ConfigError(f"TactileSensorConfig.keys: unknown map(s) {bad}; choose from "
+                              "'depth', 'shear', 'force', 'pressure'")
+        self.maps_fn = maps_fn
+        self.pad_names = list(pad_names)
+        self.device = device
+        self._obs = None
+
+    def capture(self):
+        """Gather the maps of the last co-simulation step."""
+        per_env = self.maps_fn()
+        self._obs = {pad: {k: torch.stack([maps[pad][k] for maps in per_env]).float().to(self.device)
+                           for k in self.config.keys} for pad in self.pad_names}
+
+    def get_obs(self, **kwargs):
+        if self._obs is None:
+            self.capture()
+        return self._obs
+
+    def get_params(self):
+        return {}
+
+    def get_images(self, obs=None) -> torch.Tensor:
+        """Depth maps of all pads side by side as a uint8 image [B, H, W·pads, 3] (0–2 mm)."""
+        obs = obs if obs is not None else self.get_obs()
+        d = torch.cat([obs[p]["depth"] for p in self.pad_names], dim=-1)
+        v = (d / 2e-3).clamp(0, 1)
+        return (torch.stack([v, v ** 0.5, 1 - v], -1) * 255).to(torch.uint8)

@@ -1,0 +1,466 @@
+"""GaussTacEnv: a ManiSkill task whose hand has soft MPM pads and whose camera splats Gaussians.
+
+One control step (``env.step``)::
+
+    SAPIEN physics (sim_freq substeps; the MPM reaction wrench of the last step is
+    applied to two-way-coupled rigid objects)
+      -> link poses [B, L, 4, 4] and object poses
+      -> GaussTacSim.step per env (pads, soft objects; dt = control timestep)
+      -> evaluate / reward (may read the tactile maps)
+      -> obs: agent/extra (+ sensor_data from the GaussianSplatCamera) + obs["tactile"]
+
+Tasks subclass it like any ManiSkill task (``_load_scene``, ``_initialize_episode``,
+``evaluate``, ``compute_dense_reward``) and declare what the MPM sees with
+:meth:`GaussTacEnv.add_mpm_rigid` and :meth:`GaussTacEnv.add_mpm_soft` in
+``_load_scene``. The co-simulators are (re)built at the start of every episode from the
+poses ``_initialize_episode`` leaves, and their state is part of ``get_state_dict`` so
+that replaying recorded env states reproduces the tactile maps exactly.
+
+Pads touch objects only through the MPM: the pad links' SAPIEN collisions with the
+registered objects are turned off (otherwise the rigid fingertip would stop before the
+pad compresses); the pad reaction goes back to SAPIEN as an external wrench on
+two-way-coupled dynamic objects, one control step late.
+
+Units: SI. ``physx_cpu`` runs one env per process (use ``gym.vector.AsyncVectorEnv``);
+the code keeps a batch axis everywhere.
+"""
+from __future__ import annotations
+
+import contextlib
+import copy
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import sapien
+import torch
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.utils import common
+
+from .. import backend
+from ..agents.base import GaussTacAgent, load_hand_gaussians
+from ..config import Material
+from ..cosim import GaussTacSim, default_hand_settings
+from ..errors import ConfigError
+from ..mpm.colliders import Collider
+from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
+from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
+                       TactileSensorConfig)
+
+__all__ = ["GaussTacEnv", "RigidObject", "SoftObject"]
+
+#: Collision group-2 bit shared by pad links and MPM objects (shapes sharing it do not collide).
+PAD_OBJECT_BIT = 29
+
+
+@dataclass
+class RigidObject:
+    """A SAPIEN actor the pads feel through an SDF collider (collider in the actor frame)."""
+
+    name: str
+    actor: object
+    collider: Collider
+    gaussians: object = None
+    two_way: bool = False
+
+
+@dataclass
+class SoftObject:
+    """An MPM-only deformable object: ``particles(env_idx)`` -> (world positions [N, 3] m,
+    kinematic mask [N] or None, anchor 4x4 world pose or None); kinematic particles are
+    glued to the fixed anchor frame."""
+
+    name: str
+    particles: Callable[[int], tuple]
+    material: Material
+
+
+class GaussTacEnv(BaseEnv):
+    """Base class of GaussTac tasks.
+
+    Args (in addition to ManiSkill's ``BaseEnv`` arguments):
+        robot_uids: a GaussTac agent (default ``allegro_hand_right_gausstac``).
+        mpm_dx: MPM grid spacing [m] (pads: 2 particles per cell). 2 mm is the fast
+            default; 1.5 mm and 1 mm are finer and slower (see BENCHMARKS.md).
+        mpm_sleep_margin: a pad farther than this from every object sleeps [m].
+        splat_size: (width, height) of the default splat camera ``splat_camera``.
+        render_size: (width, height) of the human render camera (``render_mode="rgb_array"``).
+        splat_background: ``"sapien"`` (composite over SAPIEN's render) or an RGB triple.
+        record_mpm_state: put the MPM state in ``get_state_dict`` (exact replay; ~150 B per
+            particle per recorded step).
+    """
+
+    SUPPORTED_ROBOTS = ["allegro_hand_right_gausstac"]
+    agent: GaussTacAgent
+
+    def __init__(self, *args, robot_uids="allegro_hand_right_gausstac", mpm_dx: float = 2.0e-3,
+                 mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
+                 splat_background="sapien", record_mpm_state: bool = True, **kwargs):
+        backend.ensure_init()
+        if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
+            raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
+        self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
+        self.mpm_sleep_margin = float(mpm_sleep_margin)
+        self.splat_size = tuple(int(v) for v in splat_size)
+        self.render_size = tuple(int(v) for v in render_size)
+        self.splat_background = splat_background
+        self.record_mpm_state = bool(record_mpm_state)
+        self.cosims: list[GaussTacSim] = []
+        self._rigid: dict[str, RigidObject] = {}
+        self._soft: dict[str, SoftObject] = {}
+        self._wrench: dict[str, np.ndarray] = {}
+        self._cosim_stale = True
+        #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
+        self.step_timing: dict[str, float] = {}
+        self._splat_source = _EnvSplatSource(self)
+        super().__init__(*args, robot_uids=robot_uids, **kwargs)
+
+    # ------------------------------------------------------------------ set-up
+    def _load_agent(self, options: dict, *args, **kwargs):
+        super()._load_agent(options, *args, **kwargs)
+        if not isinstance(self.agent, GaussTacAgent) or not self.agent.gausstac_pads:
+            uid = getattr(self.agent, "uid", self.robot_uids)
+            raise ConfigError(f"robot_uids={uid!r} has no GaussTac pads: use 'allegro_hand_right_gausstac' or an "
+                              "agent made with gausstac_maniskill.agents.add_gausstac_pads(...)")
+
+    #: height [m] of the ground plane under the hand (``None``: no ground)
+    ground_altitude: float | None = -0.15
+
+    def _load_scene(self, options: dict):
+        """Builds the ground; tasks call it first, then build their actors and register
+        what the MPM sees (:meth:`add_mpm_rigid`, :meth:`add_mpm_soft`)."""
+        if self.ground_altitude is not None:
+            from mani_skill.utils.building.ground import build_ground
+
+            self.ground = build_ground(self.scene, floor_width=4, altitude=self.ground_altitude,
+                                       texture_square_len=0.1)
+
+    def add_mpm_rigid(self, name: str, actor, collider: Collider, gaussians=None, two_way: bool = False) -> None:
+        """Let the pads feel ``actor`` through ``collider`` (its pose in the actor frame is
+        taken as identity; the actor's pose drives it). ``two_way``: apply the pads'
+        reaction wrench to the (dynamic) actor in SAPIEN. ``gaussians``: the actor's look
+        for the splat camera (actor frame); without them SAPIEN draws it."""
+        if name in self._rigid or name in self._soft:
+            raise ConfigError(f"MPM object {name!r} already registered")
+        if two_way and getattr(actor, "px_body_type", "dynamic") != "dynamic":
+            raise ConfigError(f"two_way coupling needs a dynamic actor; {name!r} is {actor.px_body_type}")
+        self._rigid[name] = RigidObject(name, actor, collider, gaussians, bool(two_way))
+        actor.set_collision_group_bit(2, PAD_OBJECT_BIT, 1)
+
+    def add_mpm_soft(self, name: str, particles: Callable[[int], tuple], material: Material) -> None:
+        """A deformable MPM object (not in SAPIEN; the splat camera draws it): see
+        :class:`SoftObject`. ``particles`` is called when each episode's co-simulator is built."""
+        if name in self._rigid or name in self._soft:
+            raise ConfigError(f"MPM object {name!r} already registered")
+        self._soft[name] = SoftObject(name, particles, material)
+
+    def _after_reconfigure(self, options):
+        super()._after_reconfigure(options)
+        self._pose_source = SapienPoseSource(self.agent)
+        for spec in self.agent.gausstac_pads:
+            link = next(link for link in self.agent.robot.links if link.name == spec.link)
+            link.set_collision_group_bit(2, PAD_OBJECT_BIT, 1)
+        self._cosim_stale = True
+        self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
+                                            lambda: [sim.tactile() for sim in self.cosims],
+                                            [p.name for p in self.agent.gausstac_pads], device=self.device)
+
+    @property
+    def pad_names(self) -> list[str]:
+        """Pad ids, the keys of ``obs["tactile"]``."""
+        return [p.name for p in self.agent.gausstac_pads]
+
+    def pad_geometry(self, pad: str):
+        """The :class:`~gausstac_maniskill.tactile.Pad` (link-frame particles and sensor frame)
+        of pad ``pad`` at this env's resolution (cached)."""
+        from ..tactile import build_pad
+        from ..urdf import link_mesh
+
+        spec = next((p for p in self.agent.gausstac_pads if p.name == pad), None)
+        if spec is None:
+            raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
+        mesh = link_mesh(type(self.agent).pad_urdf(), spec.link) if spec.mesh is None else spec.mesh
+        if isinstance(mesh, str):
+            import trimesh
+
+            mesh = trimesh.load(mesh, force="mesh")
+        return build_pad(spec, mesh, self.mpm_settings.particle_spacing, self.mpm_settings.dx)
+
+    def pad_frame(self, pad: str) -> torch.Tensor:
+        """[B, 4, 4] world pose of ``pad``'s sensor frame now (z out of the pad, origin at
+        its apex, x along the finger), from SAPIEN's link poses."""
+        geo = self.pad_geometry(pad)
+        names = self._pose_source.link_names
+        P = self._pose_source.all_link_poses()[:, names.index(geo.spec.link)].detach().cpu().double()
+        return (P @ torch.as_tensor(geo.sensor_frame)).to(torch.float64)
+
+    def _splat_camera_pose(self) -> sapien.Pose:
+        """Pose of the default splat and render cameras (tasks override)."""
+        from mani_skill.utils import sapien_utils
+
+        return sapien_utils.look_at(eye=[0.3, -0.12, 0.3], target=[0.0, 0.03, 0.05])
+
+    @property
+    def _default_sensor_configs(self):
+        w, h = self.splat_size
+        return [GaussianSplatCameraConfig(uid="splat_camera", pose=self._splat_camera_pose(), width=w, height=h,
+                                          fov=np.pi / 3, near=0.01, far=10.0, background=self.splat_background)]
+
+    @property
+    def _default_human_render_camera_configs(self):
+        w, h = self.render_size
+        return GaussianSplatCameraConfig(uid="render_camera", pose=self._splat_camera_pose(), width=w, height=h,
+                                         fov=np.pi / 3, near=0.01, far=10.0, background=self.splat_background)
+
+    def _setup_sensors(self, options: dict):
+        super()._setup_sensors(options)
+        for cams in (self._sensors, self._human_render_cameras):
+            for uid, cam in list(cams.items()):
+                if isinstance(cam.config, GaussianSplatCameraConfig) and not isinstance(cam, GaussianSplatCamera):
+                    cams[uid] = GaussianSplatCamera.adopt(cam)
+                if isinstance(cams[uid], GaussianSplatCamera):
+                    cams[uid].attach(self._splat_source)
+        self.scene.sensors = self._sensors
+        self.scene.human_render_cameras = self._human_render_cameras
+
+    # ------------------------------------------------------------------ co-simulation
+    def _link_pose_dicts(self) -> list[dict[str, np.ndarray]]:
+        P = self._pose_source.all_link_poses().detach().cpu().double().numpy()
+        names = self._pose_source.link_names
+        return [{n: P[b, i] for i, n in enumerate(names)} for b in range(P.shape[0])]
+
+    def _object_poses(self) -> list[dict[str, np.ndarray]]:
+        out = [dict() for _ in range(self.num_envs)]
+        for name, obj in self._rigid.items():
+            T = vec7_to_matrix(obj.actor.pose.raw_pose).detach().cpu().double().numpy()
+            for b in range(self.num_envs):
+                out[b][name] = T[b]
+        return out
+
+    def _build_cosims(self) -> None:
+        """(Re)build one co-simulator per env at rest, from the current SAPIEN poses."""
+        t0 = time.perf_counter()
+        agent = type(self.agent)
+        hand = None
+        if agent.gausstac_gaussians:
+            hand = load_hand_gaussians(agent.gausstac_gaussians)
+        links, objects = self._link_pose_dicts(), self._object_poses()
+        self.cosims = []
+        for b in range(self.num_envs):
+            sim = GaussTacSim(agent.gausstac_pads, links[b], urdf=agent.pad_urdf(), settings=self.mpm_settings,
+                              sleep_margin=self.mpm_sleep_margin)
+            for name, obj in self._rigid.items():
+                col = copy.deepcopy(obj.collider)
+                col.pose = objects[b][name]
+                sim.add_rigid_object(name, col)
+            for name, soft in self._soft.items():
+                x, kin, anchor = soft.particles(b)
+                link = None
+                if kin is not None and np.any(kin):
+                    link = f"{name}_anchor"
+                    sim.world.add_link(link, np.eye(4) if anchor is None else np.asarray(anchor, np.float64))
+                sim.add_soft_object(name, x, soft.material, link=link, kinematic=kin)
+            if hand is not None or any(o.gaussians is not None for o in self._rigid.values()) or self._soft:
+                sim.attach_gaussians(hand[0] if hand else None, hand[1] if hand else (),
+                                     {n: o.gaussians for n, o in self._rigid.items() if o.gaussians is not None})
+            self.cosims.append(sim)
+        self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
+        self._cosim_stale = False
+        self.step_timing["cosim_build"] = time.perf_counter() - t0
+
+    def _ensure_cosims(self) -> None:
+        if self._cosim_stale or not self.cosims:
+            self._build_cosims()
+
+    def reset(self, seed=None, options=None):
+        self._cosim_stale = True
+        t0 = time.perf_counter()
+        out = super().reset(seed=seed, options=options)
+        self.step_timing["reset"] = time.perf_counter() - t0
+        return out
+
+    def get_info(self) -> dict:
+        self._ensure_cosims()  # after _initialize_episode placed the hand and objects
+        return super().get_info()
+
+    def _after_control_step(self):
+        super()._after_control_step()
+        self._ensure_cosims()
+        t0 = time.perf_counter()
+        links, objects = self._link_pose_dicts(), self._object_poses()
+        for b, sim in enumerate(self.cosims):
+            sim.step(links[b], self.control_timestep, objects[b])
+            for name in self._wrench:
+                f, tau = sim.object_wrench(name)
+                self._wrench[name][b] = np.concatenate([f, tau])
+        t1 = time.perf_counter()
+        for sim in self.cosims:
+            sim.tactile()  # extract the maps now (cached for evaluate / obs)
+        self.step_timing["mpm"] = t1 - t0
+        self.step_timing["tactile"] = time.perf_counter() - t1
+
+    def _before_simulation_step(self):
+        super()._before_simulation_step()
+        for name, w in self._wrench.items():
+            if not np.any(w):
+                continue
+            actor = self._rigid[name].actor
+            origin = actor.pose.raw_pose[:, :3].detach().cpu().double().numpy()
+            for b, body in enumerate(actor._bodies):
+                com = np.asarray((body.pose * body.cmass_local_pose).p, np.float64)
+                force, torque = w[b, :3], w[b, 3:]
+                torque_com = torque + np.cross(origin[b] - com, force)  # torque was about the actor origin
+                body.add_force_torque(force.astype(np.float32), torque_com.astype(np.float32))
+
+    def object_wrench(self, name: str) -> torch.Tensor:
+        """[B, 6] force [N] and torque [N·m] (about the object origin) the pads exerted on
+        MPM rigid object ``name`` during the last step."""
+        if name not in self._rigid:
+            raise ConfigError(f"unknown MPM object {name!r}; objects: {sorted(self._rigid)}")
+        out = [np.concatenate(sim.object_wrench(name)) for sim in self.cosims]
+        return torch.as_tensor(np.array(out), dtype=torch.float32, device=self.device)
+
+    # ------------------------------------------------------------------ step / obs
+    def step(self, action):
+        if action is not None and not isinstance(action, dict):
+            a = common.to_tensor(action)
+            if not torch.is_floating_point(a) or not torch.isfinite(a).all():
+                bad = torch.nonzero(~torch.isfinite(a.float())).tolist()
+                raise ConfigError(f"{self.spec.id if self.spec else type(self).__name__}: action contains NaN or "
+                                  f"inf at {bad[:8]} (shape {list(a.shape)}); nothing was stepped")
+        t0 = time.perf_counter()
+        self.step_timing.update(mpm=0.0, tactile=0.0, render=0.0)
+        out = super().step(action)
+        total = time.perf_counter() - t0
+        self.step_timing["total"] = total
+        self.step_timing["physics"] = total - sum(self.step_timing[k] for k in ("mpm", "tactile", "render"))
+        return out
+
+    def get_obs(self, info=None, unflattened: bool = False):
+        obs = super().get_obs(info, unflattened=True)
+        if self._obs_mode != "none":
+            t0 = time.perf_counter()
+            self._ensure_cosims()
+            self.tactile_sensor.capture()
+            tactile = self.tactile_sensor.get_obs()
+            if self._obs_mode == "state":  # a flat state vector: maps flattened to [B, H*W(*2)]
+                tactile = {p: {k: v.reshape(v.shape[0], -1) for k, v in m.items()} for p, m in tactile.items()}
+            obs["tactile"] = tactile
+            self.step_timing["tactile"] = self.step_timing.get("tactile", 0.0) + time.perf_counter() - t0
+        return obs if unflattened else self._flatten_raw_obs(obs)
+
+    def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
+        t0 = time.perf_counter()
+        out = super()._get_obs_sensor_data(apply_texture_transforms)
+        self.step_timing["render"] = self.step_timing.get("render", 0.0) + time.perf_counter() - t0
+        return out
+
+    def tactile(self) -> dict:
+        """``{pad: {"depth", "shear", "force", "pressure"}}`` batched [B, ...] of the last step."""
+        self._ensure_cosims()
+        per_env = [sim.tactile() for sim in self.cosims]
+        return {p: {k: torch.stack([m[p][k] for m in per_env]).to(self.device) for k in per_env[0][p]}
+                for p in self.pad_names}
+
+    def pad_force(self, pad: str) -> torch.Tensor:
+        """[B] total normal contact force [N] on ``pad`` (sum of its force map)."""
+        if pad not in self.pad_names:
+            raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
+        self._ensure_cosims()
+        return torch.tensor([sim.pad_normal_force(pad) for sim in self.cosims], device=self.device)
+
+    # ------------------------------------------------------------------ state
+    def _get_task_state(self) -> dict[str, torch.Tensor]:
+        """Task variables that SAPIEN's state does not hold (targets, progress), [B, ...]
+        tensors; part of ``get_state_dict`` so that replay by env states is exact."""
+        return {}
+
+    def _set_task_state(self, state: dict, env_idx) -> None:
+        """Restore :meth:`_get_task_state` (rows ``env_idx``)."""
+
+    def get_state_dict(self):
+        state = super().get_state_dict()
+        task = self._get_task_state()
+        if task:
+            state["task"] = {k: v.clone() for k, v in task.items()}
+        if self.record_mpm_state and self.cosims and not self._cosim_stale:
+            flats = [sim.flat_state() for sim in self.cosims]
+            state["gausstac"] = {k: torch.from_numpy(np.stack([f[k] for f in flats])) for k in flats[0]}
+        return state
+
+    def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
+        mpm = state.get("gausstac")
+        sim_state = {k: v for k, v in state.items() if k not in ("gausstac", "task")}
+        super().set_state_dict(sim_state, env_idx)
+        if "task" in state:
+            rows = torch.arange(self.num_envs) if env_idx is None else torch.as_tensor(common.to_numpy(env_idx))
+            task = {}
+            for k, v in state["task"].items():
+                v = common.to_tensor(v).cpu()
+                task[k] = v[rows] if v.shape[0] == self.num_envs else v  # rows of the envs being set
+            self._set_task_state(task, rows)
+        if mpm is None:
+            self._cosim_stale = True  # rebuilt at rest from the new poses
+            return
+        self._ensure_cosims()
+        idx = range(self.num_envs) if env_idx is None else common.to_numpy(env_idx).tolist()
+        for row, b in enumerate(idx):
+            flat = {k: np.asarray(common.to_numpy(v))[b if np.shape(v)[0] == self.num_envs else row]
+                    for k, v in mpm.items()}
+            self.cosims[b].load_flat_state(flat)
+
+
+class _EnvSplatSource(SplatSource):
+    """The env's co-simulators as the splat camera's scene."""
+
+    def __init__(self, env: GaussTacEnv):
+        self.env = env
+
+    def render(self, viewmats, Ks, width, height, background, background_depth):
+        env = self.env
+        env._ensure_cosims()
+        rgbs, depths = [], []
+        for b, sim in enumerate(env.cosims):
+            kw = {}
+            if isinstance(background, torch.Tensor):
+                kw["background"] = background[b:b + 1]
+            else:
+                kw["background"] = background
+            if background_depth is not None:
+                kw["background_depth"] = background_depth[b:b + 1]
+            if getattr(sim, "_scene", None) is None:  # nothing to splat: the background as is
+                bg = kw["background"]
+                rgb = bg.clone() if isinstance(bg, torch.Tensor) else \
+                    torch.tensor(bg, dtype=torch.float32).expand(1, height, width, 3).clone()
+                d = kw.get("background_depth", torch.full((1, height, width), float("inf")))
+                rgbs.append(rgb)
+                depths.append(d)
+                continue
+            out = sim.render(viewmats[b:b + 1], Ks[b:b + 1], width, height, **kw)
+            seen = out.alpha > 0.5
+            d_splat = out.depth / out.alpha.clamp_min(1e-6)
+            d_bg = kw.get("background_depth", torch.full_like(d_splat, float("inf")))
+            depths.append(torch.where(seen, d_splat, d_bg))
+            rgbs.append(out.rgb)
+        return torch.cat(rgbs), torch.cat(depths)
+
+    @contextlib.contextmanager
+    def hidden(self):
+        """Hide the hand's SAPIEN visuals while the splat camera takes its background (CPU sim;
+        only when the hand has Gaussians to replace it)."""
+        env = self.env
+        bodies = []
+        if type(env.agent).gausstac_gaussians and not env.gpu_sim_enabled:
+            for link in env.agent.robot.links:
+                for obj in link._objs:
+                    rb = obj.entity.find_component_by_type(sapien.render.RenderBodyComponent)
+                    if rb is not None and rb.visibility != 0:
+                        bodies.append(rb)
+        for rb in bodies:
+            rb.visibility = 0
+        try:
+            yield
+        finally:
+            for rb in bodies:
+                rb.visibility = 1
