@@ -18,6 +18,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench hertz --grid-contact
 	$(PY) -m gausstac_maniskill.bench splat
 	$(PY) -m gausstac_maniskill.bench hand
+	$(PY) -m gausstac_maniskill.bench envs
 
 clean:
 	rm -rf .venv out build *.egg-info

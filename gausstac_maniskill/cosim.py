@@ -130,6 +130,7 @@ class GaussTacSim:
         self._update_sleep()
         self.world.step(dt)
         self._maps = {}
+        self._posed = None
         return self.tactile()
 
     def _update_sleep(self) -> None:
@@ -169,6 +170,7 @@ class GaussTacSim:
         from .render import SceneGaussians
 
         self._scene = SceneGaussians(self, hand, hand_links, objects)
+        self._posed = None
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render the scene with the splat camera: ``viewmats`` [C, 4, 4] world-to-camera
@@ -176,7 +178,10 @@ class GaussTacSim:
         (``rgb`` [C, H, W, 3], ``depth`` [C, H, W] m, ``alpha`` [C, H, W])."""
         if getattr(self, "_scene", None) is None:
             raise ConfigError("GaussTacSim.render: call attach_gaussians(...) first")
-        return self._scene.render(viewmats, Ks, width, height, **kwargs)
+        if getattr(self, "_posed", None) is None:  # posed once per step, whatever the number of cameras
+            self._posed = self._scene.posed()
+        return self._posed.render(torch.as_tensor(viewmats, dtype=torch.float32),
+                                  torch.as_tensor(Ks, dtype=torch.float32), width, height, **kwargs)
 
     # ------------------------------------------------------------------ readout
     def is_awake(self, pad: str) -> bool:
@@ -302,6 +307,7 @@ class GaussTacSim:
         self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
         self._awake = dict(state["awake"])
         self._maps = {}
+        self._posed = None
 
 
 def _load_mesh(path: str):

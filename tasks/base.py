@@ -36,6 +36,7 @@ import numpy as np
 import sapien
 import torch
 from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import common
 
 from .. import backend
@@ -87,6 +88,8 @@ class GaussTacEnv(BaseEnv):
         splat_size: (width, height) of the default splat camera ``splat_camera``.
         render_size: (width, height) of the human render camera (``render_mode="rgb_array"``).
         splat_background: ``"sapien"`` (composite over SAPIEN's render) or an RGB triple.
+        camera: ``"splat"`` (default cameras are :class:`GaussianSplatCamera`) or ``"sapien"``
+            (plain SAPIEN cameras at the same poses: rigid meshes only, no pad deformation).
         record_mpm_state: put the MPM state in ``get_state_dict`` (exact replay; ~150 B per
             particle per recorded step).
     """
@@ -96,7 +99,7 @@ class GaussTacEnv(BaseEnv):
 
     def __init__(self, *args, robot_uids="allegro_hand_right_gausstac", mpm_dx: float = 2.0e-3,
                  mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
-                 splat_background="sapien", record_mpm_state: bool = True, **kwargs):
+                 splat_background="sapien", record_mpm_state: bool = True, camera: str = "splat", **kwargs):
         backend.ensure_init()
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
@@ -106,6 +109,9 @@ class GaussTacEnv(BaseEnv):
         self.render_size = tuple(int(v) for v in render_size)
         self.splat_background = splat_background
         self.record_mpm_state = bool(record_mpm_state)
+        if camera not in ("splat", "sapien"):
+            raise ConfigError(f"camera={camera!r}: use 'splat' (Gaussian Splatting) or 'sapien'")
+        self.camera_kind = camera
         self.cosims: list[GaussTacSim] = []
         self._rigid: dict[str, RigidObject] = {}
         self._soft: dict[str, SoftObject] = {}
@@ -117,8 +123,9 @@ class GaussTacEnv(BaseEnv):
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
     # ------------------------------------------------------------------ set-up
-    def _load_agent(self, options: dict, *args, **kwargs):
-        super()._load_agent(options, *args, **kwargs)
+    def _load_agent(self, options: dict, initial_agent_poses=None, *args, **kwargs):
+        super()._load_agent(options, sapien.Pose() if initial_agent_poses is None else initial_agent_poses,
+                            *args, **kwargs)
         if not isinstance(self.agent, GaussTacAgent) or not self.agent.gausstac_pads:
             uid = getattr(self.agent, "uid", self.robot_uids)
             raise ConfigError(f"robot_uids={uid!r} has no GaussTac pads: use 'allegro_hand_right_gausstac' or an "
@@ -201,17 +208,21 @@ class GaussTacEnv(BaseEnv):
 
         return sapien_utils.look_at(eye=[0.3, -0.12, 0.3], target=[0.0, 0.03, 0.05])
 
+    def _camera_config(self, uid: str, size) -> CameraConfig:
+        w, h = size
+        common_args = dict(uid=uid, pose=self._splat_camera_pose(), width=w, height=h, fov=np.pi / 3, near=0.01,
+                           far=10.0)
+        if self.camera_kind == "sapien":
+            return CameraConfig(**common_args)
+        return GaussianSplatCameraConfig(**common_args, background=self.splat_background)
+
     @property
     def _default_sensor_configs(self):
-        w, h = self.splat_size
-        return [GaussianSplatCameraConfig(uid="splat_camera", pose=self._splat_camera_pose(), width=w, height=h,
-                                          fov=np.pi / 3, near=0.01, far=10.0, background=self.splat_background)]
+        return [self._camera_config("splat_camera", self.splat_size)]
 
     @property
     def _default_human_render_camera_configs(self):
-        w, h = self.render_size
-        return GaussianSplatCameraConfig(uid="render_camera", pose=self._splat_camera_pose(), width=w, height=h,
-                                         fov=np.pi / 3, near=0.01, far=10.0, background=self.splat_background)
+        return self._camera_config("render_camera", self.render_size)
 
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)

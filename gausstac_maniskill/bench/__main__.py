@@ -12,6 +12,7 @@ BENCHMARKS = {
     "hertz": "gausstac_maniskill.bench.hertz",
     "splat": "gausstac_maniskill.bench.splat",
     "hand": "gausstac_maniskill.bench.hand",
+    "envs": "gausstac_maniskill.bench.envs",
 }
 
 

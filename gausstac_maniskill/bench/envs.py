@@ -1,0 +1,140 @@
+"""ManiSkill env benchmark: step time of every GaussTac task split into physics / MPM /
+tactile / render, reset time, and the task outcome, against SAPIEN's own camera and
+ManiSkill's FSR-tactile Allegro task.
+
+``python -m gausstac_maniskill.bench envs [--steps N] [--dx 2e-3 1.5e-3] [--out DIR]``
+
+Rows:
+
+* every GaussTac task with the splat camera (``obs_mode="rgb"``, 128×128), driven by
+  its scripted expert; PressCube also at finer MPM grids (``--dx``), where the
+  "outcome" column is the force error at the end (speed vs accuracy);
+* the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
+  CPU machine: rigid meshes only, no pad deformation);
+* ``RotateSingleObjectInHandLevel0-v1`` with ``allegro_hand_right_touch`` (ManiSkill's
+  FSR tactile: 16 contact impulses), random actions, the same obs mode and image size.
+
+The first step of each run (Taichi compilation) is not timed. Times are means over the
+timed steps, milliseconds.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import numpy as np
+
+TASKS = ["GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1"]
+PARTS = ("physics", "mpm", "tactile", "render")
+
+
+def _outcome(env_id, info) -> str:
+    if env_id == "GaussTac-PressCube-v1":
+        return f"success={bool(info['success'][0])}, |F-F*|={float(info['force_error'][0]):.3f} N"
+    if env_id == "GaussTac-SlideCube-v1":
+        return f"success={bool(info['success'][0])}, slid={1e3 * float(info['slid'][0]):.1f} mm"
+    if env_id == "GaussTac-SqueezeSponge-v1":
+        return f"success={bool(info['success'][0])}, |c-c*|={float(info['compression_error'][0]):.3f}"
+    if "success" in info:
+        return f"success={bool(info['success'][0])}"
+    return "-"
+
+
+def run_gausstac(env_id: str, steps: int, camera: str = "splat", dx: float = 2e-3, resets: int = 3) -> dict:
+    import gymnasium as gym
+
+    from ..experts import make_expert
+
+    env = gym.make(env_id, obs_mode="rgb", sim_backend="physx_cpu", control_mode="pd_joint_delta_pos",
+                   camera=camera, mpm_dx=dx, splat_size=(128, 128))
+    base = env.unwrapped
+    reset_s = []
+    for k in range(resets):
+        t0 = time.perf_counter()
+        obs, _ = env.reset(seed=k)
+        reset_s.append(time.perf_counter() - t0)
+    obs, _ = env.reset(seed=0)
+    expert = make_expert(env)
+    expert.reset()
+    rows, info, particles = [], {}, 0
+    for k in range(steps + 1):
+        obs, _, _, _, info = env.step(expert.act(obs))
+        particles = max(particles, sum(g.count for s in base.cosims for g in s.world.groups if g.awake))
+        if k > 0:
+            rows.append({p: base.step_timing[p] for p in PARTS + ("total",)})
+    env.close()
+    out = {p: 1e3 * float(np.mean([r[p] for r in rows])) for p in PARTS + ("total",)}
+    out.update(reset=1e3 * float(np.mean(reset_s[1:] or reset_s)), outcome=_outcome(env_id, info),
+               particles=particles)
+    return out
+
+
+def run_fsr(steps: int) -> dict:
+    import gymnasium as gym
+    import mani_skill.envs  # noqa: F401
+
+    env = gym.make("RotateSingleObjectInHandLevel0-v1", obs_mode="rgb", sim_backend="physx_cpu",
+                   sensor_configs=dict(width=128, height=128))
+    reset_s = []
+    for k in range(3):
+        t0 = time.perf_counter()
+        env.reset(seed=k)
+        reset_s.append(time.perf_counter() - t0)
+    times, render = [], []
+    base = env.unwrapped
+    orig = base._get_obs_sensor_data
+
+    def timed(*a, **kw):
+        t0 = time.perf_counter()
+        r = orig(*a, **kw)
+        render.append(time.perf_counter() - t0)
+        return r
+
+    base._get_obs_sensor_data = timed
+    for k in range(steps + 1):
+        t0 = time.perf_counter()
+        env.step(env.action_space.sample() * 0.2)
+        if k > 0:
+            times.append(time.perf_counter() - t0)
+    env.close()
+    total, rend = 1e3 * float(np.mean(times)), 1e3 * float(np.mean(render[1:]))
+    return dict(physics=total - rend, mpm=0.0, tactile=0.0, render=rend, total=total,
+                reset=1e3 * float(np.mean(reset_s[1:])), outcome="FSR impulses (16 links)", particles=0)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench envs", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--steps", type=int, default=15, help="timed control steps per run")
+    ap.add_argument("--dx", type=float, nargs="+", default=[2e-3, 1.5e-3],
+                    help="MPM grid spacings [m] for the PressCube resolution sweep")
+    ap.add_argument("--out", default="out/bench", help="folder for envs.json")
+    args = ap.parse_args(argv)
+    from .. import backend
+
+    print(f"[bench envs] Taichi backend: {backend.init(os.environ.get('GAUSSTAC_ARCH', 'auto'))}, "
+          f"machine: {platform.machine()}, {os.cpu_count()} cores")
+    runs = []
+    for env_id in TASKS:
+        runs.append((env_id, "splat", 2e-3, run_gausstac(env_id, args.steps, "splat")))
+        runs.append((env_id, "sapien", 2e-3, run_gausstac(env_id, args.steps, "sapien")))
+    for dx in args.dx:
+        if dx != 2e-3:
+            runs.append(("GaussTac-PressCube-v1", "splat", dx, run_gausstac("GaussTac-PressCube-v1", args.steps,
+                                                                             "splat", dx)))
+    runs.append(("RotateSingleObjectInHandLevel0-v1 (allegro_hand_right_touch)", "sapien", None,
+                 run_fsr(args.steps)))
+    print("\n| task | camera | MPM dx [mm] | active particles | reset [ms] | step [ms] | physics | MPM | "
+          "tactile | render | outcome |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for env_id, cam, dx, r in runs:
+        print(f"| {env_id} | {cam} | {'-' if dx is None else f'{1e3 * dx:g}'} | {r['particles']} | "
+              f"{r['reset']:.0f} | {r['total']:.0f} | {r['physics']:.0f} | {r['mpm']:.0f} | {r['tactile']:.1f} | "
+              f"{r['render']:.0f} | {r['outcome']} |")
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, "envs.json"), "w") as f:
+        json.dump([dict(env=e, camera=c, dx=d, **r) for e, c, d, r in runs], f, indent=1)
+    return 0

@@ -1,0 +1,142 @@
+"""The four GaussTac tasks: gym.make/reset/step on physx_cpu, obs layout, experts, bad input."""
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import gausstac_maniskill  # noqa: F401  (registers the tasks)
+from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.experts import make_expert
+
+TASKS = ["GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1"]
+PADS = ["thumb", "index", "middle", "ring"]
+
+
+def _make(env_id, **kw):
+    kw.setdefault("obs_mode", "state_dict")
+    return gym.make(env_id, sim_backend="physx_cpu", **kw)
+
+
+@pytest.mark.parametrize("env_id", TASKS)
+def test_make_reset_step_and_obs_layout(env_id):
+    env = _make(env_id)
+    try:
+        obs, info = env.reset(seed=0)
+        assert "success" in info
+        for _ in range(3):
+            obs, reward, terminated, truncated, info = env.step(env.action_space.sample() * 0.1)
+        assert reward.shape == (1,) and torch.isfinite(reward).all()
+        assert sorted(obs["tactile"]) == sorted(PADS)
+        for pad in PADS:
+            m = obs["tactile"][pad]
+            assert set(m) == {"depth", "shear", "force"}
+            assert m["depth"].shape == (1, 16, 16) and m["depth"].dtype == torch.float32
+            assert m["shear"].shape == (1, 16, 16, 2) and m["shear"].dtype == torch.float32
+            assert m["force"].shape == (1, 16, 16) and m["force"].dtype == torch.float32
+        # the observation space describes the tactile entries too
+        space = env.unwrapped.single_observation_space
+        assert space["tactile"]["index"]["shear"].shape == (16, 16, 2)
+        timing = env.unwrapped.step_timing
+        assert {"physics", "mpm", "tactile", "render", "reset"} <= set(timing)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", TASKS)
+def test_scripted_expert_succeeds_on_fixed_seed(env_id):
+    env = _make(env_id, control_mode="pd_joint_delta_pos")
+    try:
+        obs, _ = env.reset(seed=1)
+        expert = make_expert(env)
+        expert.reset()
+        success = False
+        for _ in range(60):
+            obs, reward, terminated, truncated, info = env.step(expert.act(obs))
+            if info["success"].all():
+                success = True
+                break
+            assert not info.get("fail", torch.zeros(1, dtype=torch.bool)).any(), info
+        assert success, info
+        if env_id != "GaussTac-Gesture-v1":  # contact tasks: the index pad is deformed
+            assert obs["tactile"]["index"]["depth"].max() > 1e-4
+    finally:
+        env.close()
+
+
+def test_state_obs_mode_flattens_tactile_into_the_vector():
+    env = _make("GaussTac-Gesture-v1", obs_mode="state")
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs.ndim == 2 and obs.shape[0] == 1
+        # 4 pads x (256 depth + 512 shear + 256 force) tactile values are part of it
+        assert obs.shape[1] > 4 * 1024
+    finally:
+        env.close()
+
+
+def test_press_force_is_the_tactile_force_sum_and_tracks_the_target():
+    env = _make("GaussTac-PressCube-v1")
+    try:
+        obs, _ = env.reset(seed=3)
+        expert = make_expert(env)
+        expert.reset()
+        for _ in range(30):
+            obs, _, _, _, info = env.step(expert.act(obs))
+            assert torch.allclose(info["force"], obs["tactile"]["index"]["force"].sum(dim=(1, 2)), rtol=1e-5)
+            if info["success"].all():
+                break
+        target = env.unwrapped.target_force
+        assert (info["force"] - target).abs().item() < 0.15 * target.item()
+        # only the index pad touches the cube
+        for pad in ("thumb", "middle", "ring"):
+            assert obs["tactile"][pad]["force"].abs().sum() == 0
+    finally:
+        env.close()
+
+
+def test_invalid_gesture_name_is_a_clear_error():
+    with pytest.raises(ConfigError, match="gesture='wave'.*choose from"):
+        _make("GaussTac-Gesture-v1", gesture="wave")
+
+
+def test_non_gausstac_robot_is_refused():
+    with pytest.raises(ConfigError, match="has no GaussTac pads"):
+        _make("GaussTac-Gesture-v1", robot_uids="allegro_hand_right")
+
+
+def test_nan_action_is_refused_and_changes_nothing():
+    env = _make("GaussTac-Gesture-v1")
+    try:
+        env.reset(seed=0)
+        base = env.unwrapped
+        q0 = base.agent.robot.get_qpos().clone()
+        steps0 = int(base.elapsed_steps[0])
+        a = np.zeros(env.action_space.shape, np.float32)
+        a[..., 3] = np.nan
+        with pytest.raises(ConfigError, match="NaN or inf"):
+            env.step(a)
+        assert torch.equal(base.agent.robot.get_qpos(), q0)
+        assert int(base.elapsed_steps[0]) == steps0
+        env.step(np.zeros_like(a))  # still usable
+    finally:
+        env.close()
+
+
+def test_sponge_material_is_user_settable_and_checked():
+    with pytest.raises(ConfigError, match="nu"):
+        _make("GaussTac-SqueezeSponge-v1", sponge_nu=0.6)
+    soft = _make("GaussTac-SqueezeSponge-v1", sponge_E=1.5e4)
+    stiff = _make("GaussTac-SqueezeSponge-v1", sponge_E=1.2e5)
+    try:
+        forces = []
+        for env in (soft, stiff):
+            obs, _ = env.reset(seed=2)
+            expert = make_expert(env)
+            expert.reset()
+            for _ in range(4):  # the same approach and 1 mm indentation for both
+                obs, _, _, _, info = env.step(expert.act(obs))
+            forces.append(float(info["pad_force"][0]))
+        assert forces[1] > 2.0 * forces[0], forces
+    finally:
+        soft.close()
+        stiff.close()

@@ -1,0 +1,96 @@
+"""GaussianSplatCamera and TactileSensor inside a ManiSkill env, checked against SAPIEN's camera."""
+import gymnasium as gym
+import numpy as np
+import pytest
+import sapien
+import torch
+from mani_skill.sensors.camera import CameraConfig
+
+import gausstac_maniskill  # noqa: F401
+from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.sensors import GaussianSplatCamera, GaussianSplatCameraConfig
+from gausstac_maniskill.tasks.press_cube import PressCubeEnv
+
+
+class _TwoCameras(PressCubeEnv):
+    """PressCube with a plain SAPIEN camera next to the splat camera (same pose and size)."""
+
+    @property
+    def _default_sensor_configs(self):
+        splat = super()._default_sensor_configs[0]
+        plain = CameraConfig(uid="sapien_camera", pose=splat.pose, width=splat.width, height=splat.height,
+                             fov=splat.fov, near=splat.near, far=splat.far)
+        return [splat, plain]
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = _TwoCameras(obs_mode="rgb+depth+segmentation", render_mode="rgb_array", sim_backend="physx_cpu",
+                    splat_size=(160, 120))
+    e.reset(seed=0)
+    yield e
+    e.close()
+
+
+def test_splat_camera_obs_match_sapien_camera_layout(env):
+    obs = env.get_obs()
+    splat, plain = obs["sensor_data"]["splat_camera"], obs["sensor_data"]["sapien_camera"]
+    assert isinstance(env._sensors["splat_camera"], GaussianSplatCamera)
+    for key in ("rgb", "depth"):
+        assert splat[key].shape == plain[key].shape, key
+        assert splat[key].dtype == plain[key].dtype, key
+    assert splat["rgb"].shape == (1, 120, 160, 3) and splat["depth"].shape == (1, 120, 160, 1)
+    ps, pp = obs["sensor_param"]["splat_camera"], obs["sensor_param"]["sapien_camera"]
+    assert set(ps) == set(pp) == {"extrinsic_cv", "cam2world_gl", "intrinsic_cv"}
+    for k in ps:
+        assert torch.allclose(ps[k], pp[k], atol=1e-6), k
+
+
+def test_splat_depth_agrees_with_sapien_on_the_hand(env):
+    """Where SAPIEN sees the hand, the splatted hand lies at the same depth (rendering vs SAPIEN)."""
+    obs = env.get_obs()
+    cam = env._sensors["sapien_camera"]
+    depth_with_hand = obs["sensor_data"]["sapien_camera"]["depth"][0, ..., 0].float()
+    with env._splat_source.hidden():
+        cam.capture()
+        depth_without = cam.get_obs(rgb=False, depth=True, position=False, segmentation=False)["depth"][0, ..., 0]
+    hand = (depth_with_hand > 0) & ((depth_without.float() - depth_with_hand).abs() > 5)  # mm
+    assert hand.sum() > 500, "the hand should cover part of the image"
+    splat = obs["sensor_data"]["splat_camera"]["depth"][0, ..., 0].float()
+    covered = (splat[hand] > 0).float().mean().item()
+    err = (splat[hand] - depth_with_hand[hand]).abs()
+    assert covered > 0.9, covered
+    assert err.median().item() < 3.0, err.median()  # millimetres
+    # the SAPIEN background taken for compositing had the hand hidden
+    assert (env._sensors["splat_camera"]._background_obs["depth"][0, ..., 0][hand] == depth_without[hand]).all()
+
+
+def test_human_render_camera_is_a_splat_camera(env):
+    img = env.render()
+    assert isinstance(env._human_render_cameras["render_camera"], GaussianSplatCamera)
+    assert img.shape == (1, 256, 256, 3) and img.dtype == torch.uint8
+    assert img.float().std() > 10
+
+
+def test_tactile_sensor_images(env):
+    img = env.tactile_sensor.get_images()
+    assert img.shape == (1, 16, 64, 3) and img.dtype == torch.uint8
+
+
+def test_plain_background_and_bad_background():
+    e = gym.make("GaussTac-Gesture-v1", obs_mode="rgb", splat_background=(1.0, 1.0, 1.0), sim_backend="physx_cpu")
+    try:
+        obs, _ = e.reset(seed=0)
+        rgb = obs["sensor_data"]["splat_camera"]["rgb"][0]
+        assert (rgb == 255).all(dim=-1).float().mean() > 0.5  # mostly the white background
+        assert (rgb < 100).all(dim=-1).any()  # and the dark hand
+    finally:
+        e.close()
+    with pytest.raises(ConfigError, match="background"):
+        GaussianSplatCameraConfig(uid="c", pose=sapien.Pose(), width=8, height=8, fov=1.0, background="blue")
+
+
+def test_capture_without_scene_is_a_clear_error(env):
+    cam = GaussianSplatCamera.adopt(env._sensors["sapien_camera"])
+    with pytest.raises(ConfigError, match="no scene attached"):
+        cam.capture()
