@@ -94,8 +94,6 @@ class TipIK:
     """
 
     def __init__(self, env, pad: str, joints):
-        from .pose import MujocoPoseSource
-
         geo = env.pad_geometry(pad)
         self.S = geo.sensor_frame
         self.src = _mujoco_source(type(env.agent).pad_urdf())

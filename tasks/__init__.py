@@ -1,6 +1,7 @@
 """GaussTac tasks, registered with ManiSkill on import (``gym.make("GaussTac-...-v1")``)."""
 from .base import GaussTacEnv
 from .gesture import GESTURES, GestureEnv
+from .touch import TouchEnv  # noqa: F401
 from .press_cube import PressCubeEnv
 from .slide_cube import SlideCubeEnv
 from .squeeze_sponge import SqueezeSpongeEnv

@@ -319,7 +319,7 @@ class GaussTacEnv(BaseEnv):
             actor = self._rigid[name].actor
             origin = actor.pose.raw_pose[:, :3].detach().cpu().double().numpy()
             for b, body in enumerate(actor._bodies):
-                com = np.asarray((body.pose * body.cmass_local_pose).p, np.float64)
+                com = np.asarray((body.entity_pose * body.cmass_local_pose).p, np.float64)
                 force, torque = w[b, :3], w[b, 3:]
                 torque_com = torque + np.cross(origin[b] - com, force)  # torque was about the actor origin
                 body.add_force_torque(force.astype(np.float32), torque_com.astype(np.float32))
@@ -393,6 +393,8 @@ class GaussTacEnv(BaseEnv):
     def get_state_dict(self):
         state = super().get_state_dict()
         task = self._get_task_state()
+        if self._wrench:  # the two-way wrench acting during the next control step
+            task = {**task, **{f"wrench_{n}": torch.as_tensor(w, dtype=torch.float64) for n, w in self._wrench.items()}}
         if task:
             state["task"] = {k: v.clone() for k, v in task.items()}
         if self.record_mpm_state and self.cosims and not self._cosim_stale:
@@ -401,25 +403,30 @@ class GaussTacEnv(BaseEnv):
         return state
 
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
+        """SAPIEN state, then the task's variables, then the co-simulators: restored from
+        ``state["gausstac"]`` when present (exact), otherwise rebuilt at rest."""
         mpm = state.get("gausstac")
         sim_state = {k: v for k, v in state.items() if k not in ("gausstac", "task")}
         super().set_state_dict(sim_state, env_idx)
-        if "task" in state:
-            rows = torch.arange(self.num_envs) if env_idx is None else torch.as_tensor(common.to_numpy(env_idx))
-            task = {}
-            for k, v in state["task"].items():
-                v = common.to_tensor(v).cpu()
-                task[k] = v[rows] if v.shape[0] == self.num_envs else v  # rows of the envs being set
-            self._set_task_state(task, rows)
+        rows = torch.arange(self.num_envs) if env_idx is None else torch.as_tensor(common.to_numpy(env_idx))
+        task = {}
+        for k, v in state.get("task", {}).items():
+            v = common.to_tensor(v).cpu()
+            task[k] = v[rows] if v.shape[0] == self.num_envs else v  # rows of the envs being set
+        wrench = {k[len("wrench_"):]: task.pop(k) for k in list(task) if k.startswith("wrench_")}
+        if task:
+            self._set_task_state(task, rows)  # first: soft objects are built from task variables
         if mpm is None:
-            self._cosim_stale = True  # rebuilt at rest from the new poses
-            return
-        self._ensure_cosims()
-        idx = range(self.num_envs) if env_idx is None else common.to_numpy(env_idx).tolist()
-        for row, b in enumerate(idx):
-            flat = {k: np.asarray(common.to_numpy(v))[b if np.shape(v)[0] == self.num_envs else row]
-                    for k, v in mpm.items()}
-            self.cosims[b].load_flat_state(flat)
+            self._build_cosims()  # at rest, from the poses just set
+        else:
+            self._ensure_cosims()
+            for row, b in enumerate(rows.tolist()):
+                flat = {k: np.asarray(common.to_numpy(v))[b if np.shape(v)[0] == self.num_envs else row]
+                        for k, v in mpm.items()}
+                self.cosims[b].load_flat_state(flat)
+        for name, w in wrench.items():
+            if name in self._wrench:
+                self._wrench[name][rows.numpy()] = w.double().numpy()
 
 
 class _EnvSplatSource(SplatSource):

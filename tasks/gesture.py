@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import sapien
 import torch
+from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
 
 from ..errors import ConfigError
@@ -71,7 +72,7 @@ class GestureEnv(GaussTacEnv):
         if self.fixed_gesture is not None:
             idx = torch.full((b,), self.gesture_names.index(self.fixed_gesture), dtype=torch.long)
         else:
-            idx = torch.as_tensor(self._batched_episode_rng[common_np(env_idx)].randint(0, len(GESTURES)),
+            idx = torch.as_tensor(self._batched_episode_rng[common.to_numpy(env_idx)].randint(0, len(GESTURES)),
                                   dtype=torch.long).reshape(b)
         self.gesture_index[env_idx] = idx.to(self.device)
         q0 = torch.as_tensor(GESTURES["open"], device=self.device)
@@ -109,9 +110,3 @@ class GestureEnv(GaussTacEnv):
 
     def compute_normalized_dense_reward(self, obs, action, info):
         return self.compute_dense_reward(obs, action, info) / 2.0
-
-
-def common_np(idx):
-    from mani_skill.utils import common
-
-    return common.to_numpy(idx)
