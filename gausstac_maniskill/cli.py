@@ -1,9 +1,11 @@
-"""Command line: ``gausstac demo | bench <name> | build-asset``.
+"""Command line: ``gausstac demo | bench <name> | build-asset | collect``.
 
 * ``gausstac demo`` — the main demo (see README); writes PNG/MP4 files under ``out/``.
 * ``gausstac bench hertz|splat [options]`` — benchmarks that print what they measured.
 * ``gausstac build-asset [options]`` — hand Gaussians (``gaussians.ply`` + ``links.json``)
   from a URDF's visual meshes, or aligned from a scan.
+* ``gausstac collect <env_id> [options]`` — record scripted-expert demonstrations (h5 + json),
+  same as ``python -m gausstac_maniskill.collect``.
 """
 from __future__ import annotations
 
@@ -29,7 +31,13 @@ def _build_asset(argv: list[str]) -> int:
     return build.main(argv)
 
 
-COMMANDS = {"demo": _demo, "bench": _bench, "build-asset": _build_asset}
+def _collect(argv: list[str]) -> int:
+    from . import collect
+
+    return collect.main(argv)
+
+
+COMMANDS = {"demo": _demo, "bench": _bench, "build-asset": _build_asset, "collect": _collect}
 
 
 def main(argv: list[str] | None = None) -> int:

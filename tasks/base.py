@@ -162,6 +162,15 @@ class GaussTacEnv(BaseEnv):
             raise ConfigError(f"MPM object {name!r} already registered")
         self._soft[name] = SoftObject(name, particles, material)
 
+    def _reconfigure(self, options=dict()):
+        # a reconfiguration rebuilds the scene: tasks register their MPM objects again
+        self._rigid.clear()
+        self._soft.clear()
+        self._wrench = {}
+        self.cosims = []
+        self._cosim_stale = True
+        super()._reconfigure(options)
+
     def _after_reconfigure(self, options):
         super()._after_reconfigure(options)
         self._pose_source = SapienPoseSource(self.agent)
@@ -395,8 +404,8 @@ class GaussTacEnv(BaseEnv):
         task = self._get_task_state()
         if self._wrench:  # the two-way wrench acting during the next control step
             task = {**task, **{f"wrench_{n}": torch.as_tensor(w, dtype=torch.float64) for n, w in self._wrench.items()}}
-        if task:
-            state["task"] = {k: v.clone() for k, v in task.items()}
+        if task:  # [B] leaves as [B, 1]: ManiSkill's replay indexes every state leaf as [..., D]
+            state["task"] = {k: (v[:, None] if v.ndim == 1 else v).clone() for k, v in task.items()}
         if self.record_mpm_state and self.cosims and not self._cosim_stale:
             flats = [sim.flat_state() for sim in self.cosims]
             state["gausstac"] = {k: torch.from_numpy(np.stack([f[k] for f in flats])) for k in flats[0]}
@@ -405,6 +414,7 @@ class GaussTacEnv(BaseEnv):
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
         """SAPIEN state, then the task's variables, then the co-simulators: restored from
         ``state["gausstac"]`` when present (exact), otherwise rebuilt at rest."""
+        state = _batch_state(state)
         mpm = state.get("gausstac")
         sim_state = {k: v for k, v in state.items() if k not in ("gausstac", "task")}
         super().set_state_dict(sim_state, env_idx)
@@ -414,6 +424,9 @@ class GaussTacEnv(BaseEnv):
             v = common.to_tensor(v).cpu()
             task[k] = v[rows] if v.shape[0] == self.num_envs else v  # rows of the envs being set
         wrench = {k[len("wrench_"):]: task.pop(k) for k in list(task) if k.startswith("wrench_")}
+        if task:  # back to the task's own shapes ([B, 1] -> [B])
+            now = self._get_task_state()
+            task = {k: v[..., 0] if k in now and now[k].ndim == 1 and v.ndim == 2 else v for k, v in task.items()}
         if task:
             self._set_task_state(task, rows)  # first: soft objects are built from task variables
         if mpm is None:
@@ -427,6 +440,20 @@ class GaussTacEnv(BaseEnv):
         for name, w in wrench.items():
             if name in self._wrench:
                 self._wrench[name][rows.numpy()] = w.double().numpy()
+
+
+def _batch_state(state: dict) -> dict:
+    """Give a one-env state dict whose leaves lack the env axis (ManiSkill's CPU replay
+    passes one step of a recorded ``env_states`` that way) its env axis; batched dicts
+    are returned unchanged. The articulations' state tells which: ``[D]`` or ``[B, D]``."""
+    probe = next(iter((state.get("articulations") or state.get("actors") or {}).values()), None)
+    if probe is None or len(probe.shape) != 1:
+        return state
+
+    def add_axis(x):
+        return {k: add_axis(v) for k, v in x.items()} if isinstance(x, dict) else x[None]
+
+    return add_axis(state)
 
 
 class _EnvSplatSource(SplatSource):

@@ -32,7 +32,8 @@ _CURL = dict(j1=1.3, j2=1.4, j3=1.1, j5=1.3, j6=1.4, j7=1.1, j9=1.3, j10=1.4, j1
 #: Joint targets [rad] in action order (joint_0.0 ... joint_15.0).
 GESTURES = {
     "open": _pose(j12=0.3),
-    "fist": _pose(**_CURL, j12=1.2, j13=0.6, j14=0.9, j15=0.8),
+    # the thumb lies beside the curled fingers: opposed further, it blocks the middle finger
+    "fist": _pose(**_CURL, j12=0.6, j13=0.1, j14=0.4, j15=0.4),
     "point": _pose(**{k: v for k, v in _CURL.items() if k not in ("j1", "j2", "j3")}, j12=1.1, j13=0.5, j14=0.8, j15=0.7),
     "peace": _pose(j0=-0.25, j4=0.25, j9=1.3, j10=1.4, j11=1.1, j12=1.1, j13=0.5, j14=0.8, j15=0.7),
     "thumbs_up": _pose(**_CURL, j12=0.3, j13=-0.1, j14=0.0, j15=0.0),

@@ -227,6 +227,9 @@ class MPMWorld:
                               f"got {type(collider).__name__}")
         self.colliders.append(collider)
         self._col_prev.append(collider.pose.copy())
+        # one impulse row per collider from the start, so the state keeps its shape before
+        # and after the first step (recorders stack states of successive steps)
+        self._col_impulse = np.concatenate([self._col_impulse, np.zeros((1, 6))])
         self._dirty = True
         return len(self.colliders) - 1
 
