@@ -29,7 +29,6 @@ No hand Gaussians: the splat camera draws the pads over SAPIEN's render of the h
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 from pathlib import Path
@@ -108,23 +107,22 @@ def write_finger_hull(path: str = ABILITY_FINGER_HULL, urdf: str = ABILITY_URDF)
     return path
 
 
-def _finish_pads(pads) -> tuple:
-    """Per-pad fields ``add_gausstac_pads`` shares: the cone, and the fingers' mesh
-    :data:`ABILITY_FINGER_HULL` (derived from ManiSkill's URDF: written here if it is
-    missing; if it cannot be, building the pads raises AssetError naming PadSpec.mesh)."""
+def _per_link_fields() -> dict:
+    """Per-pad fields: the cone, and the fingers' mesh :data:`ABILITY_FINGER_HULL` (derived
+    from ManiSkill's URDF: written here if it is missing; if it cannot be, building the
+    pads raises AssetError naming PadSpec.mesh)."""
     if not os.path.isfile(ABILITY_FINGER_HULL):
         try:
             write_finger_hull()
         except OSError:
             pass
-    return tuple(dataclasses.replace(p, cone_deg=PAD_CONE_DEG[_kind(p.link)],
-                                     mesh=None if p.link == "thumb_L2" else ABILITY_FINGER_HULL) for p in pads)
+    return {link: dict(cone_deg=PAD_CONE_DEG[_kind(link)], mesh=None if link == "thumb_L2" else ABILITY_FINGER_HULL)
+            for link in ABILITY_PAD_LINKS.values()}
 
 
 FloatingAbilityHandRightGaussTac = add_gausstac_pads(
     "floating_ability_hand_right", ABILITY_PAD_LINKS, uid="floating_ability_hand_right_gausstac",
-    axes=ABILITY_PAD_AXES, register=False)
-FloatingAbilityHandRightGaussTac.gausstac_pads = _finish_pads(FloatingAbilityHandRightGaussTac.gausstac_pads)
+    axes=ABILITY_PAD_AXES, per_link=_per_link_fields(), register=False)
 FloatingAbilityHandRightGaussTac.__module__ = __name__
 FloatingAbilityHandRightGaussTac.__qualname__ = "FloatingAbilityHandRightGaussTac"
 FloatingAbilityHandRightGaussTac.__doc__ = (

@@ -63,7 +63,8 @@ def _check_pad_links(agent_uid: str, urdf: str, pads: Sequence[PadSpec]) -> None
 
 def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str, str], *,
                       uid: str | None = None, urdf: str | None = None, gaussians: str | None = None,
-                      axes: Mapping[str, Sequence[float]] | None = None, register: bool = True,
+                      axes: Mapping[str, Sequence[float]] | None = None,
+                      per_link: Mapping[str, Mapping] | None = None, register: bool = True,
                       **pad_fields) -> type:
     """A new agent class: ``agent`` (a registered uid or an agent class) with soft pads.
 
@@ -75,6 +76,8 @@ def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str,
         gaussians: optional folder with the hand's ``gaussians.ply`` and ``links.json``.
         axes: per-link outward pad direction in the link frame (default ``pad_fields["axis"]``
             or +x).
+        per_link: other :class:`PadSpec` fields per link (e.g. ``{"thumb_L2": {"cone_deg": 30}}``),
+            overriding ``pad_fields``.
         register: register the class with ManiSkill under ``uid``.
         pad_fields: other :class:`PadSpec` fields shared by all pads (``thickness``, ``cone_deg``,
             ``material``, ``layout``).
@@ -95,13 +98,21 @@ def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str,
     if isinstance(pad_links, str) or not pad_links:
         raise ConfigError(f"add_gausstac_pads: pad_links must be a non-empty list of link names, got {pad_links!r}")
     named = dict(pad_links) if isinstance(pad_links, Mapping) else {link: link for link in pad_links}
-    axes = dict(axes or {})
+    axes, per_link = dict(axes or {}), dict(per_link or {})
+    stray = sorted(set(axes) - set(named.values())) + sorted(set(per_link) - set(named.values()))
+    if stray:
+        raise ConfigError(f"add_gausstac_pads: axes/per_link name links without a pad: {stray}; "
+                          f"pad links: {sorted(named.values())}")
     pads = []
     for name, link in named.items():
         fields = dict(pad_fields)
         if link in axes:
             fields["axis"] = tuple(axes[link])
-        pads.append(PadSpec(link=link, name=name, **fields))
+        fields.update(per_link.get(link, {}))
+        try:
+            pads.append(PadSpec(link=link, name=name, **fields))
+        except TypeError as e:
+            raise ConfigError(f"add_gausstac_pads: pad {name!r} on {link!r}: {e}") from None
     new_uid = uid or f"{base.uid}_gausstac"
     pad_urdf = urdf or base.urdf_path
     _check_pad_links(base.uid, pad_urdf, pads)

@@ -168,6 +168,7 @@ class GaussTacEnv(BaseEnv):
         self._soft.clear()
         self._wrench = {}
         self.cosims = []
+        self._pad_geometry = {}
         self._cosim_stale = True
         super()._reconfigure(options)
 
@@ -193,6 +194,9 @@ class GaussTacEnv(BaseEnv):
         from ..tactile import build_pad
         from ..urdf import link_mesh
 
+        cache = self.__dict__.setdefault("_pad_geometry", {})
+        if pad in cache:
+            return cache[pad]
         spec = next((p for p in self.agent.gausstac_pads if p.name == pad), None)
         if spec is None:
             raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
@@ -201,7 +205,8 @@ class GaussTacEnv(BaseEnv):
             import trimesh
 
             mesh = trimesh.load(mesh, force="mesh")
-        return build_pad(spec, mesh, self.mpm_settings.particle_spacing, self.mpm_settings.dx)
+        cache[pad] = build_pad(spec, mesh, self.mpm_settings.particle_spacing, self.mpm_settings.dx)
+        return cache[pad]
 
     def pad_frame(self, pad: str) -> torch.Tensor:
         """[B, 4, 4] world pose of ``pad``'s sensor frame now (z out of the pad, origin at

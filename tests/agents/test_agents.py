@@ -139,3 +139,17 @@ def test_touch_sandbox_runs_the_allegro_too():
         assert (C[:3, 3] - S[:3, 3]) @ S[:3, 2] == pytest.approx(0.003 + 0.01, abs=1e-5)
     finally:
         env.close()
+
+
+def test_per_link_fields_and_stray_links():
+    cls = add_gausstac_pads("allegro_hand_right", {"index": "link_3.0_tip", "thumb": "link_15.0_tip"},
+                            uid="test_allegro_per_link", register=False, thickness=3e-3,
+                            per_link={"link_15.0_tip": {"cone_deg": 30.0}})
+    pads = {p.name: p for p in cls.gausstac_pads}
+    assert pads["thumb"].cone_deg == 30.0 and pads["index"].cone_deg == 60.0
+    assert pads["index"].thickness == pads["thumb"].thickness == 3e-3
+    with pytest.raises(ConfigError, match="without a pad"):
+        add_gausstac_pads("allegro_hand_right", ["link_3.0_tip"], register=False, axes={"link_7.0_tip": (1, 0, 0)})
+    with pytest.raises(ConfigError, match="colour"):
+        add_gausstac_pads("allegro_hand_right", ["link_3.0_tip"], register=False,
+                          per_link={"link_3.0_tip": {"colour": 1}})
