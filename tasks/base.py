@@ -19,7 +19,8 @@ that replaying recorded env states reproduces the tactile maps exactly.
 Pads touch objects only through the MPM: the pad links' SAPIEN collisions with the
 registered objects are turned off (otherwise the rigid fingertip would stop before the
 pad compresses); the pad reaction goes back to SAPIEN as an external wrench on
-two-way-coupled dynamic objects, one control step late.
+two-way-coupled dynamic objects, one SAPIEN step late (with such an object the MPM steps
+after every SAPIEN step instead of once per control step).
 
 Units: SI. ``physx_cpu`` runs one env per process (use ``gym.vector.AsyncVectorEnv``);
 the code keeps a batch axis everywhere.
@@ -309,20 +310,37 @@ class GaussTacEnv(BaseEnv):
         self._ensure_cosims()  # after _initialize_episode placed the hand and objects
         return super().get_info()
 
-    def _after_control_step(self):
-        super()._after_control_step()
+    @property
+    def mpm_every_sim_step(self) -> bool:
+        """Whether the MPM steps after every SAPIEN step (``sim_timestep``) instead of once
+        per control step: on when a two-way coupled object exists, so that the wrench
+        applied to it lags by one SAPIEN step, not one control step (explicit coupling is
+        stable for m > k·dt²/4). The total number of MPM substeps is about the same."""
+        return any(o.two_way for o in self._rigid.values())
+
+    def _step_mpm(self, dt: float) -> None:
         self._ensure_cosims()
         t0 = time.perf_counter()
         links, objects = self._link_pose_dicts(), self._object_poses()
         for b, sim in enumerate(self.cosims):
-            sim.step(links[b], self.control_timestep, objects[b])
+            sim.step(links[b], dt, objects[b])
             for name in self._wrench:
                 f, tau = sim.object_wrench(name)
                 self._wrench[name][b] = np.concatenate([f, tau])
+        self.step_timing["mpm"] = self.step_timing.get("mpm", 0.0) + time.perf_counter() - t0
+
+    def _after_simulation_step(self):
+        super()._after_simulation_step()
+        if self.mpm_every_sim_step:
+            self._step_mpm(self.sim_timestep)
+
+    def _after_control_step(self):
+        super()._after_control_step()
+        if not self.mpm_every_sim_step:
+            self._step_mpm(self.control_timestep)
         t1 = time.perf_counter()
         for sim in self.cosims:
             sim.tactile()  # extract the maps now (cached for evaluate / obs)
-        self.step_timing["mpm"] = t1 - t0
         self.step_timing["tactile"] = time.perf_counter() - t1
 
     def _before_simulation_step(self):

@@ -12,16 +12,15 @@ its root at the origin. A cube is placed ``cube_gap`` in front of the apex of pa
   ``two_way=two_way``: the pads' MPM reaction wrench is applied to it in SAPIEN, so a
   pad can push it.
 
-Two-way coupling is explicit: the wrench of one control step acts on the cube during the
-next one. That is stable only if the cube's mass m > k·dt²/4, with k ≈ 2 kN/m the
-contact stiffness of a default pad on a cube face and dt the control timestep; at
-ManiSkill's 20 Hz a 4 g cube is launched at ~1 m/s by a 0.1 N touch, a 62 g one by a
-1.7 N touch. So with a two-way free cube the default control rate is 100 Hz
-(``sim_config`` overrides it) and the default cube is steel (7800 kg/m³, 62 g for
-20 mm): pushed at ~7 mm/s, it then moves in stick–slip steps of 0.3–1 mm and ends within
-about 0.6 mm of the hand's travel past first contact. A cube too light for the rate gets a
-warning. (The pads' quasi-static mass scaling also makes them heavier than they are, so a
-fast pad hits the cube with too much momentum.)
+Two-way coupling is explicit: the wrench of one MPM step acts on the cube during the
+next SAPIEN step (with a two-way object the MPM steps after every SAPIEN step, see
+``GaussTacEnv.mpm_every_sim_step``). That is stable only if the cube's mass
+m > k·dt²/4, with k ≈ 2 kN/m the contact stiffness of a default pad on a cube face and dt
+the SAPIEN timestep: 50 g at ManiSkill's 100 Hz. So the default cube is steel
+(7800 kg/m³, 62 g for 20 mm): pushed at 20 mm/s it moves in stick–slip steps of 0.3–1 mm
+and ends within about 0.6 mm of the hand's travel past first contact. A cube too light for
+the rate gets a warning (it is pushed in jumps). (The pads' quasi-static mass scaling also
+makes them heavier than they are, so a fast pad hits the cube with too much momentum.)
 
 The pads feel the cube only through the MPM (SAPIEN collisions between pad links and
 the cube are off; the hand's other links still collide with it). There is no goal
@@ -97,14 +96,6 @@ class TouchEnv(GaussTacEnv):
         self.init_qpos = None if init_qpos is None else np.asarray(init_qpos, np.float32)
         super().__init__(*args, **kwargs)
 
-    @property
-    def _default_sim_config(self):
-        from mani_skill.utils.structs.types import SimConfig
-
-        if self.free_cube and self.two_way:
-            return SimConfig(sim_freq=100, control_freq=100)  # explicit two-way coupling: see the module doc
-        return SimConfig()
-
     # ------------------------------------------------------------------ scene
     def _splat_camera_pose(self):
         from mani_skill.utils import sapien_utils
@@ -130,13 +121,13 @@ class TouchEnv(GaussTacEnv):
         b.add_box_visual(half_size=[h] * 3, material=sapien.render.RenderMaterial(base_color=[0.8, 0.35, 0.2, 1]))
         self.cube = b.build(name="cube") if self.free_cube else b.build_kinematic(name="cube")
         if self.two_way:
-            m_min = _PAD_CONTACT_STIFFNESS * self.control_timestep ** 2 / 4
+            m_min = _PAD_CONTACT_STIFFNESS * self.sim_timestep ** 2 / 4  # the MPM steps with SAPIEN
             mass = self.cube_density * (2 * h) ** 3
             if mass < m_min:
                 warnings.warn(f"GaussTac-Touch-v1: free cube of {mass * 1e3:.3g} g is lighter than "
                               f"~{m_min * 1e3:.3g} g, the least the explicit two-way coupling keeps stable at "
-                              f"{1 / self.control_timestep:g} Hz control; expect the pad to launch it (raise "
-                              "cube_density or the control rate)")
+                              f"{1 / self.sim_timestep:g} Hz simulation; expect the pad to push it in jumps "
+                              "(raise cube_density or sim_freq)")
         from ..render import box_gaussians
 
         self.add_mpm_rigid("cube", self.cube, Box(half_extents=(h, h, h), friction=self.cube_friction),

@@ -58,3 +58,27 @@ def test_touch_env_checks_its_arguments():
         _make(cube_half_size=-0.01)
     with pytest.warns(UserWarning, match="lighter than"):
         _make(free_cube=True, cube_density=500.0).close()  # 4 g at 100 Hz
+
+
+def test_two_way_push_at_20_hz_control_is_not_a_launch():
+    """With a two-way object the MPM steps with every SAPIEN step (100 Hz), so ManiSkill's
+    default 20 Hz control pushes a steel cube instead of launching it."""
+    env = _make(free_cube=True, two_way=True, cube_gap=1e-3)
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        assert u.mpm_every_sim_step and u.control_freq == 20
+        n = u.pad_frame("index")[0, :3, 2].numpy().copy()
+        n[2] = 0.0
+        n /= np.linalg.norm(n)
+        action = np.zeros(env.action_space.shape, np.float32)
+        speeds = []
+        for k in range(8):  # 1 mm per 50 ms step, to 3 mm past first contact
+            action[:3] = min((k + 1) * 1e-3, u.cube_gap + 3e-3) * n
+            env.step(action)
+            speeds.append(u.cube.linear_velocity[0].norm().item())
+        along = float(u.cube_displacement()[0].numpy() @ n)
+        assert 1e-3 < along < 4e-3, along  # pushed, about as far as the hand went past contact
+        assert max(speeds) < 0.05, speeds  # never launched (the hand moves at 0.02 m/s)
+    finally:
+        env.close()
