@@ -12,6 +12,10 @@ the sponge (soft Gaussians following the MPM deformation gradient) and the cube.
 Writes ``out/demo/demo.mp4`` (camera image next to the index pad's depth map
 with shear arrows, the middle pad's depth map, and the normal force per pad)
 and ``out/demo/demo_strip.png`` (four key frames), and prints timings.
+
+Part 2 runs the ManiSkill plugin: one scripted-expert episode of each registered
+task (``GaussTac-Gesture/PressCube/SlideCube/SqueezeSponge-v1``) with the splat
+render camera and the four pads' depth maps, to ``out/demo/tasks/<task>.mp4/.png``.
 """
 from __future__ import annotations
 
@@ -219,6 +223,63 @@ def _write_outputs(out, frames, log):
         json.dump(log, f, indent=1)
 
 
+TASKS = ("GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1")
+
+
+def run_tasks(out: str = "out/demo/tasks", seed: int = 0) -> list[dict]:
+    """One scripted-expert episode of each registered GaussTac task in ManiSkill (held for
+    five more steps after success): an MP4 per task of the splat render camera with the four
+    pads' depth maps beside it, and a PNG of its last frame. Returns one summary per task."""
+    import gymnasium as gym
+    import imageio.v2 as imageio
+
+    from .experts import make_expert
+
+    os.makedirs(out, exist_ok=True)
+    results = []
+    for env_id in TASKS:
+        t0 = time.perf_counter()
+        env = gym.make(env_id, obs_mode="state_dict", render_mode="rgb_array", sim_backend="physx_cpu",
+                       control_mode="pd_joint_delta_pos")
+        obs, _ = env.reset(seed=seed)
+        expert = make_expert(env)
+        expert.reset()
+        frames, steps, info, done_at = [], 0, {}, None
+        for k in range(1, 61):
+            obs, _, terminated, truncated, step_info = env.step(expert.act(obs))
+            frames.append(_task_frame(env.render()[0].numpy(), obs["tactile"]))
+            if done_at is None:
+                steps, info = k, step_info
+                if bool(terminated[0]) or bool(truncated[0]):
+                    done_at = k
+            elif k >= done_at + 5:
+                break
+        env.close()
+        name = env_id.split("-")[1].lower()
+        from .tactile import write_video
+
+        write_video(os.path.join(out, f"{name}.mp4"), frames, fps=10)
+        imageio.imwrite(os.path.join(out, f"{name}.png"), frames[-1])
+        r = dict(task=env_id, steps=steps, success=bool(info["success"][0]), seconds=time.perf_counter() - t0)
+        results.append(r)
+        print(f"[demo] {env_id}: expert {'succeeded' if r['success'] else 'FAILED'} in {steps} steps "
+              f"({r['seconds']:.1f} s) -> {out}/{name}.mp4")
+    return results
+
+
+def _task_frame(rgb: np.ndarray, tactile: dict) -> np.ndarray:
+    """The render camera image next to the four pads' depth maps (0–0.5 mm, 16×16 taxels)."""
+    h = rgb.shape[0]
+    cell = h // 4
+    col = []
+    for pad in ("thumb", "index", "middle", "ring"):
+        d = np.clip(tactile[pad]["depth"][0].numpy() / 0.5e-3, 0, 1)
+        img = np.stack([d, d ** 0.5, 1 - d], -1)
+        img = np.kron(img, np.ones((cell // 16 + 1, cell // 16 + 1, 1)))[:cell, :cell]
+        col.append((img * 255).astype(np.uint8))
+    return np.concatenate([rgb, np.concatenate(col, 0)[:h]], 1)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="gausstac demo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -226,8 +287,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fine", action="store_true",
                     help="1.5 mm grid and twice the steps (about 7 minutes on 2 cores; default: 2 mm, ~1 min)")
     ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    ap.add_argument("--no-tasks", action="store_true",
+                    help="skip part 2: one expert episode of each ManiSkill task (out/demo/tasks/, ~40 s)")
     args = ap.parse_args(argv)
     print(f"[demo] Taichi backend: {backend.init(args.arch)}")
     torch.set_num_threads(1)  # small torch ops: one thread avoids contention with Taichi's pool
     run(args.out, fast=not args.fine)
+    if not args.no_tasks:
+        run_tasks(os.path.join(args.out, "tasks"))
     return 0
