@@ -94,3 +94,29 @@ def test_capture_without_scene_is_a_clear_error(env):
     cam = GaussianSplatCamera.adopt(env._sensors["sapien_camera"])
     with pytest.raises(ConfigError, match="no scene attached"):
         cam.capture()
+
+
+class _MountedCamera(PressCubeEnv):
+    """A splat camera riding on the index fingertip (``mount``), like a wrist/finger camera."""
+
+    @property
+    def _default_sensor_configs(self):
+        link = self.agent.robot.links_map["link_3.0"]
+        return [GaussianSplatCameraConfig(uid="finger_camera", pose=sapien.Pose([0.0, 0.0, -0.06]), width=64,
+                                          height=48, fov=1.2, near=0.005, far=2.0, mount=link)]
+
+
+def test_splat_camera_mounted_on_a_link_follows_it():
+    e = _MountedCamera(obs_mode="rgb", sim_backend="physx_cpu")
+    try:
+        obs, _ = e.reset(seed=0)
+        ext0 = obs["sensor_param"]["finger_camera"]["extrinsic_cv"].clone()
+        assert obs["sensor_data"]["finger_camera"]["rgb"].shape == (1, 48, 64, 3)
+        a = torch.zeros(e.action_space.shape)
+        a[..., 2] = 1.0  # flex the index finger's middle joint
+        for _ in range(3):
+            obs, *_ = e.step(a)
+        assert not torch.allclose(obs["sensor_param"]["finger_camera"]["extrinsic_cv"], ext0, atol=1e-4)
+        assert obs["sensor_data"]["finger_camera"]["rgb"].float().std() > 5
+    finally:
+        e.close()

@@ -168,3 +168,18 @@ def test_every_gesture_is_reachable(gesture):
         assert info["success"].all(), info["max_joint_error"]
     finally:
         env.close()
+
+
+def test_seeds_reproduce_episodes():
+    env = _make("GaussTac-PressCube-v1")
+    try:
+        env.reset(seed=5)
+        first = (env.unwrapped.target_force.clone(), env.unwrapped.face_frame.clone())
+        env.reset(seed=6)
+        other = env.unwrapped.target_force.clone()
+        env.reset(seed=5)
+        assert torch.equal(env.unwrapped.target_force, first[0])
+        assert torch.equal(env.unwrapped.face_frame, first[1])
+        assert not torch.equal(other, first[0])
+    finally:
+        env.close()
