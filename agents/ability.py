@@ -116,7 +116,9 @@ def _per_link_fields() -> dict:
             write_finger_hull()
         except OSError:
             pass
-    return {link: dict(cone_deg=PAD_CONE_DEG[_kind(link)], mesh=None if link == "thumb_L2" else ABILITY_FINGER_HULL)
+    # sensor x "along the finger" = towards the tip (the link z is the flexion axis here)
+    return {link: dict(cone_deg=PAD_CONE_DEG[_kind(link)], mesh=None if link == "thumb_L2" else ABILITY_FINGER_HULL,
+                       along=tuple(float(v) for v in _TIP[_kind(link)]))
             for link in ABILITY_PAD_LINKS.values()}
 
 

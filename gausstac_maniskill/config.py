@@ -216,6 +216,8 @@ class PadSpec:
         material: the silicone (default E = 0.3 MPa, ν = 0.45).
         layout: taxel grid of the tactile maps.
         mesh: optional mesh file (link frame) overriding the URDF collision mesh.
+        along: the sensor's x axis ("along the finger") in the link frame, made orthogonal
+            to ``axis``; default the link's z axis (right for the Allegro's tips).
     """
 
     link: str
@@ -226,6 +228,7 @@ class PadSpec:
     material: Material = field(default_factory=lambda: Material(E=3e5, nu=0.45, density=1100.0))
     layout: SensorLayout = field(default_factory=SensorLayout)
     mesh: str | None = None
+    along: tuple | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.link, str) or not self.link:
@@ -237,6 +240,16 @@ class PadSpec:
         if n < 1e-9:
             raise ConfigError(f"PadSpec.axis={self.axis!r} must be a non-zero 3-vector")
         object.__setattr__(self, "axis", tuple(v / n for v in a))
+        if self.along is not None:
+            u = tuple(_finite("PadSpec.along", v) for v in self.along)
+            if len(u) != 3:
+                raise ConfigError(f"PadSpec.along={self.along!r} must be a 3-vector")
+            ax = self.axis
+            perp = [u[i] - ax[i] * sum(u[j] * ax[j] for j in range(3)) for i in range(3)]
+            m = math.sqrt(sum(v * v for v in perp))
+            if m < 1e-6:
+                raise ConfigError(f"PadSpec.along={self.along!r} is parallel to axis={self.axis!r}")
+            object.__setattr__(self, "along", tuple(v / m for v in perp))
         c = _finite("PadSpec.cone_deg", self.cone_deg)
         if not (0 < c <= 180):
             raise ConfigError(f"PadSpec.cone_deg={self.cone_deg!r} must lie in (0, 180]")

@@ -39,3 +39,13 @@ def test_lame_parameters_and_wave_speed():
 def test_solver_settings_fields(field, value):
     with pytest.raises(ConfigError, match=rf"SolverSettings\.{field}"):
         SolverSettings(**{field: value})
+
+
+def test_padspec_along_is_orthogonalised_and_checked():
+    from gausstac_maniskill.config import PadSpec
+    from gausstac_maniskill.errors import ConfigError
+
+    p = PadSpec(link="l", axis=(1.0, 0.0, 0.0), along=(1.0, 1.0, 0.0))
+    assert p.along == pytest.approx((0.0, 1.0, 0.0))
+    with pytest.raises(ConfigError, match="parallel"):
+        PadSpec(link="l", axis=(1.0, 0.0, 0.0), along=(2.0, 0.0, 0.0))

@@ -81,7 +81,7 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
         ConfigError: the region selects no soft or no kinematic particle.
     """
     label = mesh_name or f"collision mesh of {spec.link!r}"
-    key = (hash(mesh.vertices.tobytes()), hash(mesh.faces.tobytes()), spec.axis, spec.cone_deg,
+    key = (hash(mesh.vertices.tobytes()), hash(mesh.faces.tobytes()), spec.axis, spec.along, spec.cone_deg,
            spec.thickness, float(spacing), float(dx))
     if key in _CACHE:
         rest, kin, dist, nrm, surface, S = _CACHE[key]
@@ -106,10 +106,10 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
     rest, dist, nrm = pts[keep], dist[keep], nrm[keep]
     # sensor frame: origin on the pad's particle surface (outermost particles plus half
     # a spacing) where it is furthest along the axis, so zero depth is first contact
-    # whatever the lattice's alignment with the mesh; z = axis, x = the link's z (along
-    # the finger) made orthogonal to the axis
+    # whatever the lattice's alignment with the mesh; z = axis, x = ``spec.along`` or the
+    # link's z (along the finger) made orthogonal to the axis
     origin = centre + axis * (float(((rest - centre) @ axis).max()) + 0.5 * spacing)
-    x = np.array([0.0, 0.0, 1.0]) - axis * axis[2]
+    x = np.asarray(spec.along, float) if spec.along is not None else np.array([0.0, 0.0, 1.0]) - axis * axis[2]
     if np.linalg.norm(x) < 1e-6:
         x = np.array([1.0, 0.0, 0.0]) - axis * axis[0]
     x /= np.linalg.norm(x)

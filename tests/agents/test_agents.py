@@ -153,3 +153,17 @@ def test_per_link_fields_and_stray_links():
     with pytest.raises(ConfigError, match="colour"):
         add_gausstac_pads("allegro_hand_right", ["link_3.0_tip"], register=False,
                           per_link={"link_3.0_tip": {"colour": 1}})
+
+
+def test_ability_sensor_x_runs_along_the_finger_towards_the_tip():
+    from gausstac_maniskill.tactile import build_pad
+
+    for pad in FloatingAbilityHandRightGaussTac.gausstac_pads:
+        tip = np.array((0.065, 0.016, 0.0) if pad.link == "thumb_L2" else (0.035, -0.018, 0.0))
+        mesh = trimesh.load(pad.mesh, force="mesh") if pad.mesh else link_mesh(ABILITY_URDF, pad.link)
+        S = build_pad(pad, mesh, 1e-3, 2e-3).sensor_frame
+        z = S[:3, 2]
+        along = tip - (tip @ z) * z  # the tip direction within the pad plane
+        assert S[:3, 0] @ along / np.linalg.norm(along) > 0.999, pad.name
+        assert abs(S[:3, 0] @ z) < 1e-9
+        assert abs(S[:3, 2] @ np.array([0.0, 0.0, 1.0])) < 1e-6  # (the link z is the flexion axis)
