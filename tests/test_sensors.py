@@ -120,3 +120,11 @@ def test_splat_camera_mounted_on_a_link_follows_it():
         assert obs["sensor_data"]["finger_camera"]["rgb"].float().std() > 5
     finally:
         e.close()
+
+
+def test_segmentation_comes_from_sapien_with_the_hand(env):
+    obs = env.get_obs()
+    seg_splat = obs["sensor_data"]["splat_camera"]["segmentation"]
+    seg_plain = obs["sensor_data"]["sapien_camera"]["segmentation"]
+    assert seg_splat.shape == seg_plain.shape and seg_splat.dtype == seg_plain.dtype
+    assert torch.equal(seg_splat, seg_plain)  # same pose and size: the hand is in it
