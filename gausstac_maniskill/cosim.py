@@ -22,9 +22,9 @@ from .config import Material, PadSpec, SolverSettings
 from .errors import ConfigError
 from .mpm import MPMWorld
 from .mpm.colliders import Collider
-from .tactile import Pad, TaxelBinning, build_pad, tactile_maps
+from .tactile import Pad, TaxelBinning, build_pad, pad_mesh, tactile_maps
 from .transforms import as_pose_matrix
-from .urdf import default_hand_urdf, link_mesh
+from .urdf import default_hand_urdf
 
 __all__ = ["GaussTacSim", "default_hand_settings"]
 
@@ -68,8 +68,7 @@ class GaussTacSim:
             if spec.link not in link_poses:
                 raise ConfigError(f"link_poses has no pose for pad link {spec.link!r} "
                                   f"(given: {sorted(link_poses)})")
-            mesh = _load_mesh(spec.mesh) if spec.mesh else link_mesh(self.urdf, spec.link)
-            pad = build_pad(spec, mesh, h, self.settings.dx)
+            pad = build_pad(spec, pad_mesh(spec, self.urdf), h, self.settings.dx)
             T = as_pose_matrix(link_poses[spec.link], f"link_poses[{spec.link!r}]")
             if spec.link not in self.world.link_names:
                 self.world.add_link(spec.link, T)
@@ -172,11 +171,16 @@ class GaussTacSim:
         self._scene = SceneGaussians(self, hand, hand_links, objects)
         self._posed = None
 
+    @property
+    def has_gaussians(self) -> bool:
+        """Whether :meth:`attach_gaussians` gave the scene something to render."""
+        return getattr(self, "_scene", None) is not None
+
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render the scene with the splat camera: ``viewmats`` [C, 4, 4] world-to-camera
         (OpenCV convention), ``Ks`` [C, 3, 3] pixel intrinsics; returns a ``RenderOutput``
         (``rgb`` [C, H, W, 3], ``depth`` [C, H, W] m, ``alpha`` [C, H, W])."""
-        if getattr(self, "_scene", None) is None:
+        if not self.has_gaussians:
             raise ConfigError("GaussTacSim.render: call attach_gaussians(...) first")
         if getattr(self, "_posed", None) is None:  # posed once per step, whatever the number of cameras
             self._posed = self._scene.posed()
@@ -308,18 +312,6 @@ class GaussTacSim:
         self._awake = dict(state["awake"])
         self._maps = {}
         self._posed = None
-
-
-def _load_mesh(path: str):
-    import os
-
-    import trimesh
-
-    from .errors import AssetError
-
-    if not os.path.isfile(path):
-        raise AssetError(f"{path}: pad mesh file not found (PadSpec.mesh)")
-    return trimesh.load(path, force="mesh")
 
 
 def _distance(collider: Collider, point: np.ndarray) -> float:

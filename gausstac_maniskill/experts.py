@@ -36,12 +36,6 @@ def make_expert(env) -> "Expert":
     return EXPERTS[env_id](base)
 
 
-def _action_to_qpos_index(base) -> list[int]:
-    """Index into articulation qpos of each controlled joint, in action order."""
-    names = [j.name for j in base.agent.robot.get_active_joints()]
-    return [names.index(n) for n in base.agent.controller.config.joint_names]
-
-
 def joint_targets_to_action(base, q_target: torch.Tensor) -> torch.Tensor:
     """Absolute joint targets ``[B, J]`` (action joint order, rad) -> action of ``base``'s
     control mode (delta modes: the step is clipped to the controller's limit)."""
@@ -50,8 +44,7 @@ def joint_targets_to_action(base, q_target: torch.Tensor) -> torch.Tensor:
     q_target = torch.as_tensor(q_target, dtype=torch.float32, device=base.device)
     if not getattr(cfg, "use_delta", False):
         return q_target
-    idx = _action_to_qpos_index(base)
-    ref = ctrl._target_qpos if getattr(cfg, "use_target", False) else base.agent.robot.get_qpos()[:, idx]
+    ref = ctrl._target_qpos if getattr(cfg, "use_target", False) else base.qpos_in_action_order()
     low, high = float(np.min(cfg.lower)), float(np.max(cfg.upper))
     delta = (q_target - ref).clamp(low, high)
     if getattr(cfg, "normalize_action", True):
@@ -101,9 +94,7 @@ class TipIK:
         self.action_names = list(env.agent.controller.config.joint_names)
         self.to_mj = [self.action_names.index(n) for n in self.src.joint_names]
         self.dofs = [self.action_names.index(j) for j in joints]
-        low_high = env.agent.robot.get_qlimits()[0].detach().cpu().numpy()
-        names = [j.name for j in env.agent.robot.get_active_joints()]
-        self.limits = np.array([low_high[names.index(n)] for n in self.action_names])
+        self.limits = env.agent.robot.get_qlimits()[0, env.action_joint_index].detach().cpu().double().numpy()
 
     def frame(self, q: np.ndarray) -> np.ndarray:
         """4x4 pad sensor frame in the root frame for joint angles ``q`` (action order)."""
@@ -141,11 +132,6 @@ def _mujoco_source(urdf: str):
     return _MJ_CACHE[urdf]
 
 
-def _q_action_order(env) -> np.ndarray:
-    """[B, J] current joint angles in action order."""
-    return env.agent.robot.get_qpos()[:, _action_to_qpos_index(env)].detach().cpu().double().numpy()
-
-
 def _world_to_root(env) -> np.ndarray:
     from .pose.sapien_source import vec7_to_matrix
 
@@ -164,7 +150,7 @@ class _IndexFaceExpert(Expert):
 
     def reset(self):
         self.ik = TipIK(self.env, "index", self.joints)
-        self.q_cmd = _q_action_order(self.env)
+        self.q_cmd = self.env.qpos_in_action_order().detach().cpu().double().numpy()
         a = self.env.apex_in_face().numpy()
         self.s = a[:, 2].copy()
         self.t = a[:, 1].copy()

@@ -44,6 +44,7 @@ from typing import Mapping, Sequence
 import gymnasium as gym
 import numpy as np
 import torch
+from mani_skill.trajectory.dataset import load_h5_data
 
 from .errors import ConfigError
 
@@ -204,14 +205,6 @@ def tactile_state_obs_extractor(**layout_kwargs):
     return extract
 
 
-def _read(group) -> dict | np.ndarray:
-    import h5py
-
-    if isinstance(group, h5py.Dataset):
-        return group[()]
-    return {k: _read(v) for k, v in group.items()}
-
-
 def _flat(d: Mapping, n: int) -> np.ndarray:
     """Like ``mani_skill.utils.common.flatten_state_dict`` on [n, ...] leaves."""
     parts = []
@@ -259,8 +252,8 @@ def load_demos(path: str, num_traj: int | None = None, *, include_last: bool = F
             obs = g["obs"]
             n = obs["tactile"][next(iter(obs["tactile"]))]["depth"].shape[0]
             keep = n if include_last else n - 1
-            tac = layout.vector(_read(obs["tactile"]))[:keep]
-            base = _flat({k: _read(obs[k]) for k in ("agent", "extra") if k in obs}, n)[:keep]
+            tac = layout.vector(load_h5_data(obs["tactile"]))[:keep]
+            base = _flat({k: load_h5_data(obs[k]) for k in ("agent", "extra") if k in obs}, n)[:keep]
             out["state"].append(np.concatenate([base, tac], axis=1))
             out["tactile"].append(tac)
             if rgb and "sensor_data" in obs:
@@ -302,8 +295,8 @@ def flatten_file(src: str, dst: str, **layout_kwargs) -> dict:
             if "tactile" not in obs:
                 raise ConfigError(f"{src}:{name} has no obs/tactile group")
             n = obs["tactile"][next(iter(obs["tactile"]))]["depth"].shape[0]
-            base = _flat({k: _read(obs[k]) for k in ("agent", "extra") if k in obs}, n)
-            flat = np.concatenate([base, layout.vector(_read(obs["tactile"]))], axis=1)
+            base = _flat({k: load_h5_data(obs[k]) for k in ("agent", "extra") if k in obs}, n)
+            flat = np.concatenate([base, layout.vector(load_h5_data(obs["tactile"]))], axis=1)
             h.create_dataset("obs", data=flat, compression="gzip", shuffle=True)
             dim = flat.shape[1]
     meta = load_json(src.replace(".h5", ".json"))

@@ -31,7 +31,7 @@ from mani_skill.sensors.camera import Camera, CameraConfig
 from .errors import ConfigError
 
 __all__ = ["GaussianSplatCameraConfig", "GaussianSplatCamera", "TactileSensor", "TactileSensorConfig",
-           "TACTILE_KEYS"]
+           "TACTILE_KEYS", "stack_tactile"]
 
 #: The maps a :class:`TactileSensor` puts in the observation, per pad.
 TACTILE_KEYS = ("depth", "shear", "force")
@@ -144,7 +144,7 @@ class GaussianSplatCamera(Camera):
         else:
             bg, bg_depth = cfg.background, None
         rgb, depth = self.source.render(view, K, cfg.width, cfg.height, bg, bg_depth)
-        device = ext.device if not isinstance(params["extrinsic_cv"], torch.Tensor) else params["extrinsic_cv"].device
+        device = ext.device  # the camera's (as_tensor keeps a tensor's device)
         mm = torch.where(torch.isfinite(depth), depth * 1000.0, torch.zeros_like(depth))
         self._images = {
             "rgb": (rgb.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).to(device),
@@ -167,6 +167,13 @@ class GaussianSplatCamera(Camera):
             out.update(super().get_obs(rgb=False, depth=False, position=position, segmentation=segmentation,
                                        normal=False, albedo=False))
         return out
+
+
+def stack_tactile(per_env: Sequence[dict], pads: Sequence[str], keys: Sequence[str], device=None) -> dict:
+    """Batch per-env maps ``[{pad: {key: [H, W(, 2)]}}]`` into ``{pad: {key: [B, H, W(, 2)]}}``
+    float32 tensors on ``device``."""
+    return {pad: {k: torch.stack([maps[pad][k] for maps in per_env]).float().to(device) for k in keys}
+            for pad in pads}
 
 
 @dataclass
@@ -206,9 +213,7 @@ class TactileSensor(BaseSensor):
 
     def capture(self):
         """Gather the maps of the last co-simulation step."""
-        per_env = self.maps_fn()
-        self._obs = {pad: {k: torch.stack([maps[pad][k] for maps in per_env]).float().to(self.device)
-                           for k in self.config.keys} for pad in self.pad_names}
+        self._obs = stack_tactile(self.maps_fn(), self.pad_names, self.config.keys, self.device)
 
     def get_obs(self, **kwargs):
         if self._obs is None:

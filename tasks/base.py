@@ -39,6 +39,7 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import common
+from mani_skill.utils.structs.pose import Pose
 
 from .. import backend
 from ..agents.base import GaussTacAgent, load_hand_gaussians
@@ -48,9 +49,9 @@ from ..errors import ConfigError
 from ..mpm.colliders import Collider
 from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
-                       TactileSensorConfig)
+                       TactileSensorConfig, stack_tactile)
 
-__all__ = ["GaussTacEnv", "RigidObject", "SoftObject"]
+__all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "batched_pose"]
 
 #: Collision group-2 bit shared by pad links and MPM objects (shapes sharing it do not collide).
 PAD_OBJECT_BIT = 29
@@ -117,6 +118,7 @@ class GaussTacEnv(BaseEnv):
         self._rigid: dict[str, RigidObject] = {}
         self._soft: dict[str, SoftObject] = {}
         self._wrench: dict[str, np.ndarray] = {}
+        self._pad_geometry: dict = {}  # pad name -> Pad at this env's resolution
         self._cosim_stale = True
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
         self.step_timing: dict[str, float] = {}
@@ -177,12 +179,28 @@ class GaussTacEnv(BaseEnv):
         super()._after_reconfigure(options)
         self._pose_source = SapienPoseSource(self.agent)
         for spec in self.agent.gausstac_pads:
-            link = next(link for link in self.agent.robot.links if link.name == spec.link)
-            link.set_collision_group_bit(2, PAD_OBJECT_BIT, 1)
+            self.agent.robot.links_map[spec.link].set_collision_group_bit(2, PAD_OBJECT_BIT, 1)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
                                             lambda: [sim.tactile() for sim in self.cosims],
-                                            [p.name for p in self.agent.gausstac_pads], device=self.device)
+                                            self.pad_names, device=self.device)
+
+    @property
+    def action_joint_index(self) -> list[int]:
+        """Index into the articulation's qpos of each joint the controller drives, in
+        action order (Allegro: actions are joint_0.0..15.0, qpos is 0, 4, 8, 12, 1, ...)."""
+        names = [j.name for j in self.agent.robot.get_active_joints()]
+        return [names.index(n) for n in self.agent.controller.config.joint_names]
+
+    def qpos_in_action_order(self) -> torch.Tensor:
+        """[B, J] current joint angles [rad] in action order."""
+        return self.agent.robot.get_qpos()[:, self.action_joint_index]
+
+    def action_order_to_qpos(self, q: torch.Tensor) -> torch.Tensor:
+        """Joint angles ``[..., J]`` in action order -> articulation qpos order."""
+        out = torch.empty_like(q)
+        out[..., self.action_joint_index] = q
+        return out
 
     @property
     def pad_names(self) -> list[str]:
@@ -192,22 +210,15 @@ class GaussTacEnv(BaseEnv):
     def pad_geometry(self, pad: str):
         """The :class:`~gausstac_maniskill.tactile.Pad` (link-frame particles and sensor frame)
         of pad ``pad`` at this env's resolution (cached)."""
-        from ..tactile import build_pad
-        from ..urdf import link_mesh
+        from ..tactile import build_pad, pad_mesh
 
-        cache = self.__dict__.setdefault("_pad_geometry", {})
-        if pad in cache:
-            return cache[pad]
-        spec = next((p for p in self.agent.gausstac_pads if p.name == pad), None)
-        if spec is None:
-            raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
-        mesh = link_mesh(type(self.agent).pad_urdf(), spec.link) if spec.mesh is None else spec.mesh
-        if isinstance(mesh, str):
-            import trimesh
-
-            mesh = trimesh.load(mesh, force="mesh")
-        cache[pad] = build_pad(spec, mesh, self.mpm_settings.particle_spacing, self.mpm_settings.dx)
-        return cache[pad]
+        if pad not in self._pad_geometry:
+            spec = next((p for p in self.agent.gausstac_pads if p.name == pad), None)
+            if spec is None:
+                raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
+            self._pad_geometry[pad] = build_pad(spec, pad_mesh(spec, type(self.agent).pad_urdf()),
+                                                self.mpm_settings.particle_spacing, self.mpm_settings.dx)
+        return self._pad_geometry[pad]
 
     def pad_frame(self, pad: str) -> torch.Tensor:
         """[B, 4, 4] world pose of ``pad``'s sensor frame now (z out of the pad, origin at
@@ -403,8 +414,7 @@ class GaussTacEnv(BaseEnv):
         """``{pad: {"depth", "shear", "force", "pressure"}}`` batched [B, ...] of the last step."""
         self._ensure_cosims()
         per_env = [sim.tactile() for sim in self.cosims]
-        return {p: {k: torch.stack([m[p][k] for m in per_env]).to(self.device) for k in per_env[0][p]}
-                for p in self.pad_names}
+        return stack_tactile(per_env, self.pad_names, ("depth", "shear", "force", "pressure"), self.device)
 
     def pad_force(self, pad: str) -> torch.Tensor:
         """[B] total normal contact force [N] on ``pad`` (sum of its force map)."""
@@ -425,7 +435,7 @@ class GaussTacEnv(BaseEnv):
     def get_state_dict(self):
         state = super().get_state_dict()
         task = self._get_task_state()
-        if self._wrench:  # the two-way wrench acting during the next control step
+        if self._wrench:  # the two-way wrench acting during the next SAPIEN step
             task = {**task, **{f"wrench_{n}": torch.as_tensor(w, dtype=torch.float64) for n, w in self._wrench.items()}}
         if task:  # [B] leaves as [B, 1]: ManiSkill's replay indexes every state leaf as [..., D]
             state["task"] = {k: (v[:, None] if v.ndim == 1 else v).clone() for k, v in task.items()}
@@ -465,6 +475,12 @@ class GaussTacEnv(BaseEnv):
                 self._wrench[name][rows.numpy()] = w.double().numpy()
 
 
+def batched_pose(p, q) -> Pose:
+    """ManiSkill pose of n envs from positions [n, 3] m and quaternions (w, x, y, z) [n, 4]."""
+    return Pose.create_from_pq(torch.as_tensor(np.asarray(p), dtype=torch.float32),
+                               torch.as_tensor(np.asarray(q), dtype=torch.float32))
+
+
 def _batch_state(state: dict) -> dict:
     """Give a one-env state dict whose leaves lack the env axis (ManiSkill's CPU replay
     passes one step of a recorded ``env_states`` that way) its env axis; batched dicts
@@ -497,7 +513,7 @@ class _EnvSplatSource(SplatSource):
                 kw["background"] = background
             if background_depth is not None:
                 kw["background_depth"] = background_depth[b:b + 1]
-            if getattr(sim, "_scene", None) is None:  # nothing to splat: the background as is
+            if not sim.has_gaussians:  # nothing to splat: the background as is
                 bg = kw["background"]
                 rgb = bg.clone() if isinstance(bg, torch.Tensor) else \
                     torch.tensor(bg, dtype=torch.float32).expand(1, height, width, 3).clone()

@@ -18,9 +18,6 @@ from .base import GaussTacEnv
 
 __all__ = ["GestureEnv", "GESTURES"]
 
-_J = {f"joint_{i}.0": i for i in range(16)}
-
-
 def _pose(**q) -> np.ndarray:
     v = np.zeros(16, np.float32)
     for name, val in q.items():
@@ -77,13 +74,8 @@ class GestureEnv(GaussTacEnv):
                                   dtype=torch.long).reshape(b)
         self.gesture_index[env_idx] = idx.to(self.device)
         q0 = torch.as_tensor(GESTURES["open"], device=self.device)
-        self.agent.reset(self._qpos_order(q0).expand(b, 16).clone())
+        self.agent.reset(self.action_order_to_qpos(q0.expand(b, 16)))
         self.agent.robot.set_pose(sapien.Pose())
-
-    def _qpos_order(self, q_action: torch.Tensor) -> torch.Tensor:
-        """Action order (joint_0.0..15.0) -> articulation qpos order."""
-        order = [_J[j.name] for j in self.agent.robot.get_active_joints()]
-        return q_action[..., order]
 
     @property
     def target_qpos(self) -> torch.Tensor:
@@ -92,10 +84,7 @@ class GestureEnv(GaussTacEnv):
 
     def joint_error(self) -> torch.Tensor:
         """[B, 16] |q - q_target| in action order."""
-        order = [_J[j.name] for j in self.agent.robot.get_active_joints()]
-        q = torch.empty_like(self.agent.robot.get_qpos())
-        q[:, order] = self.agent.robot.get_qpos()
-        return (q - self.target_qpos).abs()
+        return (self.qpos_in_action_order() - self.target_qpos).abs()
 
     def evaluate(self):
         err = self.joint_error()

@@ -15,7 +15,7 @@ from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
 
 from ..mpm.colliders import Box
-from .base import GaussTacEnv
+from .base import GaussTacEnv, batched_pose
 
 __all__ = ["PressCubeEnv", "IndexCubeTask", "INDEX_READY"]
 
@@ -62,16 +62,12 @@ class IndexCubeTask(GaussTacEnv):
         """Distance [m] from the face to the block centre along the face normal."""
         return self.block_half[2]
 
-    def _qpos_from_action_order(self, q: torch.Tensor) -> torch.Tensor:
-        names = list(self.agent.controller.config.joint_names)
-        return q[..., [names.index(j.name) for j in self.agent.robot.get_active_joints()]]
-
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         n = len(env_idx)
         rng = self._batched_episode_rng[common.to_numpy(env_idx)]
         q = torch.as_tensor(INDEX_READY, device=self.device).expand(n, 16)
         self.agent.robot.set_pose(sapien.Pose())
-        self.agent.reset(self._qpos_from_action_order(q).clone())
+        self.agent.reset(self.action_order_to_qpos(q))
         gap = torch.as_tensor(rng.uniform(*self.gap_range), dtype=torch.float64).reshape(n)
         S = self.pad_frame(self.touch_pad)[common.to_numpy(env_idx)]  # apex frame, z out of the pad
         face = S.clone()
@@ -81,8 +77,7 @@ class IndexCubeTask(GaussTacEnv):
         from ..transforms import matrix_to_quat
 
         quat = np.stack([matrix_to_quat(R) for R in face[:, :3, :3].numpy()])
-        self.block.set_pose(sapien.Pose(centre[0].numpy(), quat[0]) if n == 1 else
-                            _batched_pose(centre.numpy(), quat))
+        self.block.set_pose(batched_pose(centre.numpy(), quat))
         self._init_task(env_idx, rng)
 
     def _init_task(self, env_idx, rng) -> None:
@@ -99,12 +94,6 @@ class IndexCubeTask(GaussTacEnv):
         S = self.pad_frame(self.touch_pad)
         F = self.face_frame
         return (torch.linalg.inv(F) @ S)[:, :3, 3]
-
-
-def _batched_pose(p, q):
-    from mani_skill.utils.structs.pose import Pose
-
-    return Pose.create_from_pq(torch.as_tensor(p, dtype=torch.float32), torch.as_tensor(q, dtype=torch.float32))
 
 
 @register_env("GaussTac-PressCube-v1", max_episode_steps=40)

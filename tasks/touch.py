@@ -37,12 +37,11 @@ import sapien
 import torch
 from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
-from mani_skill.utils.structs.pose import Pose
 
 from ..errors import ConfigError
 from ..mpm.colliders import Box
 from ..transforms import matrix_to_quat
-from .base import GaussTacEnv
+from .base import GaussTacEnv, batched_pose
 
 __all__ = ["TouchEnv"]
 
@@ -184,8 +183,8 @@ class TouchEnv(GaussTacEnv):
             quat = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], 1)
             ped = centre + horiz * (self._pedestal_half[0] - 0.5 * h)
             ped[:, 2] = centre[:, 2] - h - self._pedestal_half[2]
-            self.pedestal.set_pose(_pose(ped, quat))
-        self.cube.set_pose(_pose(centre, quat))
+            self.pedestal.set_pose(batched_pose(ped, quat))
+        self.cube.set_pose(batched_pose(centre, quat))
         if self.free_cube:
             self.cube.set_linear_velocity(torch.zeros(n, 3))
             self.cube.set_angular_velocity(torch.zeros(n, 3))
@@ -225,9 +224,3 @@ class TouchEnv(GaussTacEnv):
 
     def compute_normalized_dense_reward(self, obs, action, info):
         return self.compute_dense_reward(obs, action, info) / 3.0
-
-
-def _pose(p: np.ndarray, q: np.ndarray) -> Pose:
-    """Batched ManiSkill pose from positions [n, 3] and quaternions (w, x, y, z) [n, 4]."""
-    return Pose.create_from_pq(torch.as_tensor(np.asarray(p), dtype=torch.float32),
-                               torch.as_tensor(np.asarray(q), dtype=torch.float32))

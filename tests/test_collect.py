@@ -190,9 +190,9 @@ def test_obs_wrapper_shapes_and_loader_match_the_live_env(recorded, tmp_path):
         np.testing.assert_array_equal(obs["rgb"][0].numpy(), data["rgb"][0])
         # the diffusion-policy extractor on the raw recorded obs gives the same vector
         with h5py.File(recorded["path"], "r") as f:
-            from gausstac_maniskill.obs_wrappers import _read
+            from mani_skill.trajectory.dataset import load_h5_data
 
-            raw = _read(f["traj_0/obs"])
+            raw = load_h5_data(f["traj_0/obs"])
         row = np.hstack([np.asarray(x, np.float32).reshape(len(x), -1) for x in tactile_state_obs_extractor()(raw)])
         np.testing.assert_array_equal(row[0], data["state"][0])
     finally:

@@ -18,7 +18,7 @@ from ..config import PadSpec
 from ..errors import AssetError, ConfigError
 from ..mpm.sampling import mesh_particles
 
-__all__ = ["Pad", "build_pad", "allegro_pad_specs", "pad_specs_for_links", "ALLEGRO_TIPS"]
+__all__ = ["Pad", "build_pad", "pad_mesh", "allegro_pad_specs", "pad_specs_for_links", "ALLEGRO_TIPS"]
 
 #: Fingertip links of ManiSkill's Allegro right hand (thumb, index, middle, ring).
 ALLEGRO_TIPS = ("link_15.0_tip", "link_3.0_tip", "link_7.0_tip", "link_11.0_tip")
@@ -65,6 +65,26 @@ class Pad:
         """(centre [3], radius) of the pad's particles in the link frame, metres."""
         c = self.rest.mean(0)
         return c, float(np.linalg.norm(self.rest - c, axis=1).max() + self.spacing)
+
+
+def pad_mesh(spec: PadSpec, urdf: str):
+    """The mesh a pad is cut from, in its link frame: ``spec.mesh`` if given, else the
+    link's collision mesh in ``urdf``.
+
+    Raises:
+        AssetError: ``spec.mesh`` names no file; the URDF or link mesh is missing.
+    """
+    import os
+
+    import trimesh
+
+    from ..urdf import link_mesh
+
+    if spec.mesh is None:
+        return link_mesh(urdf, spec.link)
+    if not os.path.isfile(spec.mesh):
+        raise AssetError(f"{spec.mesh}: pad mesh file not found (PadSpec.mesh of pad {spec.name!r})")
+    return trimesh.load(spec.mesh, force="mesh")
 
 
 def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "") -> Pad:

@@ -156,12 +156,11 @@ def test_per_link_fields_and_stray_links():
 
 
 def test_ability_sensor_x_runs_along_the_finger_towards_the_tip():
-    from gausstac_maniskill.tactile import build_pad
+    from gausstac_maniskill.tactile import build_pad, pad_mesh
 
     for pad in FloatingAbilityHandRightGaussTac.gausstac_pads:
         tip = np.array((0.065, 0.016, 0.0) if pad.link == "thumb_L2" else (0.035, -0.018, 0.0))
-        mesh = trimesh.load(pad.mesh, force="mesh") if pad.mesh else link_mesh(ABILITY_URDF, pad.link)
-        S = build_pad(pad, mesh, 1e-3, 2e-3).sensor_frame
+        S = build_pad(pad, pad_mesh(pad, ABILITY_URDF), 1e-3, 2e-3).sensor_frame
         z = S[:3, 2]
         along = tip - (tip @ z) * z  # the tip direction within the pad plane
         assert S[:3, 0] @ along / np.linalg.norm(along) > 0.999, pad.name
