@@ -118,9 +118,11 @@ class SolverSettings:
         max_substeps: the most substeps one control step may take. If the CFL
             bound needs more, :class:`~gausstac_maniskill.errors.SimulationError`
             says so and what to change (never silently unstable).
-        mass_scaling: quasi-static mass scaling s ≥ 1: densities are multiplied
-            by s, so the wave speed and the substep count drop by √s. Inertia is
-            wrong by the same factor — only for slow (quasi-static) contact.
+        mass_scaling: pseudo-mass s ≥ 1 of *quasi-static* groups (pads bound to a
+            link, solved by dynamic relaxation): their density is multiplied by s, so
+            their wave speed and the substep count drop by √s, and their motion relative
+            to the link is damped towards equilibrium. Free groups (no kinematic
+            particles) always keep their physical mass, and weight is always physical.
         damping: viscous velocity damping rate [1/s] applied on the grid
             (v ← v·exp(-damping·Δt)); 0 = none. Helps reach quasi-static states.
         gravity: gravitational acceleration [m/s^2] in the world frame.

@@ -3,13 +3,16 @@
 Data flows one way: link poses (from SAPIEN or MuJoCo) → :meth:`GaussTacSim.step`
 → MPM → tactile maps (and, via :meth:`render`, the Gaussian Splatting camera).
 
-Pads whose bounding sphere is farther than ``sleep_margin`` from every object
-sleep: they are not simulated, cost nothing, and report zero maps; they are
-carried rigidly by their link and wake up as soon as an object comes near.
+Pads whose bounding sphere is farther than ``sleep_margin`` from every object,
+and that have relaxed to rest (no particle more than ``REST_TOLERANCE`` from its
+rest place on the link), sleep: they are not simulated, cost nothing, and report
+zero maps; they are carried rigidly by their link and wake up as soon as an object
+comes near. A pad never falls asleep deformed.
 
-Default numerics are chosen for robot control steps (20–100 Hz): grid spacing
-1 mm (pad particles every 0.5 mm) and quasi-static mass scaling so a 50 ms step
-takes about a hundred substeps; gravity acts with the physical mass. Units: SI.
+Time integration: pads are quasi-static (dynamic relaxation with a pseudo-mass,
+see :mod:`gausstac_maniskill.mpm.solver`); free soft objects move with their
+physical mass. Default numerics are chosen for robot control steps (20–100 Hz):
+grid spacing 1 mm (pad particles every 0.5 mm). Units: SI.
 """
 from __future__ import annotations
 
@@ -29,9 +32,14 @@ from .urdf import default_hand_urdf
 __all__ = ["GaussTacSim", "default_hand_settings"]
 
 
+#: A pad sleeps only once every particle is within this distance [m] of its rest place.
+REST_TOLERANCE = 5.0e-6
+
+
 def default_hand_settings(**changes) -> SolverSettings:
-    """Solver settings for fingertip pads at control rates: dx = 1 mm, mass scaling 1000
-    (wave speed of a 0.3 MPa silicone drops from 32 to 1 m/s), no damping."""
+    """Solver settings for fingertip pads at control rates: dx = 1 mm; pads' pseudo-mass
+    ×1000 (wave speed of a 0.3 MPa silicone drops from 32 to 1 m/s; free soft objects keep
+    their physical mass), no absolute damping (pads relax relative to their link)."""
     base = dict(dx=1.0e-3, mass_scaling=1000.0, damping=0.0, gravity=(0.0, 0.0, -9.81),
                 max_substeps=5000)
     base.update(changes)
@@ -149,9 +157,18 @@ class GaussTacSim:
             for lo, hi in soft_boxes:
                 d = float(np.linalg.norm(np.maximum(np.maximum(lo - c, c - hi), 0.0)))
                 near |= d - r < self.sleep_margin
+            if not near and self._awake[name] and not self._at_rest(name):
+                near = True  # still deformed: stay awake until the pad has relaxed
             if near != self._awake[name]:
                 self.world.set_awake(name, near)
                 self._awake[name] = near
+
+    def _at_rest(self, name: str) -> bool:
+        """Whether every particle of pad ``name`` is within REST_TOLERANCE of its rest place."""
+        pad = self.pads[name]
+        T = self.world.link_pose(pad.spec.link)  # where the particles were last stepped to
+        local = (self.world.positions(name).astype(np.float64) - T[:3, 3]) @ T[:3, :3]
+        return float(np.abs(local - pad.rest).max()) < REST_TOLERANCE
 
     # ------------------------------------------------------------------ rendering
     def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None) -> None:

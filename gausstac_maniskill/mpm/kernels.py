@@ -125,25 +125,28 @@ def sort_into_slabs(active: ti.template(), n: ti.template(), x: ti.template(),
 
 @ti.func
 def clear_grid(ncell: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), grid_dp: ti.template()):
+        grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template()):
     for i in range(ncell):
         grid_v[i] = vec3(0.0)
         grid_dp[i] = vec3(0.0)
         grid_m[i] = 0.0
         grid_mk[i] = 0.0
+        grid_mq[i] = 0.0
 
 
 @ti.func
-def p2g(gravity: ti.template(), gravity_scale: ti.template(), order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
+def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
         x: ti.template(), v: ti.template(), C: ti.template(), tau: ti.template(),
         mass: ti.template(), vol: ti.template(), kind: ti.template(), link: ti.template(),
+        matid: ti.template(), mat_table: ti.template(), group: ti.template(), group_qs: ti.template(),
         ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
-        grid_m: ti.template(), grid_mk: ti.template(), grid_link: ti.template()):
+        grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template()):
     """Scatter mass and APIC momentum (with the stress impulse) to the grid.
 
     Momentum to node i: w_ip [m_p v_p + (m_p C_p - Δt V0_p (4/dx²) τ_p)(x_i - x_p)].
-    Kinematic particles also scatter their mass to ``grid_mk`` and their link id.
+    Kinematic particles also scatter their mass to ``grid_mk`` and their link id;
+    dynamic particles of quasi-static groups scatter theirs to ``grid_mq`` (and the link id).
     """
     origin = ti.Vector([ox, oy, oz])
     for color in ti.static(range(2)):
@@ -155,10 +158,11 @@ def p2g(gravity: ti.template(), gravity_scale: ti.template(), order: ti.template
                 base, fx, w = stencil(x[p], inv_dx, origin)
                 m = mass[p]
                 affine = m * C[p] - (dt * vol[p] * 4.0 * inv_dx * inv_dx) * tau[p]
-                # momentum plus this substep's weight impulse; weight uses the physical
-                # mass (mass scaling slows inertia, it does not add weight)
-                mv = m * v[p] + (dt * m * gravity_scale) * gravity
+                # momentum plus this substep's weight impulse; weight is the physical mass
+                # ρ V0 (a quasi-static group's pseudo-mass slows its inertia, not its weight)
+                mv = m * v[p] + (dt * vol[p] * mat_table[matid[p], 6]) * gravity
                 is_kin = kind[p] == KINEMATIC
+                is_qs = (not is_kin) and group_qs[group[p]] > 0
                 lk = link[p]
                 for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                     dpos = (ti.Vector([i, j, k]) - fx) / inv_dx
@@ -170,14 +174,17 @@ def p2g(gravity: ti.template(), gravity_scale: ti.template(), order: ti.template
                     if is_kin:
                         grid_mk[idx] = grid_mk[idx] + weight * m
                         grid_link[idx] = lk
+                    elif is_qs:
+                        grid_mq[idx] = grid_mq[idx] + weight * m
+                        grid_link[idx] = lk
 
 
 @ti.func
 def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
         dt: ti.template(), gx: ti.template(), gy: ti.template(), gz: ti.template(),
-        damping: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), grid_link: ti.template(), link_poses: ti.template(),
+        damping: ti.template(), relax: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(), link_poses: ti.template(),
         alpha0: ti.template(), alpha1: ti.template(), walls: ti.template(),
         n_walls: ti.template(), grid_contact: ti.template(), n_col: ti.template(),
         col_kind: ti.template(), col_prm: ti.template(), col_pose: ti.template(),
@@ -187,6 +194,10 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
 
     * Nodes where kinematic mass is at least half the node mass move exactly with
       their link (Dirichlet), so a kinematic layer is rigid, not a viscous drag.
+    * Nodes where most mass belongs to quasi-static groups (pads) relax towards
+      equilibrium: their velocity *relative to the link's rigid motion* is scaled by
+      ``relax`` = exp(-ζ Δt) (dynamic relaxation; a pad carried by a moving hand is
+      not dragged, only its elastic ringing decays).
     * Slip walls (symmetry planes): the normal velocity of nodes on or beyond the
       wall is zeroed (bilateral).
     * With ``grid_contact`` set, colliders are enforced here on nodes with φ < 0
@@ -209,6 +220,12 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
                 q = R0.transpose() @ (xi - t0)
                 vel = (R1 @ q + t1 - xi) / dt
             else:
+                if grid_mq[idx] >= 0.5 * m and relax < 1.0:
+                    l = grid_link[idx]
+                    R0, t0 = pose_at(link_poses, l, alpha0)
+                    R1, t1 = pose_at(link_poses, l, alpha1)
+                    v_link = (R1 @ (R0.transpose() @ (xi - t0)) + t1 - xi) / dt
+                    vel = v_link + relax * (vel - v_link)
                 for w in range(n_walls):
                     ax = ti.cast(walls[w, 0], ti.i32)
                     if walls[w, 2] * (xi[ax] - walls[w, 1]) <= 1e-9:
@@ -285,6 +302,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         radius: ti.template(), impulse: ti.template(), contact_id: ti.template(),
         ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
+        grid_m: ti.template(), grid_mk: ti.template(),
         grid_dp: ti.template(), n_col: ti.template(), col_kind: ti.template(),
         col_prm: ti.template(), col_pose: ti.template(), col_mu: ti.template(),
         col_sticky: ti.template(), sdf: ti.template(), sdf_info: ti.template(),
@@ -299,8 +317,11 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
     change Δv that puts it on the surface (normal part, capped at ``max_push``) with
     Coulomb friction on the tangential slip is turned into the impulse m_p Δv, which
     is scattered to the particle's grid stencil (weights w_ip), so the whole
-    continuum - not only the particle - feels the collider. The impulse is also
-    stored per particle (contact forces / tactile) and, negated, acts on the collider.
+    continuum - not only the particle - feels the collider. Pinned (kinematic) nodes
+    take no momentum (:func:`contact_apply`), so the particle records only the part
+    that reaches free nodes, Σ_free w_ip · m_p Δv: that is the impulse the pad really
+    exchanged, stored per particle (contact forces / tactile) and, negated, acting on
+    the collider.
     Slab-ordered like :func:`p2g`, hence atomic-free and deterministic.
     """
     origin = ti.Vector([ox, oy, oz])
@@ -341,10 +362,14 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                 contact_id[p] = c
                         if contact_id[p] >= 0:
                             J = mass[p] * (vp - v0)
-                            impulse[p] += J
+                            free = 0.0
                             for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                                 idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
-                                grid_dp[idx] = grid_dp[idx] + (w[i][0] * w[j][1] * w[k][2]) * J
+                                wi = w[i][0] * w[j][1] * w[k][2]
+                                grid_dp[idx] = grid_dp[idx] + wi * J
+                                if grid_mk[idx] < 0.5 * grid_m[idx]:
+                                    free += wi
+                            impulse[p] += free * J
 
 
 @ti.func
@@ -477,8 +502,9 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
             mass: NDF, vol: NDF, radius: NDF, kind: NDI, link: NDI, matid: NDI, mat_table: NDF2,
             impulse: NDV, contact_id: NDI,
             ox: ti.i32, oy: ti.i32, oz: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
-            dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, gravity_scale: ti.f32, damping: ti.f32,
-            grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_link: NDI, grid_dp: NDV,
+            dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, damping: ti.f32, relax: ti.f32,
+            group: NDI, group_qs: NDI,
+            grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_mq: NDF, grid_link: NDI, grid_dp: NDV,
             link_poses: NDF2, alpha0: ti.f32, alpha1: ti.f32, walls: NDF2, n_walls: ti.i32,
             contact_mode: ti.template(), nh_only: ti.template(), n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
             col_mu: NDF, col_sticky: NDI, sdf: NDF, sdf_info: NDI2, col_impulse: NDF2,
@@ -489,16 +515,16 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
     """
     inv_dx = 1.0 / dx
     ncell = nx * ny * nz
-    clear_grid(ncell, grid_v, grid_m, grid_mk, grid_dp)
-    p2g(gravity, gravity_scale, order, slab_start, n_slabs, x, v, C, tau, mass, vol, kind, link, ox, oy, oz, ny, nz, inv_dx, dt,
-        grid_v, grid_m, grid_mk, grid_link)
-    grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping,
-                grid_v, grid_m, grid_mk, grid_link, link_poses, alpha0, alpha1, walls, n_walls,
+    clear_grid(ncell, grid_v, grid_m, grid_mk, grid_mq, grid_dp)
+    p2g(gravity, order, slab_start, n_slabs, x, v, C, tau, mass, vol, kind, link, matid, mat_table,
+        group, group_qs, ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, grid_mq, grid_link)
+    grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping, relax,
+                grid_v, grid_m, grid_mk, grid_mq, grid_link, link_poses, alpha0, alpha1, walls, n_walls,
                 1 if ti.static(contact_mode == 2) else 0, n_col, col_kind, col_prm, col_pose, col_mu, col_sticky,
                 sdf, sdf_info, col_impulse)
     if ti.static(contact_mode == 1):
         contact_scatter(order, slab_start, n_slabs, x, kind, mass, radius, impulse, contact_id,
-                        ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_dp, n_col, col_kind, col_prm,
+                        ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, grid_dp, n_col, col_kind, col_prm,
                         col_pose, col_mu, col_sticky, sdf, sdf_info, alpha0, alpha1, max_push, reach)
         contact_apply(ncell, ox, oy, oz, ny, nz, dx, grid_v, grid_m, grid_mk, grid_dp, walls, n_walls)
     g2p(nh_only, order, n, x, v, C, F, tau, Jp, kind, matid, mat_table, ox, oy, oz, ny, nz, inv_dx, dt, grid_v)

@@ -31,12 +31,13 @@ TABLE_COLUMNS = ("mu", "lam", "model", "theta_c", "theta_s", "hardening", "densi
 MIN_J = 0.05
 
 
-def material_table(materials: list[Material], mass_scaling: float = 1.0) -> np.ndarray:
-    """Pack materials into a float32 table [M, 8] (columns ``TABLE_COLUMNS``, one pad column)."""
+def material_table(materials: list[Material]) -> np.ndarray:
+    """Pack materials into a float32 table [M, 8] (columns ``TABLE_COLUMNS``, one pad column).
+    The density column is the physical density [kg/m^3]: it gives particles their weight."""
     table = np.zeros((max(len(materials), 1), 8), np.float32)
     for i, m in enumerate(materials):
         table[i, :7] = (m.mu, m.lam, MODEL_IDS[m.model], m.yield_compression,
-                        m.yield_stretch, m.hardening, m.density * mass_scaling)
+                        m.yield_stretch, m.hardening, m.density)
     return table
 
 

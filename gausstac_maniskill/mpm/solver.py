@@ -6,6 +6,18 @@ to a rigid *link*: those follow the link's transform exactly, yet still scatter
 their momentum and mass to the grid, so they drive the soft particles next to
 them. Rigid objects enter as SDF *colliders*.
 
+Time integration differs by kind of group (explicit MLS-MPM substeps for all):
+
+* **free groups** (no kinematic particles: a dropped or grasped sponge) have their
+  physical mass: they fall at g and carry their real momentum;
+* **quasi-static groups** (bound to a link: fingertip pads, a sponge glued to a
+  holder) are solved by *dynamic relaxation*: their density is multiplied by
+  ``SolverSettings.mass_scaling`` (a pseudo-mass that lowers the wave speed and so
+  the substep count) and their motion relative to their link is damped at a rate ζ
+  near critical for the layer's slowest mode, so they settle to elastic equilibrium
+  within a control step. Their kinematic core holds them, so the pseudo-mass never
+  shows as a wrong fall or swing of the pad; weight always uses the physical mass.
+
 Each :meth:`MPMWorld.step` advances one control step Δt_ctrl: link and collider
 poses move from the previous pose to the one last set (position lerp, rotation
 slerp per substep); the substep count comes from the CFL bound
@@ -59,6 +71,9 @@ class Group:
     link: int  # -1: not bound to a link
     n_kinematic: int
     spacing: float
+    quasi_static: bool = False  # pseudo-mass (settings.mass_scaling) + relaxation; see add_group
+    mass_scale: float = 1.0  # density multiplier of its dynamic particles (1: physical inertia)
+    relaxation: float = 0.0  # damping rate ζ [1/s] of its motion relative to its link
     awake: bool = True
     sleep_pose: np.ndarray | None = None  # link pose when the group fell asleep
 
@@ -142,7 +157,8 @@ class MPMWorld:
 
     def add_group(self, name: str, positions, material: Material, *, link=None, kinematic=None,
                   velocity=None, particle_volume: float | None = None,
-                  spacing: float | None = None) -> Group:
+                  spacing: float | None = None, quasi_static: bool | None = None,
+                  relaxation: float | None = None) -> Group:
         """Add a group of particles.
 
         Args:
@@ -156,6 +172,14 @@ class MPMWorld:
             particle_volume: rest volume per particle [m^3]; default ``spacing**3``.
             spacing: particle spacing [m] of these positions; default
                 ``settings.particle_spacing``. The contact radius is ``spacing / 2``.
+            quasi_static: solve the group by dynamic relaxation (pseudo-mass
+                ``settings.mass_scaling``, damping relative to its link). Default: True
+                when the group has kinematic particles. A free group (no kinematic
+                particle) always keeps its physical inertia; asking otherwise is an error.
+            relaxation: damping rate ζ [1/s] of a quasi-static group's motion relative
+                to its link. Default: 2·ω1, critical for the slowest mode of the layer,
+                ω1 = (π/2)·c_s/L with c_s the (pseudo-mass) shear wave speed and L the
+                largest distance of a dynamic particle from the kinematic core.
         """
         if any(g.name == name for g in self.groups):
             raise ConfigError(f"group {name!r} already exists")
@@ -189,12 +213,25 @@ class MPMWorld:
             if not np.all(np.isfinite(vel)):
                 raise ConfigError(f"add_group({name!r}): velocity contains NaN or inf")
 
+        if quasi_static is None:
+            quasi_static = bool(kin.any())
+        if quasi_static and not kin.any():
+            raise ConfigError(f"add_group({name!r}): quasi_static=True needs kinematic particles; a free "
+                              f"group keeps its physical inertia (it must fall and move at its real mass)")
+        scale = self.settings.mass_scaling if quasi_static else 1.0
+        relax = 0.0
+        if quasi_static:
+            relax = _relaxation_rate(pts, kin, material, scale) if relaxation is None else relaxation
+            relax = _finite_nonneg(f"add_group({name!r}): relaxation", relax)
+        elif relaxation is not None:
+            raise ConfigError(f"add_group({name!r}): relaxation is for quasi-static groups only")
+
         self._pull()
         if material not in self.materials:
             self.materials.append(material)
         mid = self.materials.index(material)
         gid = len(self.groups)
-        rho = material.density * self.settings.mass_scaling
+        rho = material.density * scale
         new = {
             "x": pts.astype(np.float32), "v": vel.astype(np.float32),
             "C": np.zeros((n, 3, 3), np.float32), "F": np.tile(np.eye(3, dtype=np.float32), (n, 1, 1)),
@@ -214,7 +251,7 @@ class MPMWorld:
         bind = matrix_to_quat(self._link_next[lidx][:3, :3]) if lidx >= 0 else np.array([1.0, 0, 0, 0])
         self._host["group_bind"] = np.concatenate(
             [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])
-        group = Group(name, self._n, n, material, lidx, int(kin.sum()), h)
+        group = Group(name, self._n, n, material, lidx, int(kin.sum()), h, bool(quasi_static), scale, relax)
         self.groups.append(group)
         self._n += n
         self._dirty = True
@@ -319,11 +356,16 @@ class MPMWorld:
         return float(e[0]), float(e[1])
 
     def wave_speed(self) -> float:
-        """Largest P-wave speed [m/s] of the awake groups (with mass scaling)."""
-        speeds = [g.material.wave_speed for g in self.groups if g.awake and g.count > g.n_kinematic]
-        return max(speeds, default=0.0) / math.sqrt(self.settings.mass_scaling)
+        """Largest P-wave speed [m/s] of the awake groups (quasi-static ones with their pseudo-mass)."""
+        speeds = [g.material.wave_speed / math.sqrt(g.mass_scale)
+                  for g in self.groups if g.awake and g.count > g.n_kinematic]
+        return max(speeds, default=0.0)
 
     # ------------------------------------------------------------------ driving
+    def link_pose(self, link) -> np.ndarray:
+        """World pose (4x4) of a link at the end of the last step: where its particles are."""
+        return self._link_prev[self.link_index(link)].copy()
+
     def set_link_pose(self, link, pose) -> None:
         """Target world pose (4x4) of a link at the end of the next control step."""
         i = self.link_index(link)
@@ -480,8 +522,8 @@ class MPMWorld:
         K.advance(d["order"], d["slab_start"], n_slabs, self._n_active, d["x"], d["v"], d["C"], d["F"],
                   d["tau"], d["Jp"], d["mass"], d["vol"], d["radius"], d["kind"], d["link"], d["matid"],
                   d["mat_table"], d["impulse"], d["contact_id"], ox, oy, oz, nx, ny, nz, s.dx, dt,
-                  self._gravity, 1.0 / s.mass_scaling, self._damp_factor(dt), d["grid_v"], d["grid_m"], d["grid_mk"],
-                  d["grid_link"], d["grid_dp"], d["link_pose"], a0, a1, d["walls"], len(self._walls),
+                  self._gravity, self._damp_factor(dt), self._relax_factor(dt), d["group"], d["group_qs"],
+                  d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_mq"], d["grid_link"], d["grid_dp"], d["link_pose"], a0, a1, d["walls"], len(self._walls),
                   mode, all(m.model == "neo_hookean" for m in self.materials), len(self.colliders), d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"],
                   d["col_sticky"], d["sdf"], d["sdf_info"], d["col_impulse"], 0.3 * s.dx / dt,
                   s.dx + self._reach)
@@ -490,11 +532,17 @@ class MPMWorld:
     def _damp_factor(self, dt: float) -> float:
         return math.exp(-self.settings.damping * dt)
 
+    def _relax_factor(self, dt: float) -> float:
+        """exp(-ζ Δt) for the quasi-static nodes, ζ the largest rate of the awake groups."""
+        rate = max((g.relaxation for g in self.groups if g.awake and g.quasi_static), default=0.0)
+        return math.exp(-rate * dt)
+
     def _alloc_grid(self, cap: int) -> None:
         d = self._dev
         d["grid_v"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         d["grid_m"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_mk"] = ti.ndarray(ti.f32, shape=cap)
+        d["grid_mq"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_link"] = ti.ndarray(ti.i32, shape=cap)
         d["grid_dp"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         self._grid_cap = cap
@@ -585,7 +633,8 @@ class MPMWorld:
         d["bounds"] = ti.ndarray(ti.i32, shape=(K.NCHUNK, 6))
         d["first_bad"] = ti.ndarray(ti.i32, shape=K.NCHUNK)
         d["vmax_chunk"] = ti.ndarray(ti.f32, shape=K.NCHUNK)
-        upload("mat_table", material_table(self.materials, self.settings.mass_scaling), ti.f32)
+        upload("mat_table", material_table(self.materials), ti.f32)
+        upload("group_qs", np.array([int(g.quasi_static) for g in self.groups] or [0], np.int32), ti.i32)
         walls = np.array(self._walls, np.float32).reshape(-1, 3)
         upload("walls", walls if len(walls) else np.zeros((1, 3), np.float32), ti.f32)
         # colliders
@@ -673,6 +722,27 @@ class MPMWorld:
         self._col_impulse = state["collider_impulse"].copy()
         self._last_dt_ctrl = float(state["last_dt_ctrl"])
         self._dirty = True
+
+
+def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale: float) -> float:
+    """Critical damping rate ζ = 2·ω1 [1/s] of a layer's slowest mode, ω1 = (π/2)·c_s/L:
+    L is the largest distance [m] of a dynamic particle from the kinematic core (the layer
+    thickness of a pad) and c_s = √(μ/(ρ·scale)) the shear wave speed with the pseudo-mass."""
+    from scipy.spatial import cKDTree
+
+    dyn = pts[~kin]
+    if not len(dyn):
+        return 0.0
+    L = float(cKDTree(pts[kin]).query(dyn)[0].max())
+    c_s = math.sqrt(material.mu / (material.density * scale))
+    return 2.0 * (math.pi / 2.0) * c_s / max(L, 1e-9)
+
+
+def _finite_nonneg(name: str, value) -> float:
+    v = float(value)
+    if not (math.isfinite(v) and v >= 0.0):
+        raise ConfigError(f"{name}={value!r} must be a finite rate >= 0 [1/s]")
+    return v
 
 
 def _angle(R: np.ndarray) -> float:
