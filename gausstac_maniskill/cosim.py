@@ -4,8 +4,8 @@ Data flows one way: link poses (from SAPIEN or MuJoCo) → :meth:`GaussTacSim.st
 → MPM → tactile maps (and, via :meth:`render`, the Gaussian Splatting camera).
 
 Pads whose bounding sphere is farther than ``sleep_margin`` from every object,
-and that have relaxed to rest (no particle more than ``REST_TOLERANCE`` from its
-rest place on the link), sleep: they are not simulated, cost nothing, and report
+and that have relaxed (no particle more than ``REST_TOLERANCE`` from its rest place
+on the link, or no longer moving), are put exactly on their rest shape and sleep: they are not simulated, cost nothing, and report
 zero maps; they are carried rigidly by their link and wake up as soon as an object
 comes near. A pad never falls asleep deformed.
 
@@ -157,18 +157,31 @@ class GaussTacSim:
             for lo, hi in soft_boxes:
                 d = float(np.linalg.norm(np.maximum(np.maximum(lo - c, c - hi), 0.0)))
                 near |= d - r < self.sleep_margin
-            if not near and self._awake[name] and not self._at_rest(name):
-                near = True  # still deformed: stay awake until the pad has relaxed
+            if not near and self._awake[name]:
+                settled = self._relative_speed(name) * self.world.last_dt_ctrl < 0.2 * REST_TOLERANCE
+                if np.abs(self._displacement(name)).max() >= REST_TOLERANCE and not settled:
+                    near = True  # still moving back: stay awake until the pad has relaxed
+                else:
+                    # away from every object, the unloaded elastic solution is the rest shape:
+                    # sleep exactly there (what remains is MPM's numerical plasticity)
+                    self.world.rest_group(name)
             if near != self._awake[name]:
                 self.world.set_awake(name, near)
                 self._awake[name] = near
 
-    def _at_rest(self, name: str) -> bool:
-        """Whether every particle of pad ``name`` is within REST_TOLERANCE of its rest place."""
+    def _relative_speed(self, name: str) -> float:
+        """Largest speed [m/s] of pad ``name``'s particles relative to its link's rigid motion."""
+        link = self.pads[name].spec.link
+        T, (v_o, w) = self.world.link_pose(link), self.world.link_twist(link)
+        x = self.world.positions(name).astype(np.float64)
+        rigid = v_o + np.cross(w, x - T[:3, 3])
+        return float(np.linalg.norm(self.world.velocities(name) - rigid, axis=1).max())
+
+    def _displacement(self, name: str) -> np.ndarray:
+        """[N, 3] displacement [m] of pad ``name``'s particles from rest, in the link frame."""
         pad = self.pads[name]
         T = self.world.link_pose(pad.spec.link)  # where the particles were last stepped to
-        local = (self.world.positions(name).astype(np.float64) - T[:3, 3]) @ T[:3, :3]
-        return float(np.abs(local - pad.rest).max()) < REST_TOLERANCE
+        return (self.world.positions(name).astype(np.float64) - T[:3, 3]) @ T[:3, :3] - pad.rest
 
     # ------------------------------------------------------------------ rendering
     def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None) -> None:
@@ -289,6 +302,7 @@ class GaussTacSim:
         out.update(
             link_prev=np.asarray(w["link_prev"], np.float64).reshape(-1, 4, 4),
             link_next=np.asarray(w["link_next"], np.float64).reshape(-1, 4, 4),
+            link_twist=np.asarray(w["link_twist"], np.float64).reshape(-1, 6),
             collider_prev=np.asarray(w["collider_prev"], np.float64).reshape(-1, 4, 4),
             collider_pose=np.asarray(w["collider_pose"], np.float64).reshape(-1, 4, 4),
             collider_impulse=np.asarray(w["collider_impulse"], np.float64),
@@ -310,6 +324,7 @@ class GaussTacSim:
             "particles": {k[2:]: np.asarray(v) for k, v in state.items() if k.startswith("p_")},
             "link_prev": list(np.asarray(state["link_prev"], np.float64)),
             "link_next": list(np.asarray(state["link_next"], np.float64)),
+            "link_twist": list(np.asarray(state["link_twist"], np.float64)) if "link_twist" in state else None,
             "collider_prev": list(np.asarray(state["collider_prev"], np.float64)),
             "collider_pose": list(np.asarray(state["collider_pose"], np.float64)),
             "collider_impulse": np.asarray(state["collider_impulse"], np.float64),

@@ -180,3 +180,28 @@ def test_flat_state_round_trip_is_bit_exact(hand_poses):
     bad = dict(flat, link_pose=flat["link_pose"][:1])
     with pytest.raises(ConfigError, match="link poses"):
         sim.load_flat_state(bad)
+
+
+def test_pad_never_sleeps_deformed(hand_poses):
+    """After the object leaves, the pad stays awake while it moves back; it falls asleep only
+    once settled, and then lies exactly on its rest shape (so zero maps are the truth)."""
+    sim = make_sim(hand_poses)
+    W = apex_frame(sim, hand_poses)
+    R = 6e-3
+    centre = lambda d: make_pose(W[:3, 3] + W[:3, 2] * (R - d))  # noqa: E731
+    sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3), friction=0.0))
+    for k in range(6):
+        maps = sim.step(hand_poses, 0.05, {"ball": centre(0.8e-3 * min(1.0, (k + 1) / 4))})
+    assert float(maps[INDEX]["depth"].max()) > 0.4e-3
+    pad = sim.pads[INDEX]
+    T = hand_poses[INDEX]
+    awake = []
+    for _ in range(12):
+        sim.step(hand_poses, 0.05, {"ball": centre(-0.05)})  # 5 cm away: beyond the sleep margin
+        awake.append(sim.is_awake(INDEX))
+        x = sim.pad_particles(INDEX)[0].astype(np.float64)
+        u = np.abs((x - T[:3, 3]) @ T[:3, :3] - pad.rest).max()
+        if not awake[-1]:
+            assert u < 1e-6  # asleep means at rest
+    assert awake[0], "the pad fell asleep still deformed"
+    assert not awake[-1], "the pad never settled"

@@ -220,11 +220,16 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
                 q = R0.transpose() @ (xi - t0)
                 vel = (R1 @ q + t1 - xi) / dt
             else:
-                if grid_mq[idx] >= 0.5 * m and relax < 1.0:
+                if grid_mq[idx] >= 0.5 * m:
                     l = grid_link[idx]
                     R0, t0 = pose_at(link_poses, l, alpha0)
                     R1, t1 = pose_at(link_poses, l, alpha1)
+                    # the link's rigid velocity here, and its centripetal acceleration
+                    # ω × (ω × r): the pseudo-mass must not turn a spinning hand into a load
                     v_link = (R1 @ (R0.transpose() @ (xi - t0)) + t1 - xi) / dt
+                    W = R1 @ R0.transpose()
+                    omega = 0.5 / dt * ti.Vector([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+                    vel += dt * omega.cross(omega.cross(xi - t0))
                     vel = v_link + relax * (vel - v_link)
                 for w in range(n_walls):
                     ax = ti.cast(walls[w, 0], ti.i32)
@@ -409,6 +414,37 @@ def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI
             for d in ti.static(range(3)):
                 col_impulse[c, d] += J[d]
                 col_impulse[c, 3 + d] += tq[d]
+
+
+@ti.kernel
+def place_kinematic(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM, X0: NDV, link: NDI,
+                    group: NDI, link_poses: NDF2, group_bind: NDF2, dt: ti.f32):
+    """Put kinematic particles on their link's pose at the end of the control step (the
+    substeps place them at each substep's start, one substep behind the link)."""
+    kinematic_update(kin, n, x, v, C, F, tau, X0, link, group, link_poses, group_bind, 1.0, 1.0 + 1e-6, dt)
+
+
+@ti.kernel
+def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link: NDI, group: NDI,
+                 group_qs: NDI, twist_change: NDF2):
+    """Carry quasi-static particles through their link's change of rigid velocity.
+
+    A pad's pseudo-mass must resist only its deformation, not the hand's acceleration.
+    Link motion is piecewise uniform (constant linear and angular velocity within a
+    control step), so the link accelerates only between steps; there each dynamic
+    particle of a quasi-static group takes the change of the link's rigid velocity
+    field, Δv(x) = Δv_o + Δω × (x - o), and its APIC gradient the change [Δω]×.
+    ``twist_change`` rows: (Δv_o xyz, Δω xyz, o xyz), o the link origin.
+    """
+    for ii in range(n):
+        p = active[ii]
+        l = link[p]
+        if kind[p] == DYNAMIC and l >= 0 and group_qs[group[p]] > 0:
+            dv = ti.Vector([twist_change[l, 0], twist_change[l, 1], twist_change[l, 2]])
+            dw = ti.Vector([twist_change[l, 3], twist_change[l, 4], twist_change[l, 5]])
+            o = ti.Vector([twist_change[l, 6], twist_change[l, 7], twist_change[l, 8]])
+            v[p] += dv + dw.cross(x[p] - o)
+            C[p] += ti.Matrix([[0.0, -dw[2], dw[1]], [dw[2], 0.0, -dw[0]], [-dw[1], dw[0], 0.0]])
 
 
 @ti.kernel

@@ -115,6 +115,7 @@ class MPMWorld:
         self.link_names: list[str] = []
         self._link_prev: list[np.ndarray] = []  # pose at the start of the next step
         self._link_next: list[np.ndarray] = []  # pose at its end (last set)
+        self._link_twist: list[np.ndarray] = []  # (v_origin, ω) [m/s, rad/s] of the last step
         self.colliders: list[Collider] = []
         self._col_prev: list[np.ndarray] = []
         self._walls: list[tuple[int, float, float]] = []
@@ -142,6 +143,7 @@ class MPMWorld:
         self.link_names.append(name)
         self._link_prev.append(T.copy())
         self._link_next.append(T.copy())
+        self._link_twist.append(np.zeros(6))
         self._dirty = True
         return len(self.link_names) - 1
 
@@ -177,9 +179,10 @@ class MPMWorld:
                 when the group has kinematic particles. A free group (no kinematic
                 particle) always keeps its physical inertia; asking otherwise is an error.
             relaxation: damping rate ζ [1/s] of a quasi-static group's motion relative
-                to its link. Default: 2·ω1, critical for the slowest mode of the layer,
-                ω1 = (π/2)·c_s/L with c_s the (pseudo-mass) shear wave speed and L the
-                largest distance of a dynamic particle from the kinematic core.
+                to its link. Default: ω1 = (π/2)·c_s/L, the layer's lowest shear
+                frequency, with c_s the (pseudo-mass) shear wave speed and L the largest
+                distance of a dynamic particle from the kinematic core. (Measured on a
+                block pad: ζ = ω1/4 … ω1 relax alike, 2·ω1 is slower.)
         """
         if any(g.name == name for g in self.groups):
             raise ConfigError(f"group {name!r} already exists")
@@ -366,6 +369,16 @@ class MPMWorld:
         """World pose (4x4) of a link at the end of the last step: where its particles are."""
         return self._link_prev[self.link_index(link)].copy()
 
+    def link_twist(self, link) -> tuple[np.ndarray, np.ndarray]:
+        """(velocity of the link origin [m/s], angular velocity [rad/s]) over the last step."""
+        w = self._link_twist[self.link_index(link)]
+        return w[:3].copy(), w[3:].copy()
+
+    @property
+    def last_dt_ctrl(self) -> float:
+        """Length [s] of the last control step."""
+        return self._last_dt_ctrl
+
     def set_link_pose(self, link, pose) -> None:
         """Target world pose (4x4) of a link at the end of the next control step."""
         i = self.link_index(link)
@@ -417,6 +430,27 @@ class MPMWorld:
                 h[key][sl] = (R @ h[key][sl] @ R.T).astype(np.float32)
             h["F"][sl] = (R @ h["F"][sl]).astype(np.float32)
         g.awake = bool(awake)
+        self._dirty = True
+
+    def rest_group(self, name: str) -> None:
+        """Put a link-bound group exactly on its rest shape on the link's current pose
+        (x = R X0 + t, v = 0, F = link rotation, zero stress): the elastic solution with no
+        load, used when a settled pad leaves every contact (drops numerical plasticity)."""
+        g = self.group(name)
+        if g.link < 0:
+            raise ConfigError(f"rest_group({name!r}): the group is not bound to a link")
+        self._pull()
+        T = self._link_prev[g.link]
+        sl, h = slice(g.start, g.stop), self._host
+        bind = quat_to_matrix(h["group_bind"][self.groups.index(g)].astype(np.float64))
+        h["x"][sl] = (h["X0"][sl].astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
+        h["v"][sl] = 0.0
+        h["C"][sl] = 0.0
+        h["tau"][sl] = 0.0
+        h["Jp"][sl] = 1.0
+        h["F"][sl] = (T[:3, :3] @ bind.T).astype(np.float32)
+        h["impulse"][sl] = 0.0
+        h["contact_id"][sl] = -1
         self._dirty = True
 
     def plan_substeps(self, dt: float, driver_speed: float | None = None) -> tuple[int, float]:
@@ -479,8 +513,16 @@ class MPMWorld:
         self._reach = 2.0 * (self._vmax + driver) * dt_sub
         self._upload_poses()
         d = self._dev
+        twists = [_twist(a, b, float(dt)) for a, b in zip(self._link_prev, self._link_next)]
         if self._n_active:
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
+            change = np.zeros((max(len(twists), 1), 9), np.float32)
+            for i, (new, old) in enumerate(zip(twists, self._link_twist)):
+                change[i] = np.concatenate([new - old, self._link_prev[i][:3, 3]])
+            if np.any(change[:, :6]) and any(g.awake and g.quasi_static for g in self.groups):
+                d["twist_change"].from_numpy(change)
+                K.follow_links(d["active"], self._n_active, d["v"], d["C"], d["x"], d["kind"], d["link"],
+                               d["group"], d["group_qs"], d["twist_change"])
         col_imp = np.zeros((max(len(self.colliders), 1), 6), np.float32)
         d["col_impulse"].from_numpy(col_imp)
         self._host_stale = True  # from here on the device holds the newer state
@@ -489,6 +531,9 @@ class MPMWorld:
             if self._n_active == 0:
                 break
             cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub)
+        if self._n_kin and n_sub:
+            K.place_kinematic(d["active_kin"], self._n_kin, d["x"], d["v"], d["C"], d["F"], d["tau"], d["X0"],
+                              d["link"], d["group"], d["link_pose"], d["group_bind"], dt_sub)
         if self._n_active and self.contact == "particle":
             K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
                              d["col_pose"], d["col_impulse"])
@@ -496,6 +541,7 @@ class MPMWorld:
         self._check_health()
         for i in range(len(self.link_names)):
             self._link_prev[i] = self._link_next[i].copy()
+        self._link_twist = twists
         self._col_prev = [c.pose.copy() for c in self.colliders]
         self._last_dt_ctrl = float(dt)
         self.time += float(dt)
@@ -660,6 +706,7 @@ class MPMWorld:
         d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
         d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
         d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
+        d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
         if self._grid_cap == 0:
             self._alloc_grid(4096)
         self._link_radius = []
@@ -689,6 +736,7 @@ class MPMWorld:
         return {
             "particles": {k: self._host[k].copy() for k in _STATE_FIELDS} if self._n else {},
             "link_prev": np.array(self._link_prev).copy(), "link_next": np.array(self._link_next).copy(),
+            "link_twist": np.array(self._link_twist).reshape(-1, 6).copy(),
             "collider_prev": np.array(self._col_prev).copy(),
             "collider_pose": np.array([c.pose for c in self.colliders]).copy(),
             "awake": np.array([g.awake for g in self.groups]),
@@ -712,6 +760,8 @@ class MPMWorld:
             self._host[k] = parts[k].copy()
         self._link_prev = [T.copy() for T in state["link_prev"]]
         self._link_next = [T.copy() for T in state["link_next"]]
+        twist = state.get("link_twist")
+        self._link_twist = [np.zeros(6) for _ in self._link_prev] if twist is None else [w.copy() for w in twist]
         self._col_prev = [T.copy() for T in state["collider_prev"]]
         for c, T in zip(self.colliders, state["collider_pose"]):
             c.pose = T.copy()
@@ -724,8 +774,17 @@ class MPMWorld:
         self._dirty = True
 
 
+def _twist(a: np.ndarray, b: np.ndarray, dt: float) -> np.ndarray:
+    """(v_origin, ω) [m/s, rad/s] of the uniform motion from pose a to pose b in dt seconds
+    (world frame; the slerp/lerp interpolation of the substeps has exactly these)."""
+    from scipy.spatial.transform import Rotation
+
+    w = Rotation.from_matrix(b[:3, :3] @ a[:3, :3].T).as_rotvec() / dt
+    return np.concatenate([(b[:3, 3] - a[:3, 3]) / dt, w])
+
+
 def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale: float) -> float:
-    """Critical damping rate ζ = 2·ω1 [1/s] of a layer's slowest mode, ω1 = (π/2)·c_s/L:
+    """Relaxation rate ζ = ω1 [1/s], the lowest shear frequency of a layer, ω1 = (π/2)·c_s/L:
     L is the largest distance [m] of a dynamic particle from the kinematic core (the layer
     thickness of a pad) and c_s = √(μ/(ρ·scale)) the shear wave speed with the pseudo-mass."""
     from scipy.spatial import cKDTree
@@ -735,7 +794,7 @@ def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale
         return 0.0
     L = float(cKDTree(pts[kin]).query(dyn)[0].max())
     c_s = math.sqrt(material.mu / (material.density * scale))
-    return 2.0 * (math.pi / 2.0) * c_s / max(L, 1e-9)
+    return (math.pi / 2.0) * c_s / max(L, 1e-9)
 
 
 def _finite_nonneg(name: str, value) -> float:

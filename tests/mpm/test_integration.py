@@ -1,0 +1,117 @@
+"""Time integration per kind of group: free bodies move with their physical mass, quasi-static
+pads (pseudo-mass, dynamic relaxation) settle to rest and ignore the hand's acceleration."""
+import math
+
+import numpy as np
+import pytest
+from helpers import pad_world
+
+from gausstac_maniskill.config import Material, SolverSettings
+from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.mpm import MPMWorld, Sphere, box_particles
+from gausstac_maniskill.transforms import make_pose, rotation_about
+
+G = 9.81
+FOAM = Material(E=2e4, nu=0.3, density=60.0)  # a light sponge: the worst case for mass scaling
+
+
+def free_cube(mass_scaling=1000.0, velocity=None):
+    s = SolverSettings(dx=2e-3, mass_scaling=mass_scaling, gravity=(0.0, 0.0, -G))
+    world = MPMWorld(s)
+    pts = box_particles([0, 0, 0], [0.01, 0.01, 0.01], s.particle_spacing)
+    world.add_group("cube", pts, FOAM, velocity=velocity)
+    return world
+
+
+def test_free_body_falls_at_g_despite_pad_mass_scaling():
+    """Mass scaling is a pseudo-mass of quasi-static groups only: a free cube in the hand's
+    settings (×1000) falls g·t²/2 (the issue's bound: 2 %); it used to fall 0.05 mm in 0.1 s."""
+    world = free_cube()
+    z0 = world.positions("cube")[:, 2].mean()
+    for _ in range(10):
+        world.step(0.01)
+    drop = z0 - world.positions("cube")[:, 2].mean()
+    assert drop == pytest.approx(0.5 * G * 0.1 ** 2, rel=0.02)
+    assert not world.group("cube").quasi_static
+
+
+def test_free_body_keeps_its_momentum():
+    world = free_cube(velocity=[0.3, -0.2, 0.0])
+    x0 = world.positions("cube").mean(0)
+    for _ in range(5):
+        world.step(0.01)
+    v = world.velocities("cube").mean(0)
+    assert v[:2] == pytest.approx([0.3, -0.2], abs=1e-4)
+    assert v[2] == pytest.approx(-G * 0.05, rel=0.02)
+    assert world.positions("cube").mean(0)[0] - x0[0] == pytest.approx(0.015, rel=0.01)
+
+
+def test_a_free_group_cannot_be_quasi_static():
+    world = MPMWorld(SolverSettings(dx=2e-3, mass_scaling=100.0))
+    pts = box_particles([0, 0, 0], [0.004, 0.004, 0.004], 1e-3)
+    with pytest.raises(ConfigError, match="physical inertia"):
+        world.add_group("cube", pts, FOAM, quasi_static=True)
+    world.add_link("base", np.eye(4))
+    with pytest.raises(ConfigError, match="relaxation"):
+        world.add_group("pad", pts, FOAM, link="base", kinematic=pts[:, 2] < 1e-3, relaxation=-1.0)
+
+
+def pad_displacement(world, T):
+    """Largest distance [m] of a pad particle from its rest place on a link at pose T
+    (the pad's rest is its initial positions with the link at identity)."""
+    x = world.positions("pad").astype(np.float64)
+    return x @ T[:3, :3], (x - T[:3, 3]) @ T[:3, :3]
+
+
+def press_and_release(friction=0.5, released_steps=3):
+    """Press a sphere 1 mm into the block pad, slide it 1 mm, lift it off; return the largest
+    particle distance [m] from rest after each released control step of 50 ms."""
+    world = pad_world(mass_scaling=1000.0)
+    rest = world.positions("pad").astype(np.float64)
+    ball = world.add_collider(Sphere(radius=4e-3, pose=make_pose([0, 0, 4e-3]), friction=friction))
+    for k in range(6):  # press 1 mm and slide 1 mm sideways
+        world.set_collider_pose(ball, make_pose([1e-3 * max(0, k - 3) / 2, 0, 4e-3 - 1e-3 * min(1, (k + 1) / 3)]))
+        world.step(0.05)
+    assert np.abs(world.positions("pad") - rest).max() > 0.5e-3
+    world.set_collider_pose(ball, make_pose([0, 0, 0.02]))
+    out = []
+    for _ in range(released_steps):
+        world.step(0.05)
+        out.append(float(np.abs(world.positions("pad") - rest).max()))
+    return out
+
+
+def test_pad_relaxes_after_contact():
+    """After a 1 mm press-and-slide the pad relaxes without ringing, step after step, to a
+    plateau (measured 2026-11-23 with friction 0.5: 0.24 mm after 1 step, 68 µm after 4,
+    28 µm from step 10 on; frictionless 15 µm). The plateau is MPM's numerical plasticity;
+    GaussTacSim puts a settled pad away from objects exactly at rest before it sleeps."""
+    u = press_and_release(released_steps=10)
+    assert u[-1] < 4e-5
+    assert all(b <= a * 1.01 for a, b in zip(u, u[1:]))
+
+
+@pytest.mark.xfail(strict=True, reason="known gap (issue 10): MPM's F, integrated from the grid velocity "
+                   "gradient, drifts from the positions (|F - I| ~ 0.018 left at rest), so the pad "
+                   "plateaus at 15-28 µm instead of coming within 0.01 mm of rest in 3 steps")
+def test_pad_returns_to_rest_within_three_control_steps():
+    """The issue's bound: |u| < 0.01 mm within 3 control steps of 50 ms after contact ends."""
+    assert press_and_release()[-1] < 1e-5
+
+
+def test_pseudo_mass_ignores_the_hand_acceleration():
+    """A pad carried by a link that starts, stops and turns quickly (no contact) stays on its
+    rest shape: its pseudo-mass (×1000) resists deformation only, not the link's acceleration."""
+    world = pad_world(mass_scaling=1000.0)
+    rest = world.positions("pad").astype(np.float64)
+    worst = 0.0
+    for k in range(12):  # 0.2 m/s for 3 steps, stop, rotate 0.3 rad/step, stop
+        t = 0.01 * min(k + 1, 3)
+        ang = 0.3 * min(max(k - 4, 0), 4)
+        T = make_pose([t, 0.0, 0.0], rotation_about([0, 1, 0], ang))
+        world.set_link_pose("base", T)
+        world.step(0.05)
+        local = (world.positions("pad").astype(np.float64) - T[:3, 3]) @ T[:3, :3]
+        worst = max(worst, float(np.abs(local - rest).max()))
+    assert worst < 1e-5, f"pad deformed {worst * 1e3:.4f} mm by the link's acceleration"
+    assert math.isfinite(worst)
