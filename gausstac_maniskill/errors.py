@@ -16,3 +16,7 @@ class AssetError(GaussTacError, ValueError):
 
 class SimulationError(GaussTacError, RuntimeError):
     """The simulation reached an invalid state (NaN, particle left the grid, ...)."""
+
+
+class ResolutionWarning(UserWarning):
+    """A simulated feature spans too few grid cells for its result to be converged."""

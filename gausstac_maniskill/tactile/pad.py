@@ -10,12 +10,13 @@ surface point, which the tactile maps use.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import PadSpec
-from ..errors import AssetError, ConfigError
+from ..errors import AssetError, ConfigError, ResolutionWarning
 from ..mpm.sampling import mesh_particles
 
 __all__ = ["Pad", "build_pad", "pad_mesh", "allegro_pad_specs", "pad_specs_for_links", "ALLEGRO_TIPS"]
@@ -101,6 +102,7 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
         ConfigError: the region selects no soft or no kinematic particle.
     """
     label = mesh_name or f"collision mesh of {spec.link!r}"
+    check_layer_resolution(spec, dx)
     key = (hash(mesh.vertices.tobytes()), hash(mesh.faces.tobytes()), spec.axis, spec.along, spec.cone_deg,
            spec.thickness, float(spacing), float(dx))
     if key in _CACHE:
@@ -141,6 +143,31 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
 
 
 _CACHE: dict = {}
+
+#: Grid cells the soft layer must span for its contact force to converge (issue 10's bound;
+#: BENCHMARKS.md "Fingertip press" shows 1–2 cells off by 2.7–11× against theory).
+MIN_LAYER_CELLS = 4
+
+
+def check_layer_resolution(spec: PadSpec, dx: float) -> None:
+    """Refuse a soft layer thinner than one grid cell; warn when it spans fewer than
+    ``MIN_LAYER_CELLS`` cells (its forces are then not converged).
+
+    Raises:
+        ConfigError: ``spec.thickness < dx``.
+    """
+    cells = spec.thickness / dx
+    if cells < 1.0 - 1e-9:
+        raise ConfigError(
+            f"pad {spec.name!r}: PadSpec.thickness={spec.thickness:g} m is thinner than one grid cell "
+            f"(SolverSettings.dx={dx:g} m); the layer cannot be simulated. Use dx <= "
+            f"{spec.thickness / MIN_LAYER_CELLS:g} m (4 cells) or a thicker pad")
+    if cells < MIN_LAYER_CELLS - 1e-9:
+        warnings.warn(
+            f"pad {spec.name!r}: the soft layer (PadSpec.thickness={spec.thickness:g} m) spans only "
+            f"{cells:.1f} grid cells at dx={dx:g} m; contact forces are not converged below "
+            f"{MIN_LAYER_CELLS} cells (use dx <= {spec.thickness / MIN_LAYER_CELLS:g} m)",
+            ResolutionWarning, stacklevel=3)
 
 #: Thickness of the kinematic layer in grid cells. With one cell, the grid nodes at the
 #: soft/kinematic interface get only ~half their mass from kinematic particles and stay

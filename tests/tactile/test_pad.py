@@ -44,8 +44,8 @@ def test_mesh_with_no_volume(tmp_path):
 
 def test_region_selecting_no_particles():
     mesh = link_mesh(default_hand_urdf(), "link_3.0_tip")
-    with pytest.raises(ConfigError, match=r"pad 'link_3.0_tip'.*selects 0 soft"):
-        build_pad(PadSpec(link="link_3.0_tip", thickness=1e-9, cone_deg=1.0), mesh, H, DX)
+    with pytest.raises(ConfigError, match=r"pad 'link_3.0_tip'.*selects 0 soft and 0 kinematic"):
+        build_pad(PadSpec(link="link_3.0_tip", thickness=2 * DX, cone_deg=0.01), mesh, H, DX)
 
 
 def test_bad_pad_fields():
@@ -55,3 +55,21 @@ def test_bad_pad_fields():
         PadSpec(link="a", thickness=-1)
     with pytest.raises(ConfigError, match=r"SensorLayout\.rows"):
         SensorLayout(rows=0)
+
+
+def test_layer_thinner_than_a_cell_is_refused_and_under_resolved_warns():
+    import pytest
+
+    from gausstac_maniskill.errors import ConfigError, ResolutionWarning
+    from gausstac_maniskill.tactile.pad import check_layer_resolution
+
+    spec = PadSpec(link="link_3.0_tip", thickness=2e-3)
+    with pytest.raises(ConfigError, match=r"PadSpec.thickness=0.002 m is thinner than one grid cell"):
+        check_layer_resolution(spec, 3e-3)
+    with pytest.warns(ResolutionWarning, match=r"spans only 2.0 grid cells"):
+        check_layer_resolution(spec, 1e-3)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_layer_resolution(spec, 0.5e-3)  # 4 cells: resolved, silent
