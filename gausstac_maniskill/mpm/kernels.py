@@ -426,7 +426,7 @@ def place_kinematic(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: ND
 
 @ti.kernel
 def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link: NDI, group: NDI,
-                 group_qs: NDI, twist_change: NDF2):
+                 group_qs: NDI, contact_id: NDI, twist_change: NDF2):
     """Carry quasi-static particles through their link's change of rigid velocity.
 
     A pad's pseudo-mass must resist only its deformation, not the hand's acceleration.
@@ -435,11 +435,14 @@ def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link
     particle of a quasi-static group takes the change of the link's rigid velocity
     field, Δv(x) = Δv_o + Δω × (x - o), and its APIC gradient the change [Δω]×.
     ``twist_change`` rows: (Δv_o xyz, Δω xyz, o xyz), o the link origin.
+    Particles that touched a collider in the last step are left alone (and the solver
+    skips the call after any collider contact): there the jump would reach the object
+    as a pseudo-mass impulse.
     """
     for ii in range(n):
         p = active[ii]
         l = link[p]
-        if kind[p] == DYNAMIC and l >= 0 and group_qs[group[p]] > 0:
+        if kind[p] == DYNAMIC and l >= 0 and group_qs[group[p]] > 0 and contact_id[p] < 0:
             dv = ti.Vector([twist_change[l, 0], twist_change[l, 1], twist_change[l, 2]])
             dw = ti.Vector([twist_change[l, 3], twist_change[l, 4], twist_change[l, 5]])
             o = ti.Vector([twist_change[l, 6], twist_change[l, 7], twist_change[l, 8]])
