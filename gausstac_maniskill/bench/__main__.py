@@ -13,6 +13,8 @@ BENCHMARKS = {
     "splat": "gausstac_maniskill.bench.splat",
     "hand": "gausstac_maniskill.bench.hand",
     "envs": "gausstac_maniskill.bench.envs",
+    "thinlayer": "gausstac_maniskill.bench.thinlayer",
+    "pad": "gausstac_maniskill.bench.pad",
 }
 
 

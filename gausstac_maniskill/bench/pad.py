@@ -1,0 +1,387 @@
+"""Grid convergence of the product's fingertip pad (Allegro index tip, default PadSpec).
+
+``python -m gausstac_maniskill.bench pad [--quick] [--dx 1e-3 7.5e-4 5e-4] [--depths 5e-4 1e-3]
+[--thickness 2e-3] [--out DIR]``
+
+Set-up (SI units): the index pad (``link_3.0_tip`` of :func:`allegro_pad_specs`) in a
+:class:`GaussTacSim` with :func:`default_hand_settings` (only ``dx`` changes), its link
+fixed at a world pose with identity rotation (the particle lattice is aligned with the
+MPM grid). Two rigid indenters, friction coefficient 0.5:
+
+* ``plate``: a :class:`HalfSpace` whose surface is normal to the sensor z axis;
+* ``sphere``: a :class:`Sphere` of radius 5 mm centred on the sensor z axis.
+
+Protocol, in 50 ms control steps (``sim.step``): one step at rest with the indenter
+0.2 mm away (JIT, not timed); then for each depth d (past first contact at the sensor
+origin, which lies on the pad's particle surface at its apex) the indenter moves along
+-z to z = -d over ``press`` steps and holds for ``hold`` steps ("press" phase); from that
+state it slides 2 mm along +x at constant z over ``slide`` steps and holds ("slide"
+phase); the pressed state is then restored and the next depth starts from it.
+
+Measured over the hold steps (means): normal force Fn = reaction on the indenter along
+sensor z, tangential force Ft = reaction along -x (resisting the slide), the force-map
+sum, the maps (depth, shear, force), contact area (taxels whose force exceeds 1 mN ×
+taxel area; and the projected area of the pad particles with a contact force, at their
+rest positions, binned on the particle lattice), peak depth. Against the finest run:
+relative L2 of each map, ‖m − m_finest‖ / ‖m_finest‖ on the layout's taxel grid, and a
+Richardson extrapolation of Fn and Ft from the three finest grids.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .. import backend
+
+INDEX = "link_3.0_tip"
+SPHERE_RADIUS = 5e-3  # m
+FRICTION = 0.5
+SLIDE = 2e-3  # m, along sensor x
+GAP = 0.2e-3  # m, indenter clearance at rest
+DT = 0.05  # s, control step
+AREA_FORCE = 1e-3  # N, a taxel above this force is in contact
+LINK_POSE = np.array([[1.0, 0, 0, 0.0], [0, 1.0, 0, 0.0], [0, 0, 1.0, 0.1], [0, 0, 0, 1.0]])
+MAPS = ("depth", "shear", "force")
+
+
+@dataclass
+class Protocol:
+    """Control steps of each stage: ramp per depth, slide, and hold (measured)."""
+
+    press: int = 3
+    slide: int = 4
+    hold: int = 3
+
+
+FULL, QUICK = Protocol(3, 4, 3), Protocol(2, 2, 2)
+
+
+# ---------------------------------------------------------------------------- numerics
+def rel_l2(m, ref) -> float:
+    """‖m − ref‖₂ / ‖ref‖₂ over all entries (any equal shapes); nan when ref is all zero."""
+    m, ref = np.asarray(m, np.float64), np.asarray(ref, np.float64)
+    n = float(np.linalg.norm(ref))
+    return float(np.linalg.norm(m - ref)) / n if n > 0 else float("nan")
+
+
+def richardson(h, f) -> dict:
+    """Observed order and extrapolated value from three grids.
+
+    Args:
+        h: three grid spacings [m] (any order; the finest is h1).
+        f: the quantity at those spacings.
+
+    Returns:
+        ``{"p": order or None, "f_star": extrapolated value or None, "status": str}``.
+        With r21 = h2/h1, r32 = h3/h2 the order solves (f3−f2)/(f2−f1) =
+        r21^p (r32^p − 1)/(r21^p − 1) (= r^p for a constant ratio), and
+        f* = f1 + (f1 − f2)/(r21^p − 1). ``status``: ``"ok"``; ``"not monotone"`` when
+        the differences change sign (or one is zero: order undefined); ``"not converging"``
+        when p ≤ 0 (differences do not shrink with h; p is still reported).
+    """
+    (h1, f1), (h2, f2), (h3, f3) = sorted(zip(map(float, h), map(float, f)))
+    e21, e32 = f2 - f1, f3 - f2
+    if e21 == 0.0 or e32 == 0.0 or e32 / e21 < 0.0:
+        return {"p": None, "f_star": None, "status": "not monotone"}
+    a, b = math.log(h2 / h1), math.log(h3 / h2)
+    target = math.log(e32 / e21)
+
+    def g(p: float) -> float:  # ln of the ratio of differences predicted by order p
+        if abs(p) < 1e-12:
+            return math.log(b / a)
+        return p * a + math.log(math.expm1(p * b) / math.expm1(p * a))
+
+    lo, hi = -60.0, 60.0
+    if not g(lo) < target < g(hi):
+        return {"p": None, "f_star": None, "status": "no order in [-60, 60]"}
+    for _ in range(200):  # g increases with p: bisection
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if g(mid) < target else (lo, mid)
+    p = 0.5 * (lo + hi)
+    if p <= 0.0:
+        return {"p": p, "f_star": None, "status": "not converging"}
+    return {"p": p, "f_star": f1 + (f1 - f2) / math.expm1(p * a), "status": "ok"}
+
+
+# ---------------------------------------------------------------------------- simulation
+def index_spec(thickness: float | None = None):
+    """The product's default PadSpec of the index tip (optionally another soft thickness [m])."""
+    from ..tactile import allegro_pad_specs
+
+    kw = {} if thickness is None else {"thickness": float(thickness)}
+    return next(s for s in allegro_pad_specs(**kw) if s.link == INDEX)
+
+
+def indenter_pose(kind: str, W: np.ndarray, z: float, x: float = 0.0) -> np.ndarray:
+    """World pose of indenter ``kind`` whose surface point nearest the pad is at sensor
+    coordinates (x, 0, z) [m]; ``W`` is the sensor frame's world pose (4x4)."""
+    from ..transforms import make_pose
+
+    p = W[:3, :3] @ np.array([x, 0.0, z]) + W[:3, 3]
+    if kind == "plate":  # half-space solid along +z_sensor: its local z points at the pad
+        return make_pose(p, W[:3, :3] @ np.diag([1.0, -1.0, -1.0]))
+    return make_pose(p + W[:3, 2] * SPHERE_RADIUS, W[:3, :3])
+
+
+def _collider(kind: str, pose: np.ndarray, friction: float):
+    from ..mpm.colliders import HalfSpace, Sphere
+
+    if kind == "plate":
+        return HalfSpace(pose=pose, friction=friction)
+    return Sphere(radius=SPHERE_RADIUS, pose=pose, friction=friction)
+
+
+def _contact_area(sim, pad) -> float:
+    """Projected area [m²] of the pad particles with a contact force: their rest sensor
+    coordinates binned on the particle lattice (h × h cells)."""
+    f = sim.world.contact_forces(INDEX)
+    s = pad.sensor_coords()[np.linalg.norm(f, axis=1) > 0]
+    if not len(s):
+        return 0.0
+    cells = np.unique(np.round((s[:, :2] - pad.sensor_coords()[0, :2]) / pad.spacing).astype(np.int64), axis=0)
+    return len(cells) * pad.spacing ** 2
+
+
+def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
+             friction: float = FRICTION, bar=None) -> dict:
+    """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m].
+
+    Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
+    "phases": [...]}``; each phase (``"press"`` / ``"slide"`` at depth ``d`` [m]) holds
+    hold-step means of ``Fn``, ``Ft``, ``Fy``, ``F_map`` [N], ``F_spread`` (max−min)/mean
+    of Fn, ``area_taxel``, ``area_particle`` [m²], ``peak_depth`` [m] and ``maps``
+    (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
+    """
+    from ..cosim import GaussTacSim, default_hand_settings
+
+    t0 = time.perf_counter()
+    spec = index_spec(thickness)
+    sim = GaussTacSim([spec], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx))
+    pad = sim.pads[INDEX]
+    W = LINK_POSE @ pad.sensor_frame
+    sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
+    build_s = time.perf_counter() - t0
+    lay = spec.layout
+    taxel_area = lay.pitch[0] * lay.pitch[1]
+    walls, subs = [], []
+
+    def step(z: float, x: float):
+        maps = sim.step({INDEX: LINK_POSE}, DT, {"indenter": indenter_pose(indenter, W, z, x)})[INDEX]
+        walls.append(sim.world.last_step.wall_time)
+        subs.append(sim.world.last_step.substeps)
+        if bar is not None:
+            bar.update(1)
+        F = W[:3, :3].T @ sim.object_wrench("indenter")[0]  # on the indenter, sensor axes
+        return F, {k: maps[k].numpy().astype(np.float64) for k in MAPS}
+
+    def hold(phase: str, d: float, z: float, x: float) -> dict:
+        Fs, ms, areas = [], [], []
+        for _ in range(protocol.hold):
+            F, m = step(z, x)
+            Fs.append(F)
+            ms.append(m)
+            areas.append(_contact_area(sim, pad))
+        Fs = np.array(Fs)
+        maps = {k: np.mean([m[k] for m in ms], axis=0) for k in MAPS}
+        Fn = float(Fs[:, 2].mean())
+        return dict(phase=phase, d=d, Fn=Fn, Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
+                    F_map=float(maps["force"].sum()), F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
+                    area_taxel=float((maps["force"] > AREA_FORCE).sum() * taxel_area),
+                    area_particle=float(np.mean(areas)), peak_depth=float(maps["depth"].max()), maps=maps)
+
+    step(GAP, 0.0)  # at rest: JIT compile and settle, not timed
+    walls.clear()
+    subs.clear()
+    phases, z = [], GAP
+    for d in depths:
+        for k in range(protocol.press):
+            step(z + (-d - z) * (k + 1) / protocol.press, 0.0)
+        z = -d
+        phases.append(hold("press", d, z, 0.0))
+        pressed = sim.state_dict()
+        for k in range(protocol.slide):
+            step(z, SLIDE * (k + 1) / protocol.slide)
+        phases.append(hold("slide", d, z, SLIDE))
+        sim.load_state_dict(pressed)
+    return dict(dx=dx, indenter=indenter, particles=pad.num_particles, soft=int((~pad.kinematic).sum()),
+                substeps=float(np.mean(subs)), step_ms=1e3 * float(np.mean(walls)), build_s=build_s,
+                thickness=spec.thickness, phases=phases)
+
+
+# ---------------------------------------------------------------------------- analysis
+def analyse(cases: list[dict], default_dx: float) -> dict:
+    """Map errors vs the finest run, Richardson rows and the verdict for the default dx.
+
+    Adds ``l2`` ({map: rel L2 vs the finest dx}) to every phase of ``cases`` and returns
+    ``{"richardson": [...], "checks": [...], "verdict": str}``.
+    """
+    by = {}
+    for c in cases:
+        for ph in c["phases"]:
+            by.setdefault((c["indenter"], ph["d"], ph["phase"]), {})[c["dx"]] = ph
+    rows, checks = [], []
+    for (ind, d, phase), runs in by.items():
+        dxs = sorted(runs)
+        ref = runs[dxs[0]]
+        for ph in runs.values():
+            ph["l2"] = {k: rel_l2(ph["maps"][k], ref["maps"][k]) for k in MAPS}
+        default = runs.get(_match(default_dx, dxs))
+        for q in ("Fn", "Ft") if phase == "slide" else ("Fn",):
+            row = dict(indenter=ind, d=d, phase=phase, q=q, dx=dxs[:3], f=[runs[x][q] for x in dxs[:3]],
+                       p=None, f_star=None, status="fewer than 3 grids", err_finest=None, err_star=None)
+            if len(dxs) >= 3:
+                row.update(richardson(row["dx"], row["f"]))
+            if default is not None and default is not ref:
+                row["err_finest"] = default[q] / ref[q] - 1
+                row["err_star"] = default[q] / row["f_star"] - 1 if row["f_star"] else None
+                checks.append((f"{ind} d={d * 1e3:g} mm {phase} {q}", abs(row["err_finest"]), 0.05))
+            rows.append(row)
+        if default is not None and default is not ref:
+            checks += [(f"{ind} d={d * 1e3:g} mm {phase} {k} map L2", default["l2"][k], 0.10) for k in MAPS]
+    if not any(_match(default_dx, [c["dx"]]) for c in cases):
+        verdict = f"no verdict: the default dx = {default_dx * 1e3:g} mm was not run"
+    elif not checks:
+        verdict = f"no verdict: the default dx = {default_dx * 1e3:g} mm is the finest run"
+    else:
+        bad = [n for n, v, tol in checks if not v <= tol]
+        verdict = ("PASS" if not bad else "FAIL") + (
+            f": default dx = {default_dx * 1e3:g} mm vs finest {min(c['dx'] for c in cases) * 1e3:g} mm, "
+            f"{len(checks) - len(bad)}/{len(checks)} checks within target (force 5 %, map L2 10 %)")
+    return dict(richardson=rows, checks=[dict(name=n, value=v, tol=t) for n, v, t in checks], verdict=verdict)
+
+
+def _match(x: float, values) -> float | None:
+    return next((v for v in values if abs(v - x) <= 1e-9 + 1e-6 * x), None)
+
+
+def _pct(x) -> str:
+    return "–" if x is None or not np.isfinite(x) else f"{100 * x:+.1f}%"
+
+
+def format_tables(cases: list[dict], ana: dict, default_dx: float) -> str:
+    """Markdown tables: runs, per-phase measurements, Richardson, verdict."""
+    mm = lambda v: f"{v * 1e3:g}"  # noqa: E731
+    out = ["Runs (MPM wall time per 50 ms control step, after the JIT step)", "",
+           "| indenter | dx [mm] | particles (soft) | substeps / step | MPM wall / step [ms] | build [s] |",
+           "|---|---|---|---|---|---|"]
+    for c in cases:
+        out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
+                   f"{c['particles']} ({c['soft']}) | {c['substeps']:.0f} | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
+    out += ["", "Per phase (hold-step means; Fn, Ft: reaction on the indenter in the sensor frame; Fn spread = "
+            "(max−min)/mean over the hold; area: taxels with force > 1 mN | particles in contact, projected; "
+            "L2: relative to the finest dx)", "",
+            "| indenter | d [mm] | phase | dx [mm] | Fn [N] | force map sum [N] | Ft [N] | Fy [N] | Fn spread | "
+            "area taxel [mm²] | area particle [mm²] | peak depth [mm] | L2 depth | L2 shear | L2 force |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    rows = sorted(((c, ph) for c in cases for ph in c["phases"]),
+                  key=lambda t: (t[0]["indenter"], t[1]["d"], t[1]["phase"], -t[0]["dx"]))
+    for c, ph in rows:
+        out.append(f"| {c['indenter']} | {mm(ph['d'])} | {ph['phase']} | {mm(c['dx'])} | {ph['Fn']:.3f} | "
+                   f"{ph['F_map']:.3f} | {ph['Ft']:.3f} | {ph['Fy']:.3f} | {100 * ph['F_spread']:.1f}% | "
+                   f"{ph['area_taxel'] * 1e6:.1f} | {ph['area_particle'] * 1e6:.1f} | {ph['peak_depth'] * 1e3:.3f} | "
+                   + " | ".join(f"{ph['l2'][k]:.3f}" for k in MAPS) + " |")
+    out += ["", "Richardson extrapolation from the three finest grids (f1 finest); default dx error vs the "
+            "finest run and vs f*", "",
+            "| indenter | d [mm] | phase | quantity | dx [mm] | f [N] | order p | f* [N] | default vs finest | "
+            "default vs f* |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in ana["richardson"]:
+        p = r["status"] if r["p"] is None else (f"{r['p']:.2f}" + ("" if r["status"] == "ok" else f" ({r['status']})"))
+        fs = "–" if r["f_star"] is None else f"{r['f_star']:.3f}"
+        out.append(f"| {r['indenter']} | {mm(r['d'])} | {r['phase']} | {r['q']} | "
+                   f"{', '.join(mm(x) for x in r['dx'])} | {', '.join(f'{v:.3f}' for v in r['f'])} | {p} | {fs} | "
+                   f"{_pct(r['err_finest'])} | {_pct(r['err_star'])} |")
+    out += ["", ana["verdict"]]
+    return "\n".join(out)
+
+
+def plot_maps(cases: list[dict], out_dir: str) -> list[str]:
+    """One PNG per (indenter, depth, phase): depth and force maps, one column per dx."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib not installed: no map images")
+        return []
+    paths = []
+    keys = sorted({(c["indenter"], ph["d"], ph["phase"]) for c in cases for ph in c["phases"]})
+    for ind, d, phase in keys:
+        runs = sorted(((c["dx"], ph) for c in cases if c["indenter"] == ind for ph in c["phases"]
+                       if ph["d"] == d and ph["phase"] == phase), key=lambda t: -t[0])
+        fig, axes = plt.subplots(2, len(runs), figsize=(2.6 * len(runs) + 1, 5.2), squeeze=False)
+        for row, (key, scale, unit) in enumerate((("depth", 1e3, "mm"), ("force", 1.0, "N"))):
+            vmax = max(float(ph["maps"][key].max()) * scale for _, ph in runs) or 1.0
+            for col, (dx, ph) in enumerate(runs):
+                im = axes[row, col].imshow(ph["maps"][key] * scale, origin="lower", vmin=0, vmax=vmax, cmap="viridis")
+                axes[row, col].set_title(f"{key}, dx={dx * 1e3:g} mm", fontsize=8)
+                axes[row, col].set_xticks([])
+                axes[row, col].set_yticks([])
+            fig.colorbar(im, ax=axes[row, :].tolist(), label=f"{key} [{unit}]", shrink=0.8)
+        fig.suptitle(f"{ind}, d = {d * 1e3:g} mm, {phase}")
+        path = os.path.join(out_dir, f"pad_{ind}_{d * 1e3:g}mm_{phase}.png")
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=None, protocol=FULL,
+        friction=FRICTION, progress=True) -> list[dict]:
+    """All (dx, indenter) cases, coarsest first, with one tqdm bar over every control step."""
+    from tqdm import tqdm
+
+    per_case = 1 + len(depths) * (protocol.press + protocol.slide + 2 * protocol.hold)
+    cases = []
+    with tqdm(total=per_case * len(dxs) * len(indenters), disable=not progress, desc="pad") as bar:
+        for dx in sorted(dxs, reverse=True):
+            for ind in indenters:
+                bar.set_description(f"{ind} dx={dx * 1e3:g} mm")
+                cases.append(run_case(dx, ind, depths, thickness, protocol, friction, bar))
+    return cases
+
+
+def main(argv: list[str] | None = None) -> int:
+    from ..cosim import default_hand_settings
+
+    default_dx = default_hand_settings().dx
+    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench pad", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="dx 2, 1.5, 1 mm and fewer control steps")
+    ap.add_argument("--dx", type=float, nargs="+", help="grid spacings [m] (default: %g, 7.5e-4, 5e-4)" % default_dx)
+    ap.add_argument("--depths", type=float, nargs="+", default=[0.5e-3, 1.0e-3], help="press depths [m]")
+    ap.add_argument("--thickness", type=float, help="soft layer thickness [m] (default: PadSpec's)")
+    ap.add_argument("--indenters", nargs="+", default=["plate", "sphere"], choices=["plate", "sphere"])
+    ap.add_argument("--friction", type=float, default=FRICTION)
+    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    ap.add_argument("--out", default="out/bench_pad")
+    args = ap.parse_args(argv)
+    dxs = args.dx or ([2e-3, 1.5e-3, 1e-3] if args.quick else [default_dx, 0.75e-3, 0.5e-3])
+    protocol = QUICK if args.quick else FULL
+    arch = backend.init(args.arch)
+    os.makedirs(args.out, exist_ok=True)
+    t0 = time.perf_counter()
+    cases = run(dxs, args.indenters, args.depths, args.thickness, protocol, args.friction)
+    ana = analyse(cases, default_dx)
+    spec = index_spec(args.thickness)
+    head = (f"Index pad convergence on {arch} ({os.cpu_count()} cores): thickness {spec.thickness * 1e3:g} mm, "
+            f"E = {spec.material.E / 1e6:g} MPa, nu = {spec.material.nu:g}, friction {args.friction:g}, "
+            f"sphere R = {SPHERE_RADIUS * 1e3:g} mm, slide {SLIDE * 1e3:g} mm, protocol {asdict(protocol)} "
+            f"(50 ms steps), total {time.perf_counter() - t0:.0f} s")
+    text = head + "\n\n" + format_tables(cases, ana, default_dx)
+    print(text)
+    with open(os.path.join(args.out, "pad.md"), "w") as f:
+        f.write(text + "\n")
+    plain = [{**c, "phases": [{**ph, "maps": {k: v.tolist() for k, v in ph["maps"].items()}} for ph in c["phases"]]}
+             for c in cases]
+    with open(os.path.join(args.out, "pad.json"), "w") as f:
+        json.dump(dict(arch=arch, default_dx=default_dx, protocol=asdict(protocol), cases=plain, **ana), f, indent=1)
+    images = plot_maps(cases, args.out)
+    print(f"\nwrote {args.out}/pad.md, pad.json and {len(images)} map images")
+    return 0
