@@ -158,8 +158,9 @@ class GaussTacSim:
                 d = float(np.linalg.norm(np.maximum(np.maximum(lo - c, c - hi), 0.0)))
                 near |= d - r < self.sleep_margin
             if not near and self._awake[name]:
-                settled = self._relative_speed(name) * self.world.last_dt_ctrl < 0.2 * REST_TOLERANCE
-                if np.abs(self._displacement(name)).max() >= REST_TOLERANCE and not settled:
+                x = self.world.positions(name).astype(np.float64)
+                settled = self._relative_speed(name, x) * self.world.last_dt_ctrl < 0.2 * REST_TOLERANCE
+                if np.abs(self._displacement(name, x)).max() >= REST_TOLERANCE and not settled:
                     near = True  # still moving back: stay awake until the pad has relaxed
                 else:
                     # away from every object, the unloaded elastic solution is the rest shape:
@@ -169,19 +170,20 @@ class GaussTacSim:
                 self.world.set_awake(name, near)
                 self._awake[name] = near
 
-    def _relative_speed(self, name: str) -> float:
-        """Largest speed [m/s] of pad ``name``'s particles relative to its link's rigid motion."""
+    def _relative_speed(self, name: str, x: np.ndarray) -> float:
+        """Largest speed [m/s] of pad ``name``'s particles (at world positions x [N, 3])
+        relative to its link's rigid motion."""
         link = self.pads[name].spec.link
         T, (v_o, w) = self.world.link_pose(link), self.world.link_twist(link)
-        x = self.world.positions(name).astype(np.float64)
         rigid = v_o + np.cross(w, x - T[:3, 3])
         return float(np.linalg.norm(self.world.velocities(name) - rigid, axis=1).max())
 
-    def _displacement(self, name: str) -> np.ndarray:
-        """[N, 3] displacement [m] of pad ``name``'s particles from rest, in the link frame."""
+    def _displacement(self, name: str, x: np.ndarray) -> np.ndarray:
+        """[N, 3] displacement [m] of pad ``name``'s particles (at world positions x [N, 3])
+        from rest, in the link frame."""
         pad = self.pads[name]
         T = self.world.link_pose(pad.spec.link)  # where the particles were last stepped to
-        return (self.world.positions(name).astype(np.float64) - T[:3, 3]) @ T[:3, :3] - pad.rest
+        return (x - T[:3, 3]) @ T[:3, :3] - pad.rest
 
     # ------------------------------------------------------------------ rendering
     def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None) -> None:

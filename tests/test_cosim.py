@@ -29,15 +29,20 @@ def apex_frame(sim, poses):
     return T @ S  # world pose of the index pad's sensor frame
 
 
+def add_ball(sim, poses, friction, R=6e-3):
+    """Add a sphere "ball" (radius R) on the index pad's axis, 0.5 mm clear of its apex;
+    returns centre(d): the ball's pose pressed d metres into the pad."""
+    W = apex_frame(sim, poses)
+    centre = lambda d: make_pose(W[:3, 3] + W[:3, 2] * (R - d))  # noqa: E731
+    sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3), friction=friction))
+    return centre
+
+
 @pytest.fixture(scope="module")
 def pressed(hand_poses):
     """A sphere (R = 6 mm) pressed 0.8 mm into the centre of the index pad."""
     sim = make_sim(hand_poses)
-    W = apex_frame(sim, hand_poses)
-    z = W[:3, 2]
-    R = 6e-3
-    centre = lambda d: make_pose(W[:3, 3] + z * (R - d))  # noqa: E731
-    sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3), friction=0.0))
+    centre = add_ball(sim, hand_poses, friction=0.0)
     before = {n: sim.pad_particles(n)[0] for n in sim.pads}
     for k in range(12):
         maps = sim.step(hand_poses, 0.02, {"ball": centre(0.8e-3 * min(1.0, (k + 1) / 8))})
@@ -161,10 +166,7 @@ def test_flat_state_round_trip_is_bit_exact(hand_poses):
     """flat_state (the form stored in ManiSkill env states) restores the scene exactly:
     stepping on from the restored state gives the same particles and maps."""
     sim = make_sim(hand_poses)
-    W = apex_frame(sim, hand_poses)
-    R = 6e-3
-    centre = lambda d: make_pose(W[:3, 3] + W[:3, 2] * (R - d))  # noqa: E731
-    sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3), friction=0.3))
+    centre = add_ball(sim, hand_poses, friction=0.3)
     for k in range(3):
         sim.step(hand_poses, 0.02, {"ball": centre(0.3e-3 * k)})
     flat = sim.flat_state()
@@ -186,10 +188,7 @@ def test_pad_never_sleeps_deformed(hand_poses):
     """After the object leaves, the pad stays awake while it moves back; it falls asleep only
     once settled, and then lies exactly on its rest shape (so zero maps are the truth)."""
     sim = make_sim(hand_poses)
-    W = apex_frame(sim, hand_poses)
-    R = 6e-3
-    centre = lambda d: make_pose(W[:3, 3] + W[:3, 2] * (R - d))  # noqa: E731
-    sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3), friction=0.0))
+    centre = add_ball(sim, hand_poses, friction=0.0)
     for k in range(6):
         maps = sim.step(hand_poses, 0.05, {"ball": centre(0.8e-3 * min(1.0, (k + 1) / 4))})
     assert float(maps[INDEX]["depth"].max()) > 0.4e-3

@@ -79,6 +79,17 @@ def kinematic_update(kin: ti.template(), n: ti.template(), x: ti.template(),
 
 
 @ti.func
+def link_motion_at(link_poses: ti.template(), l, xi, alpha0, alpha1, dt):
+    """Rigid motion of link ``l`` over the substep [alpha0, alpha1] at world point xi:
+    (velocity [m/s], angular velocity ω [rad/s], link origin at alpha0)."""
+    R0, t0 = pose_at(link_poses, l, alpha0)
+    R1, t1 = pose_at(link_poses, l, alpha1)
+    W = R1 @ R0.transpose()
+    omega = 0.5 / dt * ti.Vector([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+    return (R1 @ (R0.transpose() @ (xi - t0)) + t1 - xi) / dt, omega, t0
+
+
+@ti.func
 def chunk_bounds(active: ti.template(), n: ti.template(), x: ti.template(),
         inv_dx: ti.template(), nchunk: ti.template(), out: ti.template()):
     """Per chunk of particles, min/max of the stencil base cell (out[c] = lo xyz, hi xyz)."""
@@ -214,21 +225,12 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
             vel = grid_v[idx] / m
             vel *= damping
             if grid_mk[idx] >= 0.5 * m:
-                l = grid_link[idx]
-                R0, t0 = pose_at(link_poses, l, alpha0)
-                R1, t1 = pose_at(link_poses, l, alpha1)
-                q = R0.transpose() @ (xi - t0)
-                vel = (R1 @ q + t1 - xi) / dt
+                vel, _omega, _t0 = link_motion_at(link_poses, grid_link[idx], xi, alpha0, alpha1, dt)
             else:
                 if grid_mq[idx] >= 0.5 * m:
-                    l = grid_link[idx]
-                    R0, t0 = pose_at(link_poses, l, alpha0)
-                    R1, t1 = pose_at(link_poses, l, alpha1)
                     # the link's rigid velocity here, and its centripetal acceleration
                     # ω × (ω × r): the pseudo-mass must not turn a spinning hand into a load
-                    v_link = (R1 @ (R0.transpose() @ (xi - t0)) + t1 - xi) / dt
-                    W = R1 @ R0.transpose()
-                    omega = 0.5 / dt * ti.Vector([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+                    v_link, omega, t0 = link_motion_at(link_poses, grid_link[idx], xi, alpha0, alpha1, dt)
                     vel += dt * omega.cross(omega.cross(xi - t0))
                     vel = v_link + relax * (vel - v_link)
                 for w in range(n_walls):
@@ -426,7 +428,7 @@ def place_kinematic(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: ND
 
 @ti.kernel
 def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link: NDI, group: NDI,
-                 group_qs: NDI, contact_id: NDI, twist_change: NDF2):
+                 group_qs: NDI, twist_change: NDF2):
     """Carry quasi-static particles through their link's change of rigid velocity.
 
     A pad's pseudo-mass must resist only its deformation, not the hand's acceleration.
@@ -435,14 +437,13 @@ def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link
     particle of a quasi-static group takes the change of the link's rigid velocity
     field, Δv(x) = Δv_o + Δω × (x - o), and its APIC gradient the change [Δω]×.
     ``twist_change`` rows: (Δv_o xyz, Δω xyz, o xyz), o the link origin.
-    Particles that touched a collider in the last step are left alone (and the solver
-    skips the call after any collider contact): there the jump would reach the object
-    as a pseudo-mass impulse.
+    The solver skips the call after a step with collider contact: there the jump would
+    reach the object as a pseudo-mass impulse.
     """
     for ii in range(n):
         p = active[ii]
         l = link[p]
-        if kind[p] == DYNAMIC and l >= 0 and group_qs[group[p]] > 0 and contact_id[p] < 0:
+        if kind[p] == DYNAMIC and l >= 0 and group_qs[group[p]] > 0:
             dv = ti.Vector([twist_change[l, 0], twist_change[l, 1], twist_change[l, 2]])
             dw = ti.Vector([twist_change[l, 3], twist_change[l, 4], twist_change[l, 5]])
             o = ti.Vector([twist_change[l, 6], twist_change[l, 7], twist_change[l, 8]])

@@ -47,7 +47,7 @@ import numpy as np
 import taichi as ti
 
 from .. import backend
-from ..config import Material, SolverSettings
+from ..config import Material, SolverSettings, _finite
 from ..errors import ConfigError, SimulationError
 from ..transforms import as_pose_matrix, matrix_to_quat, quat_to_matrix
 from . import kernels as K
@@ -225,7 +225,9 @@ class MPMWorld:
         relax = 0.0
         if quasi_static:
             relax = _relaxation_rate(pts, kin, material, scale) if relaxation is None else relaxation
-            relax = _finite_nonneg(f"add_group({name!r}): relaxation", relax)
+            relax = _finite(f"add_group({name!r}): relaxation", relax)
+            if relax < 0.0:
+                raise ConfigError(f"add_group({name!r}): relaxation={relax!r} must be a rate >= 0 [1/s]")
         elif relaxation is not None:
             raise ConfigError(f"add_group({name!r}): relaxation is for quasi-static groups only")
 
@@ -524,7 +526,7 @@ class MPMWorld:
             if np.any(change[:, :6]) and not touching and any(g.awake and g.quasi_static for g in self.groups):
                 d["twist_change"].from_numpy(change)
                 K.follow_links(d["active"], self._n_active, d["v"], d["C"], d["x"], d["kind"], d["link"],
-                               d["group"], d["group_qs"], d["contact_id"], d["twist_change"])
+                               d["group"], d["group_qs"], d["twist_change"])
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
         col_imp = np.zeros((max(len(self.colliders), 1), 6), np.float32)
         d["col_impulse"].from_numpy(col_imp)
@@ -798,13 +800,6 @@ def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale
     L = float(cKDTree(pts[kin]).query(dyn)[0].max())
     c_s = math.sqrt(material.mu / (material.density * scale))
     return (math.pi / 2.0) * c_s / max(L, 1e-9)
-
-
-def _finite_nonneg(name: str, value) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and v >= 0.0):
-        raise ConfigError(f"{name}={value!r} must be a finite rate >= 0 [1/s]")
-    return v
 
 
 def _angle(R: np.ndarray) -> float:
