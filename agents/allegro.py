@@ -21,8 +21,8 @@ _ASSETS = Path(__file__).resolve().parent.parent / "assets" / "allegro_hand_righ
 
 @register_agent(override=True)
 class AllegroHandRightGaussTac(GaussTacAgent, AllegroHandRight):
-    """Allegro right hand; pads ``thumb``, ``index``, ``middle``, ``ring`` (2 mm silicone,
-    E = 0.3 MPa, ν = 0.45, 16×16 taxels over 20 mm) on the palmar side (+x) of the tips."""
+    """Allegro right hand; pads ``thumb``, ``index``, ``middle``, ``ring`` (4 mm Dragon Skin 10
+    silicone, E = 0.26 MPa, ν = 0.48, 16×16 taxels over 20 mm) on the palmar side (+x) of the tips."""
 
     uid = "allegro_hand_right_gausstac"
     gausstac_pads = tuple(PadSpec(link=link, name=name) for link, name in zip(ALLEGRO_TIPS, ALLEGRO_PAD_NAMES))

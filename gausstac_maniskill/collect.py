@@ -63,7 +63,7 @@ class CollectConfig:
     only_success: bool = False
     max_attempts: float = 3.0
     save_video: bool = False
-    mpm_dx: float = 2.0e-3
+    mpm_dx: float = 1.0e-3
     max_episode_steps: int | None = None
     record_mpm_state: bool = True
     compress: bool = True
@@ -409,7 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-attempts", type=float, default=3.0,
                    help="with --only-success: give up after this many times the episodes asked for (default 3)")
     p.add_argument("--save-video", action="store_true", help="also write <out>/<env_id>/videos/seed<s>.mp4")
-    p.add_argument("--mpm-dx", type=float, default=2.0e-3, help="MPM grid spacing [m] (default 2e-3)")
+    p.add_argument("--mpm-dx", type=float, default=1.0e-3, help="MPM grid spacing [m] (default 1e-3: the 4 mm pads span 4 cells)")
     p.add_argument("--max-episode-steps", type=int, default=None, help="override the task's time limit")
     p.add_argument("--no-mpm-state", action="store_true",
                    help="leave the MPM state out of env_states (smaller files; replay by states then "

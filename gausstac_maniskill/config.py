@@ -34,8 +34,10 @@ class Material:
 
     Attributes:
         E: Young's modulus [Pa], > 0. Silicone pads: 0.1–2 MPa; sponge: 5–50 kPa.
-        nu: Poisson's ratio [-], in (-1, 0.5). Up to 0.49 (near-incompressible) is
-            supported; 0.5 exactly is rejected (infinite bulk modulus).
+        nu: Poisson's ratio [-], in (-1, 0.5). Up to 0.499 (near-incompressible) is
+            supported without locking (``SolverSettings.fbar``); each step toward 0.5
+            costs substeps, as the P-wave speed grows as √(λ + 2μ). 0.5 exactly is
+            rejected (infinite bulk modulus).
         density: mass density [kg/m^3], > 0.
         model: ``"neo_hookean"`` (compressible Neo-Hookean, the default),
             ``"fixed_corotated"`` (Stomakhin et al. 2012), or ``"foam"``.
@@ -126,6 +128,9 @@ class SolverSettings:
         damping: viscous velocity damping rate [1/s] applied on the grid
             (v ← v·exp(-damping·Δt)); 0 = none. Helps reach quasi-static states.
         gravity: gravitational acceleration [m/s^2] in the world frame.
+        fbar: F-bar anti-locking (default on): stresses use the grid-smoothed volume
+            change J̄ (one per node) instead of each particle's own, so nearly
+            incompressible silicone (ν → 0.5) does not lock; ``False`` is plain MLS-MPM.
         grid_margin: empty cells kept around the active particles' bounding box.
         max_grid_cells: safety limit on the active grid's cell count.
     """
@@ -137,6 +142,7 @@ class SolverSettings:
     mass_scaling: float = 1.0
     damping: float = 0.0
     gravity: tuple = (0.0, 0.0, -9.81)
+    fbar: bool = True
     grid_margin: int = 3
     max_grid_cells: int = 8_000_000
 
@@ -158,6 +164,9 @@ class SolverSettings:
         if len(g) != 3:
             raise ConfigError(f"SolverSettings.gravity={self.gravity!r} must have 3 components")
         object.__setattr__(self, "gravity", tuple(_finite("SolverSettings.gravity", v) for v in g))
+        if not isinstance(self.fbar, bool):
+            raise ConfigError(f"SolverSettings.fbar={self.fbar!r} must be True or False")
+        object.__setattr__(self, "fbar", bool(self.fbar))
         if int(self.grid_margin) != self.grid_margin or self.grid_margin < 2:
             raise ConfigError(f"SolverSettings.grid_margin={self.grid_margin!r} must be an integer >= 2")
         if int(self.max_grid_cells) != self.max_grid_cells or self.max_grid_cells < 1000:
@@ -199,6 +208,18 @@ class SensorLayout:
         return (self.size[0] / self.cols, self.size[1] / self.rows)
 
 
+def dragon_skin_10() -> "Material":
+    """The default pad silicone: Smooth-On Dragon Skin 10 (platinum-cure silicone rubber, Shore 10A).
+
+    Smooth-On's data sheet gives a 100 % modulus of 151 kPa (22 psi) and a specific gravity
+    of 1.07. A neo-Hookean fit of that point, σ_eng = μ(λ − λ⁻²) = 1.75 μ at λ = 2, gives
+    μ = 86.7 kPa and E = 3μ ≈ 0.26 MPa. Cured silicone is nearly incompressible (bulk modulus
+    about 1 GPa, ν ≈ 0.4999); ν = 0.48 is the modelling choice: F-bar keeps it free of
+    locking, and its explicit substep count is 1.5× that of ν = 0.45 (4.3× at ν = 0.499,
+    which the solver also runs; see BENCHMARKS.md)."""
+    return Material(E=2.6e5, nu=0.48, density=1070.0)
+
+
 @dataclass(frozen=True)
 class PadSpec:
     """A soft tactile pad on a hand link.
@@ -214,8 +235,10 @@ class PadSpec:
         name: pad id used in observations; default: the link name.
         axis: outward direction of the pad centre in the link frame (Allegro: +x is palmar).
         cone_deg: half-angle [deg] of the pad region around ``axis``.
-        thickness: soft layer thickness [m].
-        material: the silicone (default E = 0.3 MPa, ν = 0.45).
+        thickness: soft layer thickness [m]. Default 4 mm: a fingertip skin of the
+            GelSight/DIGIT class is 2–5 mm thick, and 4 mm spans the 4 grid cells that
+            converge at the default dx = 1 mm (``tactile.pad.MIN_LAYER_CELLS``).
+        material: the silicone (default :func:`dragon_skin_10`: E = 0.26 MPa, ν = 0.48).
         layout: taxel grid of the tactile maps.
         mesh: optional mesh file (link frame) overriding the URDF collision mesh.
         along: the sensor's x axis ("along the finger") in the link frame, made orthogonal
@@ -226,8 +249,8 @@ class PadSpec:
     name: str = ""
     axis: tuple = (1.0, 0.0, 0.0)
     cone_deg: float = 60.0
-    thickness: float = 2.0e-3
-    material: Material = field(default_factory=lambda: Material(E=3e5, nu=0.45, density=1100.0))
+    thickness: float = 4.0e-3
+    material: Material = field(default_factory=dragon_skin_10)
     layout: SensorLayout = field(default_factory=SensorLayout)
     mesh: str | None = None
     along: tuple | None = None

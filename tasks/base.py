@@ -84,8 +84,9 @@ class GaussTacEnv(BaseEnv):
 
     Args (in addition to ManiSkill's ``BaseEnv`` arguments):
         robot_uids: a GaussTac agent (default ``allegro_hand_right_gausstac``).
-        mpm_dx: MPM grid spacing [m] (pads: 2 particles per cell). 2 mm is the fast
-            default; 1.5 mm and 1 mm are finer and slower (see BENCHMARKS.md).
+        mpm_dx: MPM grid spacing [m] (pads: 2 particles per cell). The default 1 mm
+            resolves the 4 mm pads (4 cells); 2 mm is 8× cheaper but under-resolved (a
+            ``ResolutionWarning`` says so; forces are not converged, see BENCHMARKS.md).
         mpm_sleep_margin: a pad farther than this from every object sleeps [m].
         splat_size: (width, height) of the default splat camera ``splat_camera``.
         render_size: (width, height) of the human render camera (``render_mode="rgb_array"``).
@@ -99,7 +100,7 @@ class GaussTacEnv(BaseEnv):
     SUPPORTED_ROBOTS = ["allegro_hand_right_gausstac"]
     agent: GaussTacAgent
 
-    def __init__(self, *args, robot_uids="allegro_hand_right_gausstac", mpm_dx: float = 2.0e-3,
+    def __init__(self, *args, robot_uids="allegro_hand_right_gausstac", mpm_dx: float = 1.0e-3,
                  mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
                  splat_background="sapien", record_mpm_state: bool = True, camera: str = "splat", **kwargs):
         backend.ensure_init()

@@ -31,6 +31,7 @@ NDV = ti.types.ndarray(dtype=vec3, ndim=1)
 NDM = ti.types.ndarray(dtype=mat3, ndim=1)
 
 DYNAMIC, KINEMATIC = 0, 1
+PIN_FRACTION = 0.25  # kinematic share of a node's mass that pins it to its link (see pinned)
 BIG = 1 << 29
 NCHUNK = 16  # particle chunks of the bounds/health reductions (rows of their output arrays)
 
@@ -53,29 +54,24 @@ def stencil(xp, inv_dx, origin):
 
 @ti.func
 def kinematic_update(kin: ti.template(), n: ti.template(), x: ti.template(),
-        v: ti.template(), C: ti.template(), F: ti.template(), tau: ti.template(),
-        X0: ti.template(), link: ti.template(), group: ti.template(), link_poses: ti.template(),
-        group_bind: ti.template(), alpha0: ti.template(), alpha1: ti.template(),
-        dt: ti.template()):
+        v: ti.template(), C: ti.template(), X0: ti.template(), link: ti.template(),
+        link_poses: ti.template(), alpha0: ti.template(), alpha1: ti.template(), dt: ti.template()):
     """Place kinematic particles on their link at fraction alpha0 of the control step.
 
     Their velocity is the finite difference of the link transform over this substep
-    applied to the rest coordinate X0 (link frame); C is the matching velocity gradient
-    (R1 - R0) R0ᵀ / Δt and F the link rotation relative to the binding rotation.
+    applied to the rest coordinate X0 (link frame) and C is the matching velocity gradient
+    (R1 - R0) R0ᵀ / Δt. Their F and stress are left to :func:`g2p` (bound particles next
+    to the soft layer strain with it).
     """
     for ii in range(n):
         p = kin[ii]
         l = link[p]
         R0, t0 = pose_at(link_poses, l, alpha0)
         R1, t1 = pose_at(link_poses, l, alpha1)
-        g = group[p]
-        Rb = quat_to_mat(ti.Vector([group_bind[g, 0], group_bind[g, 1], group_bind[g, 2], group_bind[g, 3]]))
         x0 = R0 @ X0[p] + t0
         x[p] = x0
         v[p] = (R1 @ X0[p] + t1 - x0) / dt
         C[p] = (R1 - R0) @ R0.transpose() / dt
-        F[p] = R0 @ Rb.transpose()
-        tau[p] = ti.Matrix.zero(ti.f32, 3, 3)
 
 
 @ti.func
@@ -136,10 +132,11 @@ def sort_into_slabs(active: ti.template(), n: ti.template(), x: ti.template(),
 
 @ti.func
 def clear_grid(ncell: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template()):
+        grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template()):
     for i in range(ncell):
         grid_v[i] = vec3(0.0)
         grid_dp[i] = vec3(0.0)
+        grid_vol[i] = ti.Vector([0.0, 0.0])
         grid_m[i] = 0.0
         grid_mk[i] = 0.0
         grid_mq[i] = 0.0
@@ -224,7 +221,7 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
             xi = ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
             vel = grid_v[idx] / m
             vel *= damping
-            if grid_mk[idx] >= 0.5 * m:
+            if pinned(grid_m, grid_mk, idx):
                 vel, _omega, _t0 = link_motion_at(link_poses, grid_link[idx], xi, alpha0, alpha1, dt)
             else:
                 if grid_mq[idx] >= 0.5 * m:
@@ -266,41 +263,153 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
 
 
 @ti.func
+def pinned(grid_m: ti.template(), grid_mk: ti.template(), idx):
+    """A node moves rigidly with its link when kinematic particles bring at least
+    PIN_FRACTION of its mass (Dirichlet; see :func:`grid_update`)."""
+    return grid_mk[idx] >= PIN_FRACTION * grid_m[idx]
+
+
+@ti.func
+def elastic_stress(nh_only: ti.template(), F, jp, mi, mat_table: ti.template()):
+    """Kirchhoff stress τ [Pa] of material row ``mi`` at deformation gradient F."""
+    tau = ti.Matrix.zero(ti.f32, 3, 3)
+    if ti.static(nh_only):  # every material Neo-Hookean: no SVD code compiled in
+        tau = mat.neo_hookean_stress(F, mat_table[mi, 0], mat_table[mi, 1])
+    else:
+        tau = mat.kirchhoff_stress(F, jp, mat_table[mi, 0], mat_table[mi, 1], ti.cast(mat_table[mi, 2], ti.i32),
+                                   mat_table[mi, 5])
+    return tau
+
+
+@ti.func
+def binding_rotation(link_poses: ti.template(), group_bind: ti.template(), l, g, alpha):
+    """Rotation of link ``l`` at fraction alpha of the step relative to the pose its group
+    ``g`` was bound at: the rigid part of a bound particle's deformation gradient."""
+    R, _t = pose_at(link_poses, l, alpha)
+    Rb = quat_to_mat(ti.Vector([group_bind[g, 0], group_bind[g, 1], group_bind[g, 2], group_bind[g, 3]]))
+    return R @ Rb.transpose()
+
+
+@ti.func
 def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.template(), v: ti.template(),
         C: ti.template(), F: ti.template(), tau: ti.template(), Jp: ti.template(),
-        kind: ti.template(), matid: ti.template(), mat_table: ti.template(), ox: ti.template(),
+        kind: ti.template(), matid: ti.template(), mat_table: ti.template(), link: ti.template(),
+        group: ti.template(), link_poses: ti.template(), group_bind: ti.template(),
+        alpha0: ti.template(), alpha1: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(),
-        inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template()):
-    """Gather velocity and its gradient, update F (and plasticity) and stress, advect."""
+        inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        grid_mk: ti.template(), fbar: ti.template()):
+    """Gather velocity and its gradient, update F (and plasticity) and stress, advect.
+
+    Bound (kinematic) particles keep their link-given position and velocity, but strain
+    with the grid like the material they belong to: F = Q1 (I + Δt Q0ᵀ(∇v - ∇v_link) Q0) Q0ᵀ F,
+    Q the link's rotation since binding (rigid motion exactly, no drift). Their stress
+    completes the quadrature of the free nodes next to the bond, so the soft layer is held
+    where its bound particles are, not a cell deeper (``bench thinlayer``). Where every
+    node of the stencil is pinned, F is the rotation Q1 and the stress zero.
+    With ``fbar`` the stress is left to :func:`fbar_stress`.
+    """
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
         p = order[ii]
-        if kind[p] == DYNAMIC:
-            base, fx, w = stencil(x[p], inv_dx, origin)
-            new_v = vec3(0.0)
-            new_C = ti.Matrix.zero(ti.f32, 3, 3)
-            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                dpos = ti.Vector([i, j, k]) - fx
-                weight = w[i][0] * w[j][1] * w[k][2]
-                gv = grid_v[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
-                new_v += weight * gv
-                new_C += (4.0 * inv_dx * weight) * gv.outer_product(dpos)
+        is_kin = kind[p] == KINEMATIC
+        base, fx, w = stencil(x[p], inv_dx, origin)
+        new_v = vec3(0.0)
+        new_C = ti.Matrix.zero(ti.f32, 3, 3)
+        all_pinned = True
+        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+            dpos = ti.Vector([i, j, k]) - fx
+            weight = w[i][0] * w[j][1] * w[k][2]
+            idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
+            gv = grid_v[idx]
+            new_v += weight * gv
+            new_C += (4.0 * inv_dx * weight) * gv.outer_product(dpos)
+            if is_kin:
+                all_pinned = all_pinned and pinned(grid_m, grid_mk, idx)
+        mi = matid[p]
+        if not is_kin:
             # deformation gradient: F <- (I + Δt ∇v) F, then the material's return map
             Fn = (ti.Matrix.identity(ti.f32, 3) + dt * new_C) @ F[p]
-            mi = matid[p]
             jp = Jp[p]
-            if ti.static(nh_only):  # every material Neo-Hookean: no SVD code compiled in
-                tau[p] = mat.neo_hookean_stress(Fn, mat_table[mi, 0], mat_table[mi, 1])
-            else:
-                model = ti.cast(mat_table[mi, 2], ti.i32)
-                if model == mat.FOAM:
+            if ti.static(not nh_only):
+                if ti.cast(mat_table[mi, 2], ti.i32) == mat.FOAM:
                     Fn, jp = mat.plastic_return(Fn, jp, mat_table[mi, 3], mat_table[mi, 4])
-                tau[p] = mat.kirchhoff_stress(Fn, jp, mat_table[mi, 0], mat_table[mi, 1], model, mat_table[mi, 5])
+            if ti.static(not fbar):
+                tau[p] = elastic_stress(nh_only, Fn, jp, mi, mat_table)
             v[p] = new_v
             C[p] = new_C
             F[p] = Fn
             Jp[p] = jp
             x[p] = x[p] + dt * new_v
+        else:
+            l, g = link[p], group[p]
+            Q1 = binding_rotation(link_poses, group_bind, l, g, alpha1)
+            if all_pinned:
+                F[p] = Q1
+                tau[p] = ti.Matrix.zero(ti.f32, 3, 3)
+            else:
+                Q0 = binding_rotation(link_poses, group_bind, l, g, alpha0)
+                # C[p] is the link's rigid velocity gradient (kinematic_update)
+                strain_rate = Q0.transpose() @ (new_C - C[p]) @ Q0
+                Fn = Q1 @ (ti.Matrix.identity(ti.f32, 3) + dt * strain_rate) @ Q0.transpose() @ F[p]
+                F[p] = Fn
+                if ti.static(not fbar):
+                    tau[p] = elastic_stress(nh_only, Fn, Jp[p], mi, mat_table)
+
+
+@ti.func
+def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
+        x: ti.template(), F: ti.template(), vol: ti.template(), kind: ti.template(), ox: ti.template(),
+        oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(), inv_dx: ti.template(),
+        grid_vol: ti.template()):
+    """F-bar, step 1: each node gathers the rest volume Σ w V0 and the deformed volume
+    Σ w V0 J of the particles around it (slab-ordered like :func:`p2g`)."""
+    origin = ti.Vector([ox, oy, oz])
+    for color in ti.static(range(2)):
+        ti.loop_config(block_dim=1)
+        for h in range((n_slabs - color + 1) // 2):
+            s = 2 * h + color
+            for ii in range(slab_start[s], slab_start[s + 1]):
+                p = order[ii]
+                if kind[p] == DYNAMIC:
+                    base, fx, w = stencil(x[p], inv_dx, origin)
+                    vj = vol[p] * ti.Vector([1.0, F[p].determinant()])
+                    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                        idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
+                        grid_vol[idx] = grid_vol[idx] + (w[i][0] * w[j][1] * w[k][2]) * vj
+
+
+@ti.func
+def fbar_stress(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.template(),
+        F: ti.template(), tau: ti.template(), Jp: ti.template(), matid: ti.template(),
+        mat_table: ti.template(), ox: ti.template(), oy: ti.template(), oz: ti.template(),
+        ny: ti.template(), nz: ti.template(), inv_dx: ti.template(), grid_vol: ti.template()):
+    """F-bar, step 2 (anti-locking for ν → 0.5): the λ (bulk) term of the stress is
+    evaluated at the grid-smoothed volume change J̄ = Σ_i w_ip J_i, J_i = (Σ w V0 J)_i /
+    (Σ w V0)_i, instead of the particle's own J; the μ terms keep the particle's F. One
+    bulk constraint per node instead of one per particle, so a nearly incompressible
+    material is not over-constrained (volumetric locking). This is the selective form of
+    F-bar / J-bar (de Souza Neto et al. 1996; for MPM, Coombs et al. 2018): replacing the
+    whole F by (J̄/J)^{1/3} F was tried and lets particles trade volume at no cost (a pad
+    crept 7 µm after contact); the μ terms' own volume stiffness stops that."""
+    origin = ti.Vector([ox, oy, oz])
+    for ii in range(n):
+        p = order[ii]
+        base, fx, w = stencil(x[p], inv_dx, origin)
+        Fp = F[p]
+        J = ti.max(Fp.determinant(), mat.MIN_J)
+        J_sum, w_sum = 0.0, 0.0
+        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+            gv = grid_vol[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
+            if gv[0] > 0.0:
+                weight = w[i][0] * w[j][1] * w[k][2]
+                J_sum += weight * gv[1] / gv[0]
+                w_sum += weight
+        J_bar = J if w_sum <= 0.0 else J_sum / w_sum
+        mi = matid[p]
+        dp = mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), Jp[p], mi, mat_table) - \
+            mat.volumetric_stress(nh_only, J, Jp[p], mi, mat_table)
+        tau[p] = elastic_stress(nh_only, Fp, Jp[p], mi, mat_table) + dp * ti.Matrix.identity(ti.f32, 3)
 
 
 @ti.func
@@ -374,7 +483,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                 idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
                                 wi = w[i][0] * w[j][1] * w[k][2]
                                 grid_dp[idx] = grid_dp[idx] + wi * J
-                                if grid_mk[idx] < 0.5 * grid_m[idx]:
+                                if not pinned(grid_m, grid_mk, idx):
                                     free += wi
                             impulse[p] += free * J
 
@@ -388,7 +497,7 @@ def contact_apply(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
     for idx in range(ncell):
         m = grid_m[idx]
         dp = grid_dp[idx]
-        if m > 0.0 and grid_mk[idx] < 0.5 * m and dp.norm_sqr() > 0.0:
+        if m > 0.0 and not pinned(grid_m, grid_mk, idx) and dp.norm_sqr() > 0.0:
             k = idx % nz
             j = (idx // nz) % ny
             i = idx // (ny * nz)
@@ -419,11 +528,11 @@ def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI
 
 
 @ti.kernel
-def place_kinematic(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM, X0: NDV, link: NDI,
-                    group: NDI, link_poses: NDF2, group_bind: NDF2, dt: ti.f32):
+def place_kinematic(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, X0: NDV, link: NDI,
+                    link_poses: NDF2, dt: ti.f32):
     """Put kinematic particles on their link's pose at the end of the control step (the
     substeps place them at each substep's start, one substep behind the link)."""
-    kinematic_update(kin, n, x, v, C, F, tau, X0, link, group, link_poses, group_bind, 1.0, 1.0 + 1e-6, dt)
+    kinematic_update(kin, n, x, v, C, X0, link, link_poses, 1.0, 1.0 + 1e-6, dt)
 
 
 @ti.kernel
@@ -504,8 +613,8 @@ BOX = ti.types.vector(8, ti.i32)
 
 
 @ti.kernel
-def prepare(active: NDI, n: ti.i32, kin: NDI, n_kin: ti.i32, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM,
-            X0: NDV, link: NDI, group: NDI, link_poses: NDF2, group_bind: NDF2,
+def prepare(active: NDI, n: ti.i32, kin: NDI, n_kin: ti.i32, x: NDV, v: NDV, C: NDM,
+            X0: NDV, link: NDI, link_poses: NDF2,
             alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32, inv_dx: ti.f32, margin: ti.i32,
             bounds: NDI2, slab_of: NDI, slab_start: NDI, cursor: NDI, order: NDI, slab_cap: ti.i32) -> BOX:
     """Move kinematic particles, find the active box, sort particles into slabs.
@@ -513,7 +622,7 @@ def prepare(active: NDI, n: ti.i32, kin: NDI, n_kin: ti.i32, x: NDV, v: NDV, C: 
     Returns (origin xyz, dims xyz, number of slabs, slab axis); number of slabs is
     -1 if it would exceed ``slab_cap`` (nothing is sorted then).
     """
-    kinematic_update(kin, n_kin, x, v, C, F, tau, X0, link, group, link_poses, group_bind, alpha0, alpha1, dt)
+    kinematic_update(kin, n_kin, x, v, C, X0, link, link_poses, alpha0, alpha1, dt)
     chunk_bounds(active, n, x, inv_dx, NCHUNK, bounds)
     lo = ti.Vector([BIG, BIG, BIG])
     hi = ti.Vector([-BIG, -BIG, -BIG])
@@ -545,7 +654,8 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
             dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, damping: ti.f32, relax: ti.f32,
             group: NDI, group_qs: NDI,
             grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_mq: NDF, grid_link: NDI, grid_dp: NDV,
-            link_poses: NDF2, alpha0: ti.f32, alpha1: ti.f32, walls: NDF2, n_walls: ti.i32,
+            grid_vol: ti.types.ndarray(dtype=ti.math.vec2, ndim=1), fbar: ti.template(),
+            link_poses: NDF2, group_bind: NDF2, alpha0: ti.f32, alpha1: ti.f32, walls: NDF2, n_walls: ti.i32,
             contact_mode: ti.template(), nh_only: ti.template(), n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
             col_mu: NDF, col_sticky: NDI, sdf: NDF, sdf_info: NDI2, col_impulse: NDF2,
             max_push: ti.f32, reach: ti.f32):
@@ -555,7 +665,7 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
     """
     inv_dx = 1.0 / dx
     ncell = nx * ny * nz
-    clear_grid(ncell, grid_v, grid_m, grid_mk, grid_mq, grid_dp)
+    clear_grid(ncell, grid_v, grid_m, grid_mk, grid_mq, grid_dp, grid_vol)
     p2g(gravity, order, slab_start, n_slabs, x, v, C, tau, mass, vol, kind, link, matid, mat_table,
         group, group_qs, ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, grid_mq, grid_link)
     grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping, relax,
@@ -567,4 +677,8 @@ def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
                         ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, grid_dp, n_col, col_kind, col_prm,
                         col_pose, col_mu, col_sticky, sdf, sdf_info, alpha0, alpha1, max_push, reach)
         contact_apply(ncell, ox, oy, oz, ny, nz, dx, grid_v, grid_m, grid_mk, grid_dp, walls, n_walls)
-    g2p(nh_only, order, n, x, v, C, F, tau, Jp, kind, matid, mat_table, ox, oy, oz, ny, nz, inv_dx, dt, grid_v)
+    g2p(nh_only, order, n, x, v, C, F, tau, Jp, kind, matid, mat_table, link, group, link_poses, group_bind,
+        alpha0, alpha1, ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, fbar)
+    if ti.static(fbar):
+        volume_scatter(order, slab_start, n_slabs, x, F, vol, kind, ox, oy, oz, ny, nz, inv_dx, grid_vol)
+        fbar_stress(nh_only, order, n, x, F, tau, Jp, matid, mat_table, ox, oy, oz, ny, nz, inv_dx, grid_vol)

@@ -56,6 +56,25 @@ def neo_hookean_stress(F, mu, lam):
 
 
 @ti.func
+def volumetric_stress(nh_only: ti.template(), J, Jp, mi, table: ti.template()):
+    """The λ (bulk) term of the Kirchhoff stress, τ_vol = s·I, of material row ``mi`` at volume
+    change J: s = λ ln J (Neo-Hookean), λ (J - 1) J (fixed-corotated; foam with hardening)."""
+    s = 0.0
+    lam = table[mi, 1]
+    if ti.static(nh_only):
+        s = lam * ti.log(J)
+    else:
+        model = ti.cast(table[mi, 2], ti.i32)
+        if model == NEO_HOOKEAN:
+            s = lam * ti.log(J)
+        else:
+            if model == FOAM:
+                lam *= ti.exp(table[mi, 5] * (1.0 - Jp))
+            s = lam * (J - 1.0) * J
+    return s
+
+
+@ti.func
 def kirchhoff_stress(F, Jp, mu0, lam0, model, hardening):
     """Kirchhoff stress τ [Pa] of deformation gradient F (3x3) for one material."""
     tau = ti.Matrix.zero(ti.f32, 3, 3)

@@ -537,8 +537,8 @@ class MPMWorld:
                 break
             cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub)
         if self._n_kin and n_sub:
-            K.place_kinematic(d["active_kin"], self._n_kin, d["x"], d["v"], d["C"], d["F"], d["tau"], d["X0"],
-                              d["link"], d["group"], d["link_pose"], d["group_bind"], dt_sub)
+            K.place_kinematic(d["active_kin"], self._n_kin, d["x"], d["v"], d["C"], d["X0"], d["link"],
+                              d["link_pose"], dt_sub)
         if self._n_active and self.contact == "particle":
             K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
                              d["col_pose"], d["col_impulse"])
@@ -559,8 +559,7 @@ class MPMWorld:
         d, s = self._dev, self.settings
         inv_dx = 1.0 / s.dx
         box = K.prepare(d["active"], self._n_active, d["active_kin"], self._n_kin, d["x"], d["v"], d["C"],
-                        d["F"], d["tau"], d["X0"], d["link"], d["group"], d["link_pose"], d["group_bind"],
-                        a0, a1, dt, inv_dx, s.grid_margin, d["bounds"], d["slab_of"], d["slab_start"],
+                        d["X0"], d["link"], d["link_pose"], a0, a1, dt, inv_dx, s.grid_margin, d["bounds"], d["slab_of"], d["slab_start"],
                         d["cursor"], d["order"], _SLAB_CAP)
         ox, oy, oz, nx, ny, nz, n_slabs, _axis = (int(b) for b in box)
         ncell = nx * ny * nz
@@ -574,7 +573,7 @@ class MPMWorld:
                   d["tau"], d["Jp"], d["mass"], d["vol"], d["radius"], d["kind"], d["link"], d["matid"],
                   d["mat_table"], d["impulse"], d["contact_id"], ox, oy, oz, nx, ny, nz, s.dx, dt,
                   self._gravity, self._damp_factor(dt), self._relax_factor(dt), d["group"], d["group_qs"],
-                  d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_mq"], d["grid_link"], d["grid_dp"], d["link_pose"], a0, a1, d["walls"], len(self._walls),
+                  d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_mq"], d["grid_link"], d["grid_dp"], d["grid_vol"], bool(s.fbar), d["link_pose"], d["group_bind"], a0, a1, d["walls"], len(self._walls),
                   mode, all(m.model == "neo_hookean" for m in self.materials), len(self.colliders), d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"],
                   d["col_sticky"], d["sdf"], d["sdf_info"], d["col_impulse"], 0.3 * s.dx / dt,
                   s.dx + self._reach)
@@ -596,6 +595,7 @@ class MPMWorld:
         d["grid_mq"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_link"] = ti.ndarray(ti.i32, shape=cap)
         d["grid_dp"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
+        d["grid_vol"] = ti.Vector.ndarray(2, ti.f32, shape=cap)
         self._grid_cap = cap
 
     def _explode_message(self, lo, hi) -> str:

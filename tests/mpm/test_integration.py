@@ -82,18 +82,19 @@ def press_and_release(friction=0.5, released_steps=3):
 
 
 def test_pad_relaxes_after_contact():
-    """After a 1 mm press-and-slide the pad relaxes without ringing, step after step, to a
-    plateau (measured 2026-11-23 with friction 0.5: 0.24 mm after 1 step, 68 µm after 4,
-    28 µm from step 10 on; frictionless 15 µm). The plateau is MPM's numerical plasticity;
-    GaussTacSim puts a settled pad away from objects exactly at rest before it sleeps."""
+    """After a 1 mm press-and-slide the pad relaxes within one step to a plateau and stays
+    there. Measured with friction 0.5: 15 µm after 1 step, 12–19 µm over 40 steps (F-bar;
+    13–14 µm without). Before bound particles carried stress: 0.24 mm after 1 step and
+    28 µm from step 10 on. The plateau is MPM's numerical plasticity; GaussTacSim puts a
+    settled pad away from objects exactly at rest before it sleeps."""
     u = press_and_release(released_steps=10)
-    assert u[-1] < 4e-5
-    assert all(b <= a * 1.01 for a, b in zip(u, u[1:]))
+    assert u[0] < 4e-5
+    assert max(u) < 4e-5, [round(x * 1e6, 1) for x in u]
 
 
 @pytest.mark.xfail(strict=True, reason="known gap (issue 10): MPM's F, integrated from the grid velocity "
-                   "gradient, drifts from the positions (|F - I| ~ 0.018 left at rest), so the pad "
-                   "plateaus at 15-28 µm instead of coming within 0.01 mm of rest in 3 steps")
+                   "gradient, drifts from the positions, so the pad plateaus at 12-19 µm "
+                   "instead of coming within 0.01 mm of rest in 3 steps")
 def test_pad_returns_to_rest_within_three_control_steps():
     """The issue's bound: |u| < 0.01 mm within 3 control steps of 50 ms after contact ends."""
     assert press_and_release()[-1] < 1e-5
