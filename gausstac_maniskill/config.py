@@ -166,7 +166,6 @@ class SolverSettings:
         object.__setattr__(self, "gravity", tuple(_finite("SolverSettings.gravity", v) for v in g))
         if not isinstance(self.fbar, bool):
             raise ConfigError(f"SolverSettings.fbar={self.fbar!r} must be True or False")
-        object.__setattr__(self, "fbar", bool(self.fbar))
         if int(self.grid_margin) != self.grid_margin or self.grid_margin < 2:
             raise ConfigError(f"SolverSettings.grid_margin={self.grid_margin!r} must be an integer >= 2")
         if int(self.max_grid_cells) != self.max_grid_cells or self.max_grid_cells < 1000:

@@ -146,17 +146,18 @@ def layer_force(E: float, nu: float, R: float, d: float, h: float) -> tuple[floa
 
 
 # ---------------------------------------------------------------------------- simulation
-def _layer_world(h: float, dx: float, nu: float, half_width: float):
+def _layer_world(h: float, dx: float, nu: float, half_width: float, offset: float = 0.5, fbar: bool = True):
     """World with a quarter layer [0, W]² × [z_top − h, z_top] on a 2-cell kinematic base.
-    z_top is chosen so that the bond plane z_top − h lies half a cell between node planes."""
+    z_top is chosen so that the bond plane z_top − h lies ``offset`` cells above a node
+    plane (default half a cell between node planes); ``fbar``: SolverSettings.fbar."""
     from ..config import Material, SolverSettings
     from ..mpm import MPMWorld, box_particles
 
-    settings = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), max_substeps=1_000_000)
+    settings = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), max_substeps=1_000_000, fbar=fbar)
     hp = settings.particle_spacing
     if abs(h / hp - round(h / hp)) > 1e-6:
         raise ValueError(f"layer thickness h={h} m must be a multiple of the particle spacing {hp} m")
-    z_bond = (math.floor(-h / dx) + 0.5) * dx
+    z_bond = (math.floor(-h / dx) + offset) * dx
     z_top = z_bond + h
     world = MPMWorld(settings)
     world.add_link("base", np.eye(4))

@@ -2,32 +2,20 @@
 to its kinematic core, and F-bar against volumetric locking (ν → 0.5). Both are checked
 against elasticity theory (uniaxial strain, the bonded-layer contact solution), not against
 the code's own numbers."""
-import math
+import functools
 
 import numpy as np
 import pytest
 
 from gausstac_maniskill.bench import thinlayer as tl
-from gausstac_maniskill.config import Material, SolverSettings
-from gausstac_maniskill.mpm import MPMWorld, box_particles
 
 H, DX = 4e-3, 1e-3  # the product pad's layer at the default grid: 4 cells
+_BENCH_LAYER_WORLD = tl._layer_world
 
 
 def _layer_world(offset, fbar=True):
-    """``thinlayer._layer_world`` with the bond plane ``offset`` cells above a node plane."""
-    def build(h, dx, nu, half_width):
-        s = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), max_substeps=1_000_000, fbar=fbar)
-        z_bond = (math.floor(-h / dx) + offset) * dx
-        world = MPMWorld(s)
-        world.add_link("base", np.eye(4))
-        pts = box_particles([0.0, 0.0, z_bond - 2 * dx], [half_width, half_width, z_bond + h], s.particle_spacing)
-        group = world.add_group("layer", pts, Material(E=tl.E_LAYER, nu=nu, density=tl.RHO_LAYER), link="base",
-                                kinematic=pts[:, 2] < z_bond)
-        world.add_slip_wall(0, 0.0, "+")
-        world.add_slip_wall(1, 0.0, "+")
-        return world, group, z_bond + h
-    return build
+    """The benchmark's layer world with the bond plane ``offset`` cells above a node plane."""
+    return functools.partial(_BENCH_LAYER_WORLD, offset=offset, fbar=fbar)
 
 
 @pytest.mark.parametrize("offset", [0.5, 0.875])
