@@ -30,7 +30,7 @@ def box_gaussians(half_extents, spacing: float, link_id: int = 0) -> GaussianSet
     """Checkered flat Gaussians on the surface of a box (box frame, metres)."""
     import trimesh
 
-    from .splat.build import gaussians_from_surface
+    from .splat.surface import gaussians_from_surface
 
     mesh = trimesh.creation.box(extents=2 * np.asarray(half_extents, float))
     pts, face = trimesh.sample.sample_surface_even(mesh, max(int(mesh.area / spacing ** 2), 1), seed=0)
@@ -42,7 +42,7 @@ def box_gaussians(half_extents, spacing: float, link_id: int = 0) -> GaussianSet
 def particle_gaussians(sim) -> tuple[GaussianSet, np.ndarray]:
     """Soft Gaussians on the outer particles of every pad and soft object of ``sim``,
     in the world rest frame; returns them and the world particle index of each."""
-    from .splat.build import gaussians_from_surface
+    from .splat.surface import gaussians_from_surface
 
     x0 = sim.world.positions()
     h = sim.settings.particle_spacing

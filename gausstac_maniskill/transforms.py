@@ -1,4 +1,4 @@
-"""Rigid transforms in numpy: 4x4 matrices <-> (position, quaternion wxyz)."""
+"""Rigid transforms in numpy: 4x4 matrices <-> (position, quaternion wxyz), applied to points."""
 from __future__ import annotations
 
 import numpy as np
@@ -76,3 +76,8 @@ def rotation_about(axis, angle: float) -> np.ndarray:
     a = a / np.linalg.norm(a)
     K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Points [n, 3] (metres) moved by the 4x4 rigid transform ``T``: ``R p + t`` per row."""
+    return points @ T[:3, :3].T + T[:3, 3]

@@ -49,6 +49,8 @@ import numpy as np
 import torch
 
 from ..errors import AssetError, ConfigError
+# SH helpers live in .sh; re-exported here, where GaussianSet users have imported them from
+from .sh import SH_C0, num_sh_coeffs, rgb_to_sh_dc, sh_dc_to_rgb, sh_degree_from_coeffs
 
 __all__ = [
     "GaussianSet",
@@ -64,34 +66,6 @@ __all__ = [
     "load_ply",
     "save_ply",
 ]
-
-#: Real spherical harmonic Y_0^0 = 1 / (2 sqrt(pi)).
-SH_C0 = 0.28209479177387814
-
-
-def num_sh_coeffs(degree: int) -> int:
-    """Number K of SH coefficients per colour channel for ``degree`` (0..3)."""
-    if degree not in (0, 1, 2, 3):
-        raise ConfigError(f"SH degree {degree!r} must be 0, 1, 2 or 3")
-    return (degree + 1) ** 2
-
-
-def sh_degree_from_coeffs(k: int) -> int:
-    """Inverse of :func:`num_sh_coeffs`; ConfigError unless K is 1, 4, 9 or 16."""
-    for d in range(4):
-        if (d + 1) ** 2 == k:
-            return d
-    raise ConfigError(f"{k} SH coefficients per channel is not (degree+1)^2 for degree 0..3")
-
-
-def rgb_to_sh_dc(rgb: torch.Tensor) -> torch.Tensor:
-    """Colour in [0, 1] -> DC SH coefficient, so that ``SH_C0 * dc + 0.5 == rgb``."""
-    return (rgb - 0.5) / SH_C0
-
-
-def sh_dc_to_rgb(dc: torch.Tensor) -> torch.Tensor:
-    """DC SH coefficient -> view-independent colour (before the clamp at 0)."""
-    return dc * SH_C0 + 0.5
 
 
 # --------------------------------------------------------------------------- rotations

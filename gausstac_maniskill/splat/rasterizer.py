@@ -65,7 +65,8 @@ import torch
 
 from .. import backend
 from ..errors import ConfigError
-from .gaussians import GaussianSet, sh_degree_from_coeffs
+from .gaussians import GaussianSet
+from .sh import SH_C0, SH_C1, SH_C2, SH_C3, sh_degree_from_coeffs
 
 __all__ = [
     "TILE",
@@ -83,14 +84,6 @@ ALPHA_MAX = 0.99  #: α clamp (keeps T > 0)
 T_MIN = 1e-4  #: a pixel is finished when T would fall below this
 DILATION = 0.3  #: px² added to the 2D covariance's diagonal (anti-aliasing)
 FOV_CLAMP = 1.3  #: the Jacobian is evaluated at x/z clamped to 1.3 tan(fov/2)
-
-# real spherical harmonics constants (degree 1..3), as used by 3DGS
-SH_C0 = 0.28209479177387814
-SH_C1 = 0.4886025119029199
-SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
-         -1.0925484305920792, 0.5462742152960396)
-SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-         -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
 
 _f32_1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
 _f32_2 = ti.types.ndarray(dtype=ti.f32, ndim=2)

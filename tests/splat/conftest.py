@@ -128,6 +128,71 @@ def reference():
     return reference_rasterize
 
 
+@pytest.fixture
+def sh_basis_reference():
+    """The written-out SH basis above: ``fn(d [M, 3] tensor, degree) -> [M, K]``."""
+    return _sh_basis
+
+
+def random_rigid(rng, max_deg: float = 30.0, max_t: float = 0.05):
+    """A [4, 4] rigid transform: ``max_deg`` degrees about a random axis, a shift of up
+    to ``max_t`` metres per axis."""
+    from gausstac_maniskill.transforms import make_pose, rotation_about
+
+    R = rotation_about(rng.normal(size=3), math.radians(max_deg))
+    return make_pose(rng.uniform(-max_t, max_t, 3), R)
+
+
+@pytest.fixture
+def rigid_motion():
+    """:func:`random_rigid`."""
+    return random_rigid
+
+
+PLATE_URDF = """<?xml version="1.0"?>
+<robot name="plate">
+  <material name="blue"><color rgba="0.2 0.6 0.9 1"/></material>
+  <link name="plate">
+    <visual>
+      <origin xyz="0 0 0.01" rpy="0 0 0"/>
+      <geometry><box size="0.04 0.04 0.004"/></geometry>
+      <material name="blue"/>
+    </visual>
+  </link>
+  {extra}
+</robot>
+"""
+
+
+@pytest.fixture
+def plate_urdf(tmp_path):
+    """``write(extra="") -> Path``: writes ``tmp_path/robot.urdf``, robot "plate" with one
+    link "plate" (a 40 x 40 x 4 mm box, colour (0.2, 0.6, 0.9), 10 mm above the link
+    origin) and the XML ``extra`` after it."""
+    def write(extra: str = ""):
+        path = tmp_path / "robot.urdf"
+        path.write_text(PLATE_URDF.format(extra=extra))
+        return path
+
+    return write
+
+
+@pytest.fixture(scope="session")
+def hand_model():
+    """ManiSkill's Allegro right hand, parsed."""
+    from gausstac_maniskill.urdf import default_hand_urdf, parse_urdf
+
+    return parse_urdf(default_hand_urdf())
+
+
+@pytest.fixture(scope="session")
+def hand_meshes(hand_model):
+    """Coloured visual meshes of every Allegro link with a visual (link frames)."""
+    from gausstac_maniskill.splat.surface import load_link_meshes
+
+    return load_link_meshes(hand_model)
+
+
 def random_scene(n: int, sh_degree: int = 0, seed: int = 0, spread: float = 0.3):
     """A blob of n random Gaussians around the origin (GaussianSet)."""
     from gausstac_maniskill.splat import GaussianSet
