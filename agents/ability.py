@@ -31,13 +31,13 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 
 import numpy as np
 import sapien
 from mani_skill.agents.base_agent import Keyframe
 from mani_skill.agents.registration import register_agent
 
+from ..assets import asset_path
 from .base import add_gausstac_pads
 
 __all__ = ["ABILITY_PAD_LINKS", "ABILITY_PAD_AXES", "ABILITY_URDF", "ABILITY_FINGER_HULL", "finger_hull_mesh",
@@ -57,8 +57,7 @@ ABILITY_URDF = _ability_urdf()
 ABILITY_PAD_LINKS = {"thumb": "thumb_L2", "index": "index_L2", "middle": "middle_L2", "ring": "ring_L2",
                      "pinky": "pinky_L2"}
 #: The watertight pad mesh of the four fingers' distal phalanges (link frame, metres).
-ABILITY_FINGER_HULL = str(Path(__file__).resolve().parent.parent / "assets" / "ability_hand_right"
-                          / "finger_L2_hull.obj")
+ABILITY_FINGER_HULL = str(asset_path("ability_hand_right", "finger_L2_hull.obj"))
 #: Tip points of the distal phalanges in their link frames [m] (the URDF's ``*_tip_joint`` origins).
 _TIP = {"thumb_L2": (0.065, 0.016, 0.0), "finger": (0.035, -0.018, 0.0)}
 #: Tilt of the pad axis from the palmar normal towards the tip [deg], and the pad cone

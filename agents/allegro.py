@@ -2,11 +2,10 @@
 four fingertips (they replace the FSR pads of ``allegro_hand_right_touch``)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 from mani_skill.agents.registration import register_agent
 from mani_skill.agents.robots.allegro_hand.allegro import AllegroHandRight
 
+from ..assets import asset_path
 from ..config import PadSpec
 from ..tactile import ALLEGRO_TIPS
 from ..urdf import default_hand_urdf
@@ -16,7 +15,6 @@ __all__ = ["AllegroHandRightGaussTac", "ALLEGRO_PAD_NAMES"]
 
 #: Pad ids of the Allegro tips, in ``ALLEGRO_TIPS`` order (thumb, index, middle, ring).
 ALLEGRO_PAD_NAMES = ("thumb", "index", "middle", "ring")
-_ASSETS = Path(__file__).resolve().parent.parent / "assets" / "allegro_hand_right"
 
 
 @register_agent(override=True)
@@ -27,4 +25,4 @@ class AllegroHandRightGaussTac(GaussTacAgent, AllegroHandRight):
     uid = "allegro_hand_right_gausstac"
     gausstac_pads = tuple(PadSpec(link=link, name=name) for link, name in zip(ALLEGRO_TIPS, ALLEGRO_PAD_NAMES))
     gausstac_urdf = default_hand_urdf()
-    gausstac_gaussians = str(_ASSETS)
+    gausstac_gaussians = str(asset_path("allegro_hand_right"))

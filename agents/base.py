@@ -137,7 +137,8 @@ def load_hand_gaussians(folder: str):
             raise AssetError(f"{path}: hand Gaussians file not found (GaussTacAgent.gausstac_gaussians); "
                              "build it with `gausstac build-asset --urdf <hand.urdf> --out <folder>`")
     try:
-        names = json.loads(open(links).read())["link_names"]
+        with open(links) as f:
+            names = json.load(f)["link_names"]
     except (ValueError, KeyError) as e:
         raise AssetError(f"{links}: expected a JSON object with a 'link_names' list ({e})") from None
     return load_ply(ply), list(names)

@@ -4,20 +4,50 @@ Soft fingertip pads and deformable objects are simulated with a Taichi MLS-MPM
 co-simulator driven by rigid link poses (SAPIEN or MuJoCo); a 3D Gaussian
 Splatting camera renders them. Units are SI throughout (m, kg, s, Pa).
 
-``import gausstac_maniskill`` registers the GaussTac agents
-(``allegro_hand_right_gausstac``, ...) and tasks (``GaussTac-*-v1``) with ManiSkill.
+``import gausstac_maniskill`` is light (no ManiSkill, torch or Taichi import): it
+registers the tasks (``GaussTac-*-v1``) with gymnasium, so ``gym.make("GaussTac-...")``
+works at once; the first such ``gym.make``, :func:`register`, or importing
+:mod:`gausstac_maniskill.agents` / :mod:`gausstac_maniskill.tasks` registers the agents
+(``allegro_hand_right_gausstac``, ...) and tasks with ManiSkill itself (at import already
+when ManiSkill is imported first). Submodules load on first use
+(``gausstac_maniskill.backend``, ``.tasks``, ...).
 """
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
 
+#: Submodules and subpackages, imported on first attribute access.
+_SUBMODULES = ("agents", "assets", "backend", "bench", "cli", "collect", "config", "cosim", "demo", "errors",
+               "experts", "mpm", "obs_wrappers", "pose", "render", "replay", "sensors", "splat", "tactile",
+               "tasks", "transforms", "urdf")
 
-def _register() -> None:
-    """Import the agents and tasks so that ManiSkill's registries know them."""
-    try:
-        import mani_skill  # noqa: F401
-    except ImportError:  # pragma: no cover - the MPM/splat parts work without ManiSkill
-        return
-    from . import agents, tasks  # noqa: F401
+__all__ = ["__version__", "register", *_SUBMODULES]
 
 
-_register()
+def register() -> None:
+    """Register the GaussTac agents and tasks with ManiSkill (``REGISTERED_AGENTS``,
+    ``REGISTERED_ENVS``) now; imports ManiSkill. Idempotent."""
+    from ._registry import register_with_maniskill
+
+    register_with_maniskill()
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_SUBMODULES))
+
+
+def _install() -> None:
+    from ._registry import install
+
+    install()
+
+
+_install()

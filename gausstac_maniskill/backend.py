@@ -32,10 +32,14 @@ def _taichi_arch_name() -> str:
 
 
 def _try_cuda(seed: int, debug: bool) -> bool:
-    """Initialise Taichi on CUDA; return False (and reset) if Taichi fell back."""
+    """Initialise Taichi on CUDA; return False (and reset) if CUDA does not work.
+
+    ``enable_fallback=False``: without CUDA, ``ti.init`` raises before it starts (and
+    prints "[Taichi] Starting on arch=...") instead of starting on the CPU, which we would
+    reset and start again: one start-up line per process."""
     try:
         ti.init(arch=ti.cuda, default_fp=ti.f32, random_seed=seed, debug=debug,
-                log_level=ti.ERROR, offline_cache=True)
+                log_level=ti.ERROR, offline_cache=True, enable_fallback=False)
     except Exception:  # noqa: BLE001 - any CUDA failure means "no CUDA here"
         ti.reset()
         return False
@@ -85,7 +89,8 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
                     "arch='auto', or set GAUSSTAC_ARCH=cpu.")
         cpu_threads = int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
         kwargs = dict(arch=ti.cpu, default_fp=ti.f32, random_seed=seed, debug=debug,
-                      log_level=ti.WARN, offline_cache=True)
+                      log_level=ti.WARN, offline_cache=True,
+                      kernel_profiler=os.environ.get("GAUSSTAC_KERNEL_PROFILER", "") == "1")
         if cpu_threads:
             kwargs["cpu_max_num_threads"] = cpu_threads
         ti.init(**kwargs)

@@ -126,7 +126,7 @@ def _run_worker(cfg: CollectConfig, worker: int, h5_path: str, report: Callable[
 
     if cfg.arch is not None:
         backend.init(cfg.arch)
-    import gausstac_maniskill  # noqa: F401 - registers the tasks (spawned workers start bare)
+    import gausstac_maniskill  # noqa: F401 - gym.make("GaussTac-...") (spawned workers start bare)
 
     share, tries = _worker_episodes(cfg, worker)
     if share == 0:
@@ -271,8 +271,10 @@ def collect(cfg: CollectConfig) -> dict:
     cfg.validate()
     from mani_skill.utils.registration import REGISTERED_ENVS
 
-    import gausstac_maniskill  # noqa: F401
+    import gausstac_maniskill
     from .experts import EXPERTS
+
+    gausstac_maniskill.register()  # the GaussTac tasks into REGISTERED_ENVS
 
     if cfg.env_id not in REGISTERED_ENVS:
         raise ConfigError(f"unknown env id {cfg.env_id!r}; GaussTac envs: "

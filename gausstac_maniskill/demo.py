@@ -29,9 +29,10 @@ import numpy as np
 import torch
 
 from . import backend
+from .assets import asset_path
 
 INDEX, MIDDLE = "link_3.0_tip", "link_7.0_tip"
-ASSET_DIR = Path(__file__).resolve().parent.parent / "assets" / "allegro_hand_right"
+ASSET_DIR = asset_path("allegro_hand_right")
 
 
 def _rotation_between(a, b) -> np.ndarray:

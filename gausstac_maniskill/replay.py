@@ -28,7 +28,7 @@ import os
 import sys
 from typing import Sequence
 
-import gausstac_maniskill  # noqa: F401 - registers the GaussTac agents and tasks with ManiSkill
+import gausstac_maniskill  # noqa: F401 - registers the GaussTac tasks: gym.make("GaussTac-...") works
 
 __all__ = ["main", "replayed_path"]
 

@@ -1,7 +1,51 @@
-"""Test-wide set-up: Taichi runs on the CPU (CI has no GPU), once per session."""
+"""Test-wide set-up: Taichi runs on the CPU (CI has no GPU), once per session; tests that
+need SAPIEN (ManiSkill envs, SAPIEN cameras) skip with the reason where it finds no Vulkan
+device: mark them ``@pytest.mark.sapien`` (or a fixture takes ``sapien_vulkan``)."""
+import functools
+import subprocess
+import sys
+
 import pytest
 
 from gausstac_maniskill import backend
+
+_PROBE = "import sapien\nsapien.render.RenderSystem()\n"
+
+
+@functools.lru_cache(maxsize=None)
+def sapien_vulkan_device() -> tuple[bool, str]:
+    """``(True, "")`` if SAPIEN can create its render system (it needs a Vulkan device even
+    with ``render_backend='none'``), else ``(False, reason)``. Probed once per session, in a
+    child process (~0.5 s) so that a failing Vulkan driver cannot disturb the tests' SAPIEN."""
+    try:
+        out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
+    except subprocess.TimeoutExpired:
+        return False, "SAPIEN's render system did not start within 120 s (Vulkan driver hangs)"
+    if out.returncode == 0:
+        return True, ""
+    lines = [ln.strip() for ln in (out.stderr or out.stdout).splitlines() if ln.strip()]
+    why = lines[-1] if lines else f"exit status {out.returncode}"
+    return False, (f"SAPIEN finds no usable Vulkan device ({why}); `make setup` installs a CPU Vulkan "
+                   "driver (Mesa lavapipe) where the distribution has one recent enough")
+
+
+def _skip_without_vulkan() -> None:
+    ok, reason = sapien_vulkan_device()
+    if not ok:
+        pytest.skip(reason)
+
+
+@pytest.fixture(scope="session")
+def sapien_vulkan() -> bool:
+    """Skips the requesting test (or fixture) when SAPIEN has no Vulkan device."""
+    _skip_without_vulkan()
+    return True
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item):
+    if item.get_closest_marker("sapien") is not None:  # before any fixture (e.g. a module's env) is made
+        _skip_without_vulkan()
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-import gausstac_maniskill  # noqa: F401  (registers the tasks)
+import gausstac_maniskill
 from gausstac_maniskill.collect import CollectConfig, collect, merge_trajectories
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.experts import EXPERTS
@@ -23,6 +23,7 @@ PADS = ["thumb", "index", "middle", "ring"]
 def _task() -> str:
     from mani_skill.utils.registration import REGISTERED_ENVS
 
+    gausstac_maniskill.register()  # `import gausstac_maniskill` alone fills gymnasium's registry only
     press = "GaussTac-PressCube-v1"
     return press if press in REGISTERED_ENVS and press in EXPERTS else "GaussTac-Gesture-v1"
 
@@ -33,7 +34,7 @@ STEPS = 12  # PressCube reaches its force target (and terminates) in about 6-8 s
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
+def recorded(tmp_path_factory, sapien_vulkan):
     out = tmp_path_factory.mktemp("demos")
     summary = collect(CollectConfig(env_id=TASK, num_episodes=2, num_procs=1, obs_mode="rgb",
                                     control_mode="pd_joint_delta_pos", seed=3, out=str(out),
@@ -232,6 +233,7 @@ def test_collect_refuses_unknown_env_and_bad_arguments(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.sapien
 def test_two_worker_processes_merge_in_seed_order(tmp_path):
     """Spawned workers (one env each); the merged file lists seeds 0..3 whichever worker
     recorded them. Slow: spawning + (first time on a machine) Taichi compiling for the

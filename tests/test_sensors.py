@@ -11,6 +11,8 @@ from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.sensors import GaussianSplatCamera, GaussianSplatCameraConfig
 from gausstac_maniskill.tasks.press_cube import PressCubeEnv
 
+pytestmark = pytest.mark.sapien
+
 
 class _TwoCameras(PressCubeEnv):
     """PressCube with a plain SAPIEN camera next to the splat camera (same pose and size)."""

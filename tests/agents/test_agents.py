@@ -61,7 +61,7 @@ def test_ability_pad_meshes_are_watertight_and_match_the_urdf():
 
 
 @pytest.fixture(scope="module")
-def ability_env():
+def ability_env(sapien_vulkan):
     env = gym.make("GaussTac-Touch-v1", robot_uids=ABILITY, obs_mode="state_dict", sim_backend="physx_cpu",
                    mpm_dx=2e-3, cube_gap=0.001)
     yield env
@@ -124,6 +124,7 @@ def test_ability_touch_env_obs_and_press_gives_force(ability_env):
     assert info["pad_forces"][0, PADS.index("pinky")] == 0  # far from the cube
 
 
+@pytest.mark.sapien
 def test_touch_sandbox_runs_the_allegro_too():
     env = gym.make("GaussTac-Touch-v1", robot_uids="allegro_hand_right_gausstac", obs_mode="state_dict",
                    sim_backend="physx_cpu", mpm_dx=2e-3)

@@ -18,20 +18,15 @@ def mj():
 
 
 @pytest.fixture(scope="module")
-def maniskill_env():
+def maniskill_env(sapien_vulkan):
     """One ManiSkill env with the Allegro right hand (physx_cpu), shared by the module."""
     gym = pytest.importorskip("gymnasium")
     pytest.importorskip("mani_skill")
     import mani_skill.envs  # noqa: F401  (registers the envs)
 
-    try:
-        env = gym.make("Empty-v1", robot_uids="allegro_hand_right", obs_mode="state",
-                       render_mode=None, sim_backend="physx_cpu")
-        env.reset(seed=0)
-    except RuntimeError as err:  # SAPIEN needs a Vulkan device even without rendering
-        if "vulkan" in str(err).lower() or "render" in str(err).lower():
-            pytest.skip(f"SAPIEN cannot start here: {err}")
-        raise
+    env = gym.make("Empty-v1", robot_uids="allegro_hand_right", obs_mode="state",
+                   render_mode=None, sim_backend="physx_cpu")
+    env.reset(seed=0)
     yield env
     env.close()
 

@@ -10,6 +10,7 @@ from gausstac_maniskill.experts import make_expert
 
 TASKS = ["GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1"]
 PADS = ["thumb", "index", "middle", "ring"]
+pytestmark = pytest.mark.sapien
 
 
 def _make(env_id, **kw):

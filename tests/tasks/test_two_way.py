@@ -8,6 +8,7 @@ import gausstac_maniskill  # noqa: F401  (registers agents and tasks)
 from gausstac_maniskill.errors import ConfigError
 
 ABILITY = "floating_ability_hand_right_gausstac"
+pytestmark = pytest.mark.sapien
 
 
 def _make(**kw):
