@@ -15,6 +15,7 @@ BENCHMARKS = {
     "envs": "gausstac_maniskill.bench.envs",
     "thinlayer": "gausstac_maniskill.bench.thinlayer",
     "pad": "gausstac_maniskill.bench.pad",
+    "kernels": "gausstac_maniskill.bench.kernels",
 }
 
 

@@ -23,7 +23,7 @@ import taichi as ti
 
 from ..errors import AssetError, ConfigError
 from ..transforms import as_pose_matrix
-from .kinematics import pose_at
+from .kinematics import frame_at, pose_at
 
 NONE, SPHERE, BOX, CAPSULE, MESH, HALFSPACE = range(6)
 
@@ -264,16 +264,16 @@ def local_sdf(kind, prm, sdf: ti.template(), info: ti.template(), k, q):
 
 
 @ti.func
-def collider_contact(kinds: ti.template(), prms: ti.template(), poses: ti.template(),
-                     sdf: ti.template(), info: ti.template(), k, x, alpha0, alpha1, dt):
+def collider_contact(kinds: ti.template(), prms: ti.template(), frames: ti.template(),
+                     sdf: ti.template(), info: ti.template(), k, x, dt):
     """φ, world normal and collider velocity at world point x for collider k.
 
-    The collider moves from fraction alpha0 to alpha1 of the control step during
-    this substep; its velocity at x is the finite difference of the material
-    point of the collider that sits at x at the end of the substep.
+    The collider moves from its frame's start to its end pose during this substep
+    (``frames``: :func:`~gausstac_maniskill.mpm.kinematics.write_frames` rows); its
+    velocity at x is the finite difference of the material point of the collider that
+    sits at x at the end of the substep.
     """
-    R1, t1 = pose_at(poses, k, alpha1)
-    R0, t0 = pose_at(poses, k, alpha0)
+    R0, t0, R1, t1 = frame_at(frames, k)
     q = R1.transpose() @ (x - t1)
     prm = ti.Vector([prms[k, 0], prms[k, 1], prms[k, 2], prms[k, 3]])
     phi, n_local = local_sdf(kinds[k], prm, sdf, info, k, q)

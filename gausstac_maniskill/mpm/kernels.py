@@ -19,7 +19,7 @@ import taichi as ti
 
 from . import materials as mat
 from .colliders import collider_contact
-from .kinematics import pose_at, quat_to_mat
+from .kinematics import FRAME, frame_at, quat_to_mat, write_frames
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
@@ -55,8 +55,8 @@ def stencil(xp, inv_dx, origin):
 @ti.func
 def kinematic_update(kin: ti.template(), n: ti.template(), x: ti.template(),
         v: ti.template(), C: ti.template(), X0: ti.template(), link: ti.template(),
-        link_poses: ti.template(), alpha0: ti.template(), alpha1: ti.template(), dt: ti.template()):
-    """Place kinematic particles on their link at fraction alpha0 of the control step.
+        link_frames: ti.template(), dt: ti.template()):
+    """Place kinematic particles on their link at the start of the substep.
 
     Their velocity is the finite difference of the link transform over this substep
     applied to the rest coordinate X0 (link frame) and C is the matching velocity gradient
@@ -65,9 +65,7 @@ def kinematic_update(kin: ti.template(), n: ti.template(), x: ti.template(),
     """
     for ii in range(n):
         p = kin[ii]
-        l = link[p]
-        R0, t0 = pose_at(link_poses, l, alpha0)
-        R1, t1 = pose_at(link_poses, l, alpha1)
+        R0, t0, R1, t1 = frame_at(link_frames, link[p])
         x0 = R0 @ X0[p] + t0
         x[p] = x0
         v[p] = (R1 @ X0[p] + t1 - x0) / dt
@@ -75,11 +73,10 @@ def kinematic_update(kin: ti.template(), n: ti.template(), x: ti.template(),
 
 
 @ti.func
-def link_motion_at(link_poses: ti.template(), l, xi, alpha0, alpha1, dt):
-    """Rigid motion of link ``l`` over the substep [alpha0, alpha1] at world point xi:
-    (velocity [m/s], angular velocity ω [rad/s], link origin at alpha0)."""
-    R0, t0 = pose_at(link_poses, l, alpha0)
-    R1, t1 = pose_at(link_poses, l, alpha1)
+def link_motion_at(link_frames: ti.template(), l, xi, dt):
+    """Rigid motion of link ``l`` over the substep at world point xi:
+    (velocity [m/s], angular velocity ω [rad/s], link origin at the substep's start)."""
+    R0, t0, R1, t1 = frame_at(link_frames, l)
     W = R1 @ R0.transpose()
     omega = 0.5 / dt * ti.Vector([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
     return (R1 @ (R0.transpose() @ (xi - t0)) + t1 - xi) / dt, omega, t0
@@ -144,17 +141,20 @@ def clear_grid(ncell: ti.template(), grid_v: ti.template(), grid_m: ti.template(
 
 @ti.func
 def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
-        x: ti.template(), v: ti.template(), C: ti.template(), tau: ti.template(),
+        x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), tau: ti.template(), Jp: ti.template(),
         mass: ti.template(), vol: ti.template(), kind: ti.template(), link: ti.template(),
         matid: ti.template(), mat_table: ti.template(), group: ti.template(), group_qs: ti.template(),
         ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
-        grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template()):
+        grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(),
+        grid_vol: ti.template(), fbar: ti.template(), nh_only: ti.template()):
     """Scatter mass and APIC momentum (with the stress impulse) to the grid.
 
     Momentum to node i: w_ip [m_p v_p + (m_p C_p - Δt V0_p (4/dx²) τ_p)(x_i - x_p)].
     Kinematic particles also scatter their mass to ``grid_mk`` and their link id;
     dynamic particles of quasi-static groups scatter theirs to ``grid_mq`` (and the link id).
+    With ``fbar`` the stress τ_p is first evaluated here, on the same stencil, from the
+    nodal volume change that :func:`volume_scatter` left in ``grid_vol``.
     """
     origin = ti.Vector([ox, oy, oz])
     for color in ti.static(range(2)):
@@ -164,6 +164,8 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
             for ii in range(slab_start[s], slab_start[s + 1]):
                 p = order[ii]
                 base, fx, w = stencil(x[p], inv_dx, origin)
+                if ti.static(fbar):
+                    tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz)
                 m = mass[p]
                 affine = m * C[p] - (dt * vol[p] * 4.0 * inv_dx * inv_dx) * tau[p]
                 # momentum plus this substep's weight impulse; weight is the physical mass
@@ -192,15 +194,15 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
         dt: ti.template(), gx: ti.template(), gy: ti.template(), gz: ti.template(),
         damping: ti.template(), relax: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(), link_poses: ti.template(),
-        alpha0: ti.template(), alpha1: ti.template(), walls: ti.template(),
+        grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(), link_frames: ti.template(),
+        walls: ti.template(),
         n_walls: ti.template(), grid_contact: ti.template(), n_col: ti.template(),
-        col_kind: ti.template(), col_prm: ti.template(), col_pose: ti.template(),
+        col_kind: ti.template(), col_prm: ti.template(), col_frames: ti.template(),
         col_mu: ti.template(), col_sticky: ti.template(), sdf: ti.template(),
         sdf_info: ti.template(), col_impulse: ti.template()):
     """Momentum -> velocity, damping, then boundary conditions per node (gravity is in P2G).
 
-    * Nodes where kinematic mass is at least half the node mass move exactly with
+    * Nodes where kinematic mass is at least PIN_FRACTION of the node mass move exactly with
       their link (Dirichlet), so a kinematic layer is rigid, not a viscous drag.
     * Nodes where most mass belongs to quasi-static groups (pads) relax towards
       equilibrium: their velocity *relative to the link's rigid motion* is scaled by
@@ -222,12 +224,12 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
             vel = grid_v[idx] / m
             vel *= damping
             if pinned(grid_m, grid_mk, idx):
-                vel, _omega, _t0 = link_motion_at(link_poses, grid_link[idx], xi, alpha0, alpha1, dt)
+                vel, _omega, _t0 = link_motion_at(link_frames, grid_link[idx], xi, dt)
             else:
                 if grid_mq[idx] >= 0.5 * m:
                     # the link's rigid velocity here, and its centripetal acceleration
                     # ω × (ω × r): the pseudo-mass must not turn a spinning hand into a load
-                    v_link, omega, t0 = link_motion_at(link_poses, grid_link[idx], xi, alpha0, alpha1, dt)
+                    v_link, omega, t0 = link_motion_at(link_frames, grid_link[idx], xi, dt)
                     vel += dt * omega.cross(omega.cross(xi - t0))
                     vel = v_link + relax * (vel - v_link)
                 for w in range(n_walls):
@@ -236,8 +238,7 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
                         vel[ax] = 0.0
                 if grid_contact:
                     for c in range(n_col):
-                        phi, nrm, vc = collider_contact(col_kind, col_prm, col_pose, sdf, sdf_info,
-                                                        c, xi, alpha0, alpha1, dt)
+                        phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, xi, dt)
                         if phi < 0.0:
                             vrel = vel - vc
                             vn = vrel.dot(nrm)
@@ -253,7 +254,7 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
                                 ti.atomic_add(col_impulse[c, 0], -dp[0])
                                 ti.atomic_add(col_impulse[c, 1], -dp[1])
                                 ti.atomic_add(col_impulse[c, 2], -dp[2])
-                                R1, t1 = pose_at(col_pose, c, alpha1)
+                                _R0, _t0, _R1, t1 = frame_at(col_frames, c)
                                 tq = (xi - t1).cross(-dp)
                                 ti.atomic_add(col_impulse[c, 3], tq[0])
                                 ti.atomic_add(col_impulse[c, 4], tq[1])
@@ -282,20 +283,33 @@ def elastic_stress(nh_only: ti.template(), F, jp, mi, mat_table: ti.template()):
 
 
 @ti.func
-def binding_rotation(link_poses: ti.template(), group_bind: ti.template(), l, g, alpha):
-    """Rotation of link ``l`` at fraction alpha of the step relative to the pose its group
-    ``g`` was bound at: the rigid part of a bound particle's deformation gradient."""
-    R, _t = pose_at(link_poses, l, alpha)
-    Rb = quat_to_mat(ti.Vector([group_bind[g, 0], group_bind[g, 1], group_bind[g, 2], group_bind[g, 3]]))
-    return R @ Rb.transpose()
+def write_binding_frames(link_frames: ti.template(), group_bind: ti.template(), group_link: ti.template(),
+        n_groups, group_frames: ti.template()):
+    """Frame rows of each group's *binding rotation* Q = R Rbᵀ at the substep's start and
+    end: its link's rotation relative to the pose the group was bound at, the rigid part
+    of a bound particle's deformation gradient (translations 0; identity if unbound)."""
+    for g in range(n_groups):
+        Q0 = ti.Matrix.identity(ti.f32, 3)
+        Q1 = ti.Matrix.identity(ti.f32, 3)
+        l = group_link[g]
+        if l >= 0:
+            R0, _t0, R1, _t1 = frame_at(link_frames, l)
+            Rb = quat_to_mat(ti.Vector([group_bind[g, 0], group_bind[g, 1], group_bind[g, 2], group_bind[g, 3]]))
+            Q0 = R0 @ Rb.transpose()
+            Q1 = R1 @ Rb.transpose()
+        for a, b in ti.static(ti.ndrange(3, 3)):
+            group_frames[g, 3 * a + b] = Q0[a, b]
+            group_frames[g, 12 + 3 * a + b] = Q1[a, b]
+        for a in ti.static(range(3)):
+            group_frames[g, 9 + a] = 0.0
+            group_frames[g, 21 + a] = 0.0
 
 
 @ti.func
 def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.template(), v: ti.template(),
         C: ti.template(), F: ti.template(), tau: ti.template(), Jp: ti.template(),
-        kind: ti.template(), matid: ti.template(), mat_table: ti.template(), link: ti.template(),
-        group: ti.template(), link_poses: ti.template(), group_bind: ti.template(),
-        alpha0: ti.template(), alpha1: ti.template(), ox: ti.template(),
+        kind: ti.template(), matid: ti.template(), mat_table: ti.template(),
+        group: ti.template(), group_frames: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(),
         inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
         grid_mk: ti.template(), fbar: ti.template()):
@@ -307,7 +321,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
     completes the quadrature of the free nodes next to the bond, so the soft layer is held
     where its bound particles are, not a cell deeper (``bench thinlayer``). Where every
     node of the stencil is pinned, F is the rotation Q1 and the stress zero.
-    With ``fbar`` the stress is left to :func:`fbar_stress`.
+    With ``fbar`` the stress is left to the next :func:`p2g` (:func:`fbar_stress_at`).
     """
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
@@ -342,13 +356,11 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
             Jp[p] = jp
             x[p] = x[p] + dt * new_v
         else:
-            l, g = link[p], group[p]
-            Q1 = binding_rotation(link_poses, group_bind, l, g, alpha1)
+            Q0, _o0, Q1, _o1 = frame_at(group_frames, group[p])
             if all_pinned:
                 F[p] = Q1
                 tau[p] = ti.Matrix.zero(ti.f32, 3, 3)
             else:
-                Q0 = binding_rotation(link_poses, group_bind, l, g, alpha0)
                 # C[p] is the link's rigid velocity gradient (kinematic_update)
                 strain_rate = Q0.transpose() @ (new_C - C[p]) @ Q0
                 Fn = Q1 @ (ti.Matrix.identity(ti.f32, 3) + dt * strain_rate) @ Q0.transpose() @ F[p]
@@ -380,36 +392,42 @@ def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.
 
 
 @ti.func
+def fbar_stress_at(nh_only: ti.template(), Fp, jp, mi, mat_table: ti.template(), grid_vol: ti.template(),
+        base, w, ny: ti.template(), nz: ti.template()):
+    """F-bar, step 2 (anti-locking for ν → 0.5): Kirchhoff stress of a particle with
+    deformation gradient Fp and stencil (base, w) whose λ (bulk) term is evaluated at the
+    grid-smoothed volume change J̄ = Σ_i w_ip J_i, J_i = (Σ w V0 J)_i / (Σ w V0)_i, instead
+    of the particle's own J; the μ terms keep the particle's F. One bulk constraint per
+    node instead of one per particle, so a nearly incompressible material is not
+    over-constrained (volumetric locking). This is the selective form of F-bar / J-bar
+    (de Souza Neto et al. 1996; for MPM, Coombs et al. 2018): replacing the whole F by
+    (J̄/J)^{1/3} F was tried and lets particles trade volume at no cost (a pad crept 7 µm
+    after contact); the μ terms' own volume stiffness stops that."""
+    J = ti.max(Fp.determinant(), mat.MIN_J)
+    J_sum, w_sum = 0.0, 0.0
+    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+        gv = grid_vol[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
+        if gv[0] > 0.0:
+            weight = w[i][0] * w[j][1] * w[k][2]
+            J_sum += weight * gv[1] / gv[0]
+            w_sum += weight
+    J_bar = J if w_sum <= 0.0 else J_sum / w_sum
+    dp = mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), jp, mi, mat_table) - \
+        mat.volumetric_stress(nh_only, J, jp, mi, mat_table)
+    return elastic_stress(nh_only, Fp, jp, mi, mat_table) + dp * ti.Matrix.identity(ti.f32, 3)
+
+
+@ti.func
 def fbar_stress(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.template(),
         F: ti.template(), tau: ti.template(), Jp: ti.template(), matid: ti.template(),
         mat_table: ti.template(), ox: ti.template(), oy: ti.template(), oz: ti.template(),
         ny: ti.template(), nz: ti.template(), inv_dx: ti.template(), grid_vol: ti.template()):
-    """F-bar, step 2 (anti-locking for ν → 0.5): the λ (bulk) term of the stress is
-    evaluated at the grid-smoothed volume change J̄ = Σ_i w_ip J_i, J_i = (Σ w V0 J)_i /
-    (Σ w V0)_i, instead of the particle's own J; the μ terms keep the particle's F. One
-    bulk constraint per node instead of one per particle, so a nearly incompressible
-    material is not over-constrained (volumetric locking). This is the selective form of
-    F-bar / J-bar (de Souza Neto et al. 1996; for MPM, Coombs et al. 2018): replacing the
-    whole F by (J̄/J)^{1/3} F was tried and lets particles trade volume at no cost (a pad
-    crept 7 µm after contact); the μ terms' own volume stiffness stops that."""
+    """:func:`fbar_stress_at` for every particle (the stress reported after a step)."""
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
         p = order[ii]
-        base, fx, w = stencil(x[p], inv_dx, origin)
-        Fp = F[p]
-        J = ti.max(Fp.determinant(), mat.MIN_J)
-        J_sum, w_sum = 0.0, 0.0
-        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-            gv = grid_vol[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
-            if gv[0] > 0.0:
-                weight = w[i][0] * w[j][1] * w[k][2]
-                J_sum += weight * gv[1] / gv[0]
-                w_sum += weight
-        J_bar = J if w_sum <= 0.0 else J_sum / w_sum
-        mi = matid[p]
-        dp = mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), Jp[p], mi, mat_table) - \
-            mat.volumetric_stress(nh_only, J, Jp[p], mi, mat_table)
-        tau[p] = elastic_stress(nh_only, Fp, Jp[p], mi, mat_table) + dp * ti.Matrix.identity(ti.f32, 3)
+        base, _fx, w = stencil(x[p], inv_dx, origin)
+        tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz)
 
 
 @ti.func
@@ -420,10 +438,9 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
         grid_m: ti.template(), grid_mk: ti.template(),
         grid_dp: ti.template(), n_col: ti.template(), col_kind: ti.template(),
-        col_prm: ti.template(), col_pose: ti.template(), col_mu: ti.template(),
+        col_prm: ti.template(), col_frames: ti.template(), col_mu: ti.template(),
         col_sticky: ti.template(), sdf: ti.template(), sdf_info: ti.template(),
-        alpha0: ti.template(), alpha1: ti.template(), max_push: ti.template(),
-        reach: ti.template()):
+        max_push: ti.template(), reach: ti.template()):
     """Particle-detected contact, applied as momentum on the grid.
 
     For each dynamic particle near a collider, its free velocity v* is gathered
@@ -450,8 +467,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                 if kind[p] == DYNAMIC:
                     near = False
                     for c in range(n_col):
-                        phi, nrm, vc = collider_contact(col_kind, col_prm, col_pose, sdf, sdf_info,
-                                                        c, x[p], alpha0, alpha1, dt)
+                        phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, x[p], dt)
                         if phi - radius[p] < reach:
                             near = True
                     if near:
@@ -461,8 +477,8 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                             v0 += w[i][0] * w[j][1] * w[k][2] * grid_v[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
                         vp = v0
                         for c in range(n_col):
-                            phi, nrm, vc = collider_contact(col_kind, col_prm, col_pose, sdf, sdf_info,
-                                                            c, x[p] + dt * vp, alpha0, alpha1, dt)
+                            phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info,
+                                                            c, x[p] + dt * vp, dt)
                             gap = phi - radius[p]
                             if gap < 0.0:
                                 dvn = ti.min(-gap / dt, max_push)
@@ -525,14 +541,6 @@ def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI
             for d in ti.static(range(3)):
                 col_impulse[c, d] += J[d]
                 col_impulse[c, 3 + d] += tq[d]
-
-
-@ti.kernel
-def place_kinematic(kin: NDI, n: ti.i32, x: NDV, v: NDV, C: NDM, X0: NDV, link: NDI,
-                    link_poses: NDF2, dt: ti.f32):
-    """Put kinematic particles on their link's pose at the end of the control step (the
-    substeps place them at each substep's start, one substep behind the link)."""
-    kinematic_update(kin, n, x, v, C, X0, link, link_poses, 1.0, 1.0 + 1e-6, dt)
 
 
 @ti.kernel
@@ -606,30 +614,74 @@ def energies(active: NDI, n: ti.i32, v: NDV, F: NDM, Jp: NDF, kind: NDI, matid: 
 
 
 # --------------------------------------------------------------------------- fused substep
-# Taichi spends ~10 µs per kernel argument on the Python side; a substep is therefore
-# two launches: `prepare` (returns the active box by value) and `advance`.
+# Kernel arguments are grouped by what they describe, in one argument pack per kernel:
+# `World` (the particles, the grid, the scene: materials, links, groups, walls,
+# colliders, constants; and the particle order) for `advance`, `Placement` for
+# `prepare`. Taichi 1.7 allows one pack per kernel and 64 scalar elements per launch
+# (ndarrays count one each), so counts and constants live in small arrays. It spends
+# ~7 µs per ndarray on the Python side per launch, so each pack holds only what its
+# kernel reads. A substep is two launches: `prepare` (the host reads the active box
+# back to size the grid) and `advance`.
 
-BOX = ti.types.vector(8, ti.i32)
+NDV2 = ti.types.ndarray(dtype=ti.math.vec2, ndim=1)
+BOX = 8  # active box layout: origin xyz, dims xyz (nodes), number of slabs, slab axis
+SLAB_CAP = 1 << 16  # slabs are 2 cells: the active box may span 131072 cells along one axis
+# rows of Scene.counts and Scene.consts
+N_LINKS, N_GROUPS, N_COL, N_WALLS, N_ACTIVE, N_KIN = range(6)
+DX, GX, GY, GZ, DAMPING, RELAXATION, REACH, MARGIN = range(8)
+
+Particles = ti.types.argpack(  # member names are unique over the packs (Taichi flattens them)
+    x=NDV, v=NDV, C=NDM, F=NDM, tau=NDM, Jp=NDF,  # state: position [m], velocity, APIC C, F, τ [Pa], plastic J
+    impulse=NDV, contact_id=NDI,  # contact impulse [N s] of this control step, collider touched
+    mass=NDF, vol=NDF, radius=NDF,  # mass [kg], rest volume [m³], contact radius [m]
+    kind=NDI, link=NDI, matid=NDI, group=NDI)  # DYNAMIC | KINEMATIC, link, material row, group
+Grid = ti.types.argpack(
+    grid_v=NDV, grid_m=NDF,  # momentum then velocity [m/s], mass [kg]
+    grid_mk=NDF, grid_mq=NDF, grid_link=NDI,  # kinematic mass, quasi-static mass, link of those
+    grid_dp=NDV, grid_vol=NDV2)  # contact momentum [N s]; (Σ w V0, Σ w V0 J) for F-bar
+Scene = ti.types.argpack(
+    counts=NDI, consts=NDF,  # rows N_LINKS.., and DX.. [m, m/s², 1/s, 1/s, m, cells]
+    mat_table=NDF2,  # materials.material_table rows
+    group_qs=NDI, group_frames=NDF2,  # per group: quasi-static?, binding rotation frames
+    link_frames=NDF2, walls=NDF2,  # kinematics frame rows of links; slip walls (axis, position, side)
+    col_kind=NDI, col_prm=NDF2, col_frames=NDF2, col_mu=NDF, col_sticky=NDI,
+    sdf=NDF, sdf_info=NDI2, col_impulse=NDF2)
+Order = ti.types.argpack(
+    order=NDI, slab_start=NDI,  # awake particles sorted by slab, first index of each slab
+    active_box=NDI)  # the active box of the substep (BOX layout), written by prepare
+World = ti.types.argpack(P=Particles, G=Grid, S=Scene, O=Order)
+Placement = ti.types.argpack(  # what prepare reads and writes
+    x=NDV, v=NDV, C=NDM, X0=NDV, link=NDI,  # particle state; rest coords in the link frame
+    counts=NDI, consts=NDF,
+    link_poses=NDF2, link_frames=NDF2, col_poses=NDF2, col_frames=NDF2,  # pose rows -> frame rows
+    group_bind=NDF2, group_link=NDI, group_frames=NDF2,  # binding quaternion and link of each group
+    active=NDI, kin=NDI,  # awake particles (counts[N_ACTIVE]), the kinematic ones among them (counts[N_KIN])
+    bounds=NDI2, slab_of=NDI, cursor=NDI, order=NDI, slab_start=NDI, active_box=NDI)  # slab sort
 
 
 @ti.kernel
-def prepare(active: NDI, n: ti.i32, kin: NDI, n_kin: ti.i32, x: NDV, v: NDV, C: NDM,
-            X0: NDV, link: NDI, link_poses: NDF2,
-            alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32, inv_dx: ti.f32, margin: ti.i32,
-            bounds: NDI2, slab_of: NDI, slab_start: NDI, cursor: NDI, order: NDI, slab_cap: ti.i32) -> BOX:
-    """Move kinematic particles, find the active box, sort particles into slabs.
+def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32) -> ti.types.vector(BOX, ti.i32):
+    """Interpolate link, group and collider frames for the substep [alpha0, alpha1] of the
+    control step, move kinematic particles, find the active box, sort particles into slabs.
 
-    Returns (origin xyz, dims xyz, number of slabs, slab axis); number of slabs is
-    -1 if it would exceed ``slab_cap`` (nothing is sorted then).
+    Writes the box to ``W.active_box`` (BOX layout) for :func:`advance` and returns it
+    (the host sizes the grid); the number of slabs is -1 if it would exceed SLAB_CAP
+    (nothing is sorted then).
     """
-    kinematic_update(kin, n_kin, x, v, C, X0, link, link_poses, alpha0, alpha1, dt)
-    chunk_bounds(active, n, x, inv_dx, NCHUNK, bounds)
+    n = W.counts[N_ACTIVE]
+    inv_dx = 1.0 / W.consts[DX]
+    margin = ti.cast(W.consts[MARGIN], ti.i32)
+    write_frames(W.link_poses, W.counts[N_LINKS], alpha0, alpha1, W.link_frames)
+    write_frames(W.col_poses, W.counts[N_COL], alpha0, alpha1, W.col_frames)
+    write_binding_frames(W.link_frames, W.group_bind, W.group_link, W.counts[N_GROUPS], W.group_frames)
+    kinematic_update(W.kin, W.counts[N_KIN], W.x, W.v, W.C, W.X0, W.link, W.link_frames, dt)
+    chunk_bounds(W.active, n, W.x, inv_dx, NCHUNK, W.bounds)
     lo = ti.Vector([BIG, BIG, BIG])
     hi = ti.Vector([-BIG, -BIG, -BIG])
     for c in ti.static(range(NCHUNK)):  # tiny reduction, unrolled (serial)
         for d in ti.static(range(3)):
-            lo[d] = ti.min(lo[d], bounds[c, d])
-            hi[d] = ti.max(hi[d], bounds[c, 3 + d])
+            lo[d] = ti.min(lo[d], W.bounds[c, d])
+            hi[d] = ti.max(hi[d], W.bounds[c, 3 + d])
     dims = hi - lo + 3 + 2 * margin
     axis = 0
     if dims[1] > dims[axis]:
@@ -637,48 +689,82 @@ def prepare(active: NDI, n: ti.i32, kin: NDI, n_kin: ti.i32, x: NDV, v: NDV, C: 
     if dims[2] > dims[axis]:
         axis = 2
     n_slabs = (hi[axis] - lo[axis]) // 2 + 1
-    if n_slabs + 1 > slab_cap:
+    if n_slabs < 1 or n_slabs + 1 > SLAB_CAP:  # too wide, or int overflow from a NaN position
         n_slabs = -1
     else:
-        sort_into_slabs(active, n, x, inv_dx, axis, lo[axis], n_slabs, slab_of, slab_start, cursor, order)
+        sort_into_slabs(W.active, n, W.x, inv_dx, axis, lo[axis], n_slabs, W.slab_of,
+                        W.slab_start, W.cursor, W.order)
     o = lo - margin
-    return ti.Vector([o[0], o[1], o[2], dims[0], dims[1], dims[2], n_slabs, axis])
+    out = ti.Vector([o[0], o[1], o[2], dims[0], dims[1], dims[2], n_slabs, axis])
+    for i in ti.static(range(BOX)):
+        W.active_box[i] = out[i]
+    return out
 
 
 @ti.kernel
-def advance(order: NDI, slab_start: NDI, n_slabs: ti.i32, n: ti.i32,
-            x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM, Jp: NDF,
-            mass: NDF, vol: NDF, radius: NDF, kind: NDI, link: NDI, matid: NDI, mat_table: NDF2,
-            impulse: NDV, contact_id: NDI,
-            ox: ti.i32, oy: ti.i32, oz: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
-            dx: ti.f32, dt: ti.f32, gravity: ti.math.vec3, damping: ti.f32, relax: ti.f32,
-            group: NDI, group_qs: NDI,
-            grid_v: NDV, grid_m: NDF, grid_mk: NDF, grid_mq: NDF, grid_link: NDI, grid_dp: NDV,
-            grid_vol: ti.types.ndarray(dtype=ti.math.vec2, ndim=1), fbar: ti.template(),
-            link_poses: NDF2, group_bind: NDF2, alpha0: ti.f32, alpha1: ti.f32, walls: NDF2, n_walls: ti.i32,
-            contact_mode: ti.template(), nh_only: ti.template(), n_col: ti.i32, col_kind: NDI, col_prm: NDF2, col_pose: NDF2,
-            col_mu: NDF, col_sticky: NDI, sdf: NDF, sdf_info: NDI2, col_impulse: NDF2,
-            max_push: ti.f32, reach: ti.f32):
-    """One MLS-MPM substep: clear grid, P2G, grid update + BCs, contact, G2P.
+def advance(W: World, dt: ti.f32, fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template()):
+    """One MLS-MPM substep of ``dt`` seconds on the box that :func:`prepare` left in
+    ``W.O.active_box``: clear grid, (F-bar volume scatter), P2G, grid update + BCs,
+    contact, G2P.
 
     ``contact_mode``: 0 no colliders, 1 particle-detected (grid-applied), 2 grid nodes.
+    ``nh_only``: every material is Neo-Hookean (no SVD compiled in).
     """
+    substep(W.P, W.G, W.S, W.O, dt, fbar, contact_mode, nh_only)
+
+
+@ti.func
+def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), dt,
+            fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template()):
+    """Body of :func:`advance` on the packs of its World (P, G, S, O)."""
+    dx = S.consts[DX]
     inv_dx = 1.0 / dx
-    ncell = nx * ny * nz
-    clear_grid(ncell, grid_v, grid_m, grid_mk, grid_mq, grid_dp, grid_vol)
-    p2g(gravity, order, slab_start, n_slabs, x, v, C, tau, mass, vol, kind, link, matid, mat_table,
-        group, group_qs, ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, grid_mq, grid_link)
-    grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping, relax,
-                grid_v, grid_m, grid_mk, grid_mq, grid_link, link_poses, alpha0, alpha1, walls, n_walls,
-                1 if ti.static(contact_mode == 2) else 0, n_col, col_kind, col_prm, col_pose, col_mu, col_sticky,
-                sdf, sdf_info, col_impulse)
-    if ti.static(contact_mode == 1):
-        contact_scatter(order, slab_start, n_slabs, x, kind, mass, radius, impulse, contact_id,
-                        ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, grid_dp, n_col, col_kind, col_prm,
-                        col_pose, col_mu, col_sticky, sdf, sdf_info, alpha0, alpha1, max_push, reach)
-        contact_apply(ncell, ox, oy, oz, ny, nz, dx, grid_v, grid_m, grid_mk, grid_dp, walls, n_walls)
-    g2p(nh_only, order, n, x, v, C, F, tau, Jp, kind, matid, mat_table, link, group, link_poses, group_bind,
-        alpha0, alpha1, ox, oy, oz, ny, nz, inv_dx, dt, grid_v, grid_m, grid_mk, fbar)
+    gravity = ti.Vector([S.consts[GX], S.consts[GY], S.consts[GZ]])
+    damping = ti.exp(-S.consts[DAMPING] * dt)  # global velocity damping factor
+    relax = ti.exp(-S.consts[RELAXATION] * dt)  # quasi-static relaxation factor exp(-ζ Δt)
+    max_push = 0.3 * dx / dt  # cap of a contact's normal velocity change [m/s]
+    reach = dx + S.consts[REACH]  # particles farther than this from a collider skip it [m]
+    n, n_col, n_walls = S.counts[N_ACTIVE], S.counts[N_COL], S.counts[N_WALLS]
+    ox, oy, oz = O.active_box[0], O.active_box[1], O.active_box[2]
+    ny, nz, n_slabs = O.active_box[4], O.active_box[5], O.active_box[6]
+    ncell = O.active_box[3] * ny * nz
+    clear_grid(ncell, G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_dp, G.grid_vol)
     if ti.static(fbar):
-        volume_scatter(order, slab_start, n_slabs, x, F, vol, kind, ox, oy, oz, ny, nz, inv_dx, grid_vol)
-        fbar_stress(nh_only, order, n, x, F, tau, Jp, matid, mat_table, ox, oy, oz, ny, nz, inv_dx, grid_vol)
+        volume_scatter(O.order, O.slab_start, n_slabs, P.x, P.F, P.vol, P.kind, ox, oy, oz, ny, nz, inv_dx,
+                       G.grid_vol)
+    p2g(gravity, O.order, O.slab_start, n_slabs, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.mass, P.vol, P.kind,
+        P.link, P.matid, S.mat_table, P.group, S.group_qs, ox, oy, oz, ny, nz, inv_dx, dt,
+        G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only)
+    grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping, relax,
+                G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
+                1 if ti.static(contact_mode == 2) else 0, n_col, S.col_kind, S.col_prm, S.col_frames,
+                S.col_mu, S.col_sticky, S.sdf, S.sdf_info, S.col_impulse)
+    if ti.static(contact_mode == 1):
+        contact_scatter(O.order, O.slab_start, n_slabs, P.x, P.kind, P.mass, P.radius, P.impulse,
+                        P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp,
+                        n_col, S.col_kind, S.col_prm, S.col_frames, S.col_mu, S.col_sticky, S.sdf, S.sdf_info,
+                        max_push, reach)
+        contact_apply(ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls, n_walls)
+    g2p(nh_only, O.order, n, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.kind, P.matid, S.mat_table, P.group,
+        S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, fbar)
+
+
+@ti.kernel
+def fbar_update(W: World, nh_only: ti.template()):
+    """The F-bar stress of every particle at its current F and position, on the box from
+    :func:`prepare`: the substeps evaluate it in P2G, this leaves it current after a step."""
+    stress_pass(W.P, W.G, W.S, W.O, nh_only)
+
+
+@ti.func
+def stress_pass(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), nh_only: ti.template()):
+    """Body of :func:`fbar_update`."""
+    inv_dx = 1.0 / S.consts[DX]
+    ox, oy, oz = O.active_box[0], O.active_box[1], O.active_box[2]
+    ny, nz = O.active_box[4], O.active_box[5]
+    for i in range(O.active_box[3] * ny * nz):
+        G.grid_vol[i] = ti.Vector([0.0, 0.0])
+    volume_scatter(O.order, O.slab_start, O.active_box[6], P.x, P.F, P.vol, P.kind, ox, oy, oz, ny, nz, inv_dx,
+                   G.grid_vol)
+    fbar_stress(nh_only, O.order, S.counts[N_ACTIVE], P.x, P.F, P.tau, P.Jp, P.matid, S.mat_table,
+                ox, oy, oz, ny, nz, inv_dx, G.grid_vol)

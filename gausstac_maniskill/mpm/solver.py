@@ -52,11 +52,11 @@ from ..errors import ConfigError, SimulationError
 from ..transforms import as_pose_matrix, matrix_to_quat, quat_to_matrix
 from . import kernels as K
 from .colliders import Collider, MeshCollider
+from .kinematics import FRAME
 from .materials import material_table
 
 __all__ = ["MPMWorld", "StepInfo", "Group"]
 
-_SLAB_CAP = 1 << 16  # slabs are 2 cells: the active box may span 131072 cells along one axis
 _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id")
 
 
@@ -132,7 +132,7 @@ class MPMWorld:
         self._last_dt_ctrl = 1.0
         self._reach = 0.0
         self._link_radius: list[float] = []
-        self._gravity = ti.math.vec3(*self.settings.gravity)
+        self._pack: dict = {}  # kernel argument packs (kernels.Particles, Grid, Scene, Order)
 
     # ------------------------------------------------------------------ building
     def add_link(self, name: str, pose) -> int:
@@ -513,6 +513,7 @@ class MPMWorld:
         n_sub, dt_sub = self.plan_substeps(float(dt), driver)
         # particles farther than this from a collider cannot reach it within a substep
         self._reach = 2.0 * (self._vmax + driver) * dt_sub
+        self._upload_consts()
         self._upload_poses()
         d = self._dev
         twists = [_twist(a, b, float(dt)) for a, b in zip(self._link_prev, self._link_next)]
@@ -536,14 +537,17 @@ class MPMWorld:
             if self._n_active == 0:
                 break
             cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub)
-        if self._n_kin and n_sub:
-            K.place_kinematic(d["active_kin"], self._n_kin, d["x"], d["v"], d["C"], d["X0"], d["link"],
-                              d["link_pose"], dt_sub)
+        self._check_health()
+        if self._n_active and n_sub:
+            # kinematic particles onto the link's end pose (the substeps place them at each
+            # substep's start); with F-bar the stress is then brought up to the final F
+            self._prepare(1.0, 1.0 + 1e-6, dt_sub)
+            if self.settings.fbar:
+                K.fbar_update(self._world_pack(), self._nh_only())
         if self._n_active and self.contact == "particle":
             K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
                              d["col_pose"], d["col_impulse"])
         self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
-        self._check_health()
         for i in range(len(self.link_names)):
             self._link_prev[i] = self._link_next[i].copy()
         self._link_twist = twists
@@ -555,12 +559,11 @@ class MPMWorld:
         return self.last_step
 
     # ------------------------------------------------------------------ internals
-    def _substep(self, a0: float, a1: float, dt: float) -> int:
-        d, s = self._dev, self.settings
-        inv_dx = 1.0 / s.dx
-        box = K.prepare(d["active"], self._n_active, d["active_kin"], self._n_kin, d["x"], d["v"], d["C"],
-                        d["X0"], d["link"], d["link_pose"], a0, a1, dt, inv_dx, s.grid_margin, d["bounds"], d["slab_of"], d["slab_start"],
-                        d["cursor"], d["order"], _SLAB_CAP)
+    def _prepare(self, a0: float, a1: float, dt: float):
+        """Frames, kinematic particles and the slab sort for the substep [a0, a1] of the
+        control step; returns the active box (see :func:`kernels.prepare`)."""
+        s = self.settings
+        box = K.prepare(self._pack["placement"], a0, a1, dt)
         ox, oy, oz, nx, ny, nz, n_slabs, _axis = (int(b) for b in box)
         ncell = nx * ny * nz
         if ncell > s.max_grid_cells or n_slabs < 0:
@@ -568,24 +571,32 @@ class MPMWorld:
                                                         np.array([ox + nx, oy + ny, oz + nz]) - s.grid_margin - 3))
         if ncell > self._grid_cap:
             self._alloc_grid(int(min(ncell * 1.5, s.max_grid_cells)))
+        return box
+
+    def _world_pack(self):
+        """The kernels' argument pack (kernels.World) over the current device arrays."""
+        pk = self._pack
+        if pk.get("W") is None:
+            pk["W"] = K.World(P=pk["P"], G=pk["G"], S=pk["S"], O=pk["O"])
+        return pk["W"]
+
+    def _nh_only(self) -> bool:
+        return all(m.model == "neo_hookean" for m in self.materials)
+
+    def _substep(self, a0: float, a1: float, dt: float) -> int:
+        s = self.settings
+        box = self._prepare(a0, a1, dt)
         mode = 0 if not self.colliders else (1 if self.contact == "particle" else 2)
-        K.advance(d["order"], d["slab_start"], n_slabs, self._n_active, d["x"], d["v"], d["C"], d["F"],
-                  d["tau"], d["Jp"], d["mass"], d["vol"], d["radius"], d["kind"], d["link"], d["matid"],
-                  d["mat_table"], d["impulse"], d["contact_id"], ox, oy, oz, nx, ny, nz, s.dx, dt,
-                  self._gravity, self._damp_factor(dt), self._relax_factor(dt), d["group"], d["group_qs"],
-                  d["grid_v"], d["grid_m"], d["grid_mk"], d["grid_mq"], d["grid_link"], d["grid_dp"], d["grid_vol"], bool(s.fbar), d["link_pose"], d["group_bind"], a0, a1, d["walls"], len(self._walls),
-                  mode, all(m.model == "neo_hookean" for m in self.materials), len(self.colliders), d["col_kind"], d["col_prm"], d["col_pose"], d["col_mu"],
-                  d["col_sticky"], d["sdf"], d["sdf_info"], d["col_impulse"], 0.3 * s.dx / dt,
-                  s.dx + self._reach)
-        return ncell
+        K.advance(self._world_pack(), dt, bool(s.fbar), mode, self._nh_only())
+        return int(box[3] * box[4] * box[5])
 
-    def _damp_factor(self, dt: float) -> float:
-        return math.exp(-self.settings.damping * dt)
-
-    def _relax_factor(self, dt: float) -> float:
-        """exp(-ζ Δt) for the quasi-static nodes, ζ the largest rate of the awake groups."""
+    def _upload_consts(self) -> None:
+        """Scene constants of the kernels (kernels.DX ...): spacing, gravity, damping rate,
+        relaxation rate ζ of the quasi-static nodes (the largest of the awake groups), reach."""
+        s = self.settings
         rate = max((g.relaxation for g in self.groups if g.awake and g.quasi_static), default=0.0)
-        return math.exp(-rate * dt)
+        self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, rate, self._reach, s.grid_margin],
+                                                np.float32))
 
     def _alloc_grid(self, cap: int) -> None:
         d = self._dev
@@ -597,6 +608,9 @@ class MPMWorld:
         d["grid_dp"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         d["grid_vol"] = ti.Vector.ndarray(2, ti.f32, shape=cap)
         self._grid_cap = cap
+        self._pack["W"] = None
+        self._pack["G"] = K.Grid(**{k: d[k] for k in ("grid_v", "grid_m", "grid_mk", "grid_mq", "grid_link",
+                                                       "grid_dp", "grid_vol")})
 
     def _explode_message(self, lo, hi) -> str:
         x = self._dev["x"].to_numpy()
@@ -679,9 +693,10 @@ class MPMWorld:
         for key in ("order", "slab_of"):
             d[key] = ti.ndarray(ti.i32, shape=n)
         if "slab_start" not in d:
-            d["slab_start"] = ti.ndarray(ti.i32, shape=_SLAB_CAP)
-            d["cursor"] = ti.ndarray(ti.i32, shape=_SLAB_CAP)
+            d["slab_start"] = ti.ndarray(ti.i32, shape=K.SLAB_CAP)
+            d["cursor"] = ti.ndarray(ti.i32, shape=K.SLAB_CAP)
         d["bounds"] = ti.ndarray(ti.i32, shape=(K.NCHUNK, 6))
+        d["box"] = ti.ndarray(ti.i32, shape=K.BOX)
         d["first_bad"] = ti.ndarray(ti.i32, shape=K.NCHUNK)
         d["vmax_chunk"] = ti.ndarray(ti.f32, shape=K.NCHUNK)
         upload("mat_table", material_table(self.materials), ti.f32)
@@ -711,7 +726,18 @@ class MPMWorld:
         d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
         d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
         d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
+        d["link_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), FRAME))
+        d["col_frames"] = ti.ndarray(ti.f32, shape=(nc, FRAME))
+        d["group_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.groups), 1), FRAME))
+        upload("group_link", np.array([g.link for g in self.groups] or [-1], np.int32), ti.i32)
+        if "group_bind" not in d:
+            upload("group_bind", np.tile(np.array([1.0, 0, 0, 0], np.float32), (1, 1)), ti.f32)
         d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
+        upload("counts", np.array([len(self.link_names), len(self.groups), len(self.colliders), len(self._walls),
+                                   self._n_active, self._n_kin], np.int32), ti.i32)
+        d["consts"] = ti.ndarray(ti.f32, shape=8)
+        self._upload_consts()
+        self._build_packs()
         if self._grid_cap == 0:
             self._alloc_grid(4096)
         self._link_radius = []
@@ -720,6 +746,25 @@ class MPMWorld:
             self._link_radius.append(float(np.linalg.norm(h["X0"][mask], axis=1).max()) if mask.any() else 0.0)
         self._dirty = False
         self._host_stale = False
+
+    def _build_packs(self) -> None:
+        """Group the device arrays into the kernels' argument packs (kernels.Particles, Scene,
+        Order, Placement; the Grid pack is built with the grid in _alloc_grid)."""
+        d, pk = self._dev, self._pack
+        pk["W"] = None  # World is assembled on first use (_world_pack)
+        if self._n:
+            pk["P"] = K.Particles(**{k: d[k] for k in (
+                "x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "mass", "vol", "radius",
+                "kind", "link", "matid", "group")})
+            pk["placement"] = K.Placement(
+                **{k: d[k] for k in ("x", "v", "C", "X0", "link", "counts", "consts", "link_frames", "col_frames",
+                                     "group_bind", "group_link", "group_frames", "active", "bounds", "slab_of",
+                                     "cursor", "order", "slab_start")},
+                link_poses=d["link_pose"], col_poses=d["col_pose"], kin=d["active_kin"], active_box=d["box"])
+        pk["S"] = K.Scene(**{k: d[k] for k in (
+            "counts", "consts", "mat_table", "group_qs", "group_frames", "link_frames", "walls", "col_kind",
+            "col_prm", "col_frames", "col_mu", "col_sticky", "sdf", "sdf_info", "col_impulse")})
+        pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
 
     def _upload_poses(self) -> None:
         def rows(prev, nxt):

@@ -1,0 +1,59 @@
+"""``python -m gausstac_maniskill.bench kernels`` — where the MPM time goes on the product pad.
+
+The Allegro index pad (default :class:`~gausstac_maniskill.config.PadSpec`) is pressed 1 mm
+by a 5 mm sphere (the pad benchmark's set-up, ``bench pad``); one held 50 ms control step is
+then run under Taichi's kernel profiler (cpu). Prints the particle count, substeps, wall
+time, throughput in particle-substeps per second, and Taichi's per-task table: every
+parallel loop of a kernel is one task (``advance_..._kernel_<k>_range_for``), in source
+order of :func:`~gausstac_maniskill.mpm.kernels.advance` (clear grid, F-bar volume scatter,
+P2G for the two slab colours, grid update, contact scatter for the two colours, contact
+apply, G2P) and :func:`~gausstac_maniskill.mpm.kernels.prepare` (frames, kinematic
+particles, bounds, slab sort). The time not in any task is Python launch overhead.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench kernels", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
+    ap.add_argument("--indenter", default="sphere", choices=["plate", "sphere"])
+    args = ap.parse_args(argv)
+    os.environ["GAUSSTAC_KERNEL_PROFILER"] = "1"
+    from .. import backend
+
+    if backend.init("cpu") != "cpu":  # pragma: no cover - init('cpu') is cpu or raises
+        return 1
+    import taichi as ti
+
+    from ..cosim import GaussTacSim, default_hand_settings
+    from . import pad as P
+
+    spec = P.index_spec()
+    sim = GaussTacSim([spec], {P.INDEX: P.LINK_POSE}, settings=default_hand_settings(dx=args.dx))
+    W = P.LINK_POSE @ sim.pads[P.INDEX].sensor_frame
+    sim.add_rigid_object("indenter", P._collider(args.indenter, P.indenter_pose(args.indenter, W, P.GAP), 0.5))
+
+    def step(z: float):
+        sim.step({P.INDEX: P.LINK_POSE}, P.DT, {"indenter": P.indenter_pose(args.indenter, W, z)})
+        return sim.world.last_step
+
+    for z in (P.GAP, -0.5e-3, -1e-3):  # JIT, then press
+        step(z)
+    ti.profiler.clear_kernel_profiler_info()
+    t0 = time.perf_counter()
+    info = step(-1e-3)
+    wall = time.perf_counter() - t0
+    busy = ti.profiler.get_kernel_profiler_total_time()
+    print(f"index pad, {args.indenter} pressed 1 mm, dx = {args.dx * 1e3:g} mm, Taichi cpu: "
+          f"{info.active_particles} particles, {info.substeps} substeps, {info.grid_cells} grid cells")
+    print(f"wall {wall * 1e3:.0f} ms per 50 ms step, in kernels {busy * 1e3:.0f} ms "
+          f"({100 * busy / wall:.0f} %), launch overhead {1e3 * (wall - busy) / info.substeps:.2f} ms per substep")
+    print(f"throughput {info.active_particles * info.substeps / wall / 1e6:.2f} M particle-substeps/s "
+          f"({info.active_particles * info.substeps / busy / 1e6:.2f} M/s in kernels)")
+    ti.profiler.print_kernel_profiler_info("count")
+    return 0
