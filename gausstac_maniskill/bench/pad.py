@@ -60,6 +60,8 @@ class Protocol:
 
 
 FULL, QUICK = Protocol(3, 4, 3), Protocol(2, 2, 2)
+CURVE = Protocol(press=2, slide=0, hold=2)  # press and hold only (speed-vs-error curve)
+DEFAULT_MASS_SCALING = 1000.0  # default_hand_settings' pseudo-mass of pads
 
 
 # ---------------------------------------------------------------------------- numerics
@@ -149,8 +151,10 @@ def _contact_area(sim, pad) -> float:
 
 
 def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
-             friction: float = FRICTION, bar=None) -> dict:
-    """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m].
+             friction: float = FRICTION, bar=None, mass_scaling: float | None = None) -> dict:
+    """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
+    (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
+    (default: :func:`default_hand_settings`').
 
     Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
     "phases": [...]}``; each phase (``"press"`` / ``"slide"`` at depth ``d`` [m]) holds
@@ -162,7 +166,8 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
 
     t0 = time.perf_counter()
     spec = index_spec(thickness)
-    sim = GaussTacSim([spec], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx))
+    extra = {} if mass_scaling is None else {"mass_scaling": float(mass_scaling)}
+    sim = GaussTacSim([spec], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra))
     pad = sim.pads[INDEX]
     W = LINK_POSE @ pad.sensor_frame
     sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
@@ -181,17 +186,18 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
         return F, {k: maps[k].numpy().astype(np.float64) for k in MAPS}
 
     def hold(phase: str, d: float, z: float, x: float) -> dict:
-        Fs, ms, areas = [], [], []
+        Fs, ms, areas, Fstress = [], [], [], []
         for _ in range(protocol.hold):
             F, m = step(z, x)
             Fs.append(F)
             ms.append(m)
             areas.append(_contact_area(sim, pad))
+            Fstress.append(sim.pad_pressure_force(INDEX))
         Fs = np.array(Fs)
         maps = {k: np.mean([m[k] for m in ms], axis=0) for k in MAPS}
         Fn = float(Fs[:, 2].mean())
         return dict(phase=phase, d=d, Fn=Fn, Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
-                    F_map=float(maps["force"].sum()), F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
+                    F_map=float(maps["force"].sum()), F_stress=float(np.mean(Fstress)), F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
                     area_taxel=float((maps["force"] > AREA_FORCE).sum() * taxel_area),
                     area_particle=float(np.mean(areas)), peak_depth=float(maps["depth"].max()), maps=maps)
 
@@ -204,12 +210,14 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
             step(z + (-d - z) * (k + 1) / protocol.press, 0.0)
         z = -d
         phases.append(hold("press", d, z, 0.0))
+        if not protocol.slide:
+            continue
         pressed = sim.state_dict()
         for k in range(protocol.slide):
             step(z, SLIDE * (k + 1) / protocol.slide)
         phases.append(hold("slide", d, z, SLIDE))
         sim.load_state_dict(pressed)
-    return dict(dx=dx, indenter=indenter, particles=pad.num_particles, soft=int((~pad.kinematic).sum()),
+    return dict(dx=dx, indenter=indenter, mass_scaling=sim.settings.mass_scaling, particles=pad.num_particles, soft=int((~pad.kinematic).sum()),
                 substeps=float(np.mean(subs)), step_ms=1e3 * float(np.mean(walls)), build_s=build_s,
                 thickness=spec.thickness, phases=phases)
 
@@ -347,6 +355,55 @@ def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=N
     return cases
 
 
+def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress: bool = True) -> dict:
+    """Speed against force error on the product pad (``bench pad --curve``).
+
+    ``points``: (dx [m], mass_scaling) pairs; each presses ``indenter`` ``depth`` [m] into
+    the index pad (:data:`CURVE` protocol) and records the held normal force Fn [N] and
+    the MPM wall time per 50 ms step [ms], and the normal force read from the pad's stress
+    (:meth:`GaussTacSim.pad_pressure_force`, for the consistency of the two readings). The reference is the Richardson extrapolation
+    of Fn over the three finest grids at the default mass scaling when it gives an order
+    in (0.5, 4), else the finest run; errors are Fn / reference − 1.
+    Returns ``{"runs": [...], "reference": float, "reference_from": str}``.
+    """
+    from tqdm import tqdm
+
+    runs = []
+    with tqdm(total=len(points) * (1 + CURVE.press + CURVE.hold), disable=not progress, desc="curve") as bar:
+        for dx, ms in sorted(points, key=lambda t: (-t[0], t[1])):
+            bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}")
+            c = run_case(dx, indenter, [depth], protocol=CURVE, bar=bar, mass_scaling=ms)
+            runs.append(dict(dx=dx, mass_scaling=ms, particles=c["particles"], substeps=c["substeps"],
+                             step_ms=c["step_ms"], Fn=c["phases"][0]["Fn"], F_spread=c["phases"][0]["F_spread"],
+                             F_stress=c["phases"][0]["F_stress"]))
+    base = sorted((r for r in runs if r["mass_scaling"] == DEFAULT_MASS_SCALING), key=lambda r: r["dx"])
+    ref, src = base[0]["Fn"], f"finest run (dx = {base[0]['dx'] * 1e3:g} mm)"
+    if len(base) >= 3:
+        rich = richardson([r["dx"] for r in base[:3]], [r["Fn"] for r in base[:3]])
+        if rich["status"] == "ok" and 0.5 < rich["p"] < 4.0:
+            ref = rich["f_star"]
+            grids = ", ".join(f"{r['dx'] * 1e3:g}" for r in base[:3])
+            src = f"Richardson over dx = {grids} mm (order {rich['p']:.2f})"
+    for r in runs:
+        r["err"] = r["Fn"] / ref - 1.0
+    return dict(runs=runs, reference=ref, reference_from=src)
+
+
+def format_curve(curve: dict, indenter: str, depth: float) -> str:
+    """Markdown table of :func:`speed_curve`, cheapest first."""
+    out = [f"Speed against error: index pad, {indenter} pressed {depth * 1e3:g} mm, held normal force vs "
+           f"reference {curve['reference']:.4f} N ({curve['reference_from']})", "",
+           "| dx [mm] | cells in the 4 mm layer | pad mass scaling | particles | substeps / step | "
+           "MPM wall / 50 ms step [ms] | Fn [N] | Fn spread over hold | error | "
+           "force from pad stress [N] | stress / contact |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(curve["runs"], key=lambda r: r["step_ms"]):
+        out.append(f"| {r['dx'] * 1e3:g} | {4e-3 / r['dx']:.1f} | {r['mass_scaling']:g} | {r['particles']} | "
+                   f"{r['substeps']:.0f} | {r['step_ms']:.0f} | {r['Fn']:.4f} | {100 * r['F_spread']:.1f}% | "
+                   f"{_pct(r['err'])} | {r['F_stress']:.4f} | {_pct(r['F_stress'] / r['Fn'] - 1)} |")
+    return "\n".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     from ..cosim import default_hand_settings
 
@@ -361,7 +418,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--friction", type=float, default=FRICTION)
     ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
     ap.add_argument("--out", default="out/bench_pad")
+    ap.add_argument("--curve", action="store_true",
+                    help="speed-vs-error curve instead: --dx grids at the default mass scaling, plus the "
+                         "--mass-scaling values at the default dx (first --indenters, first --depths)")
+    ap.add_argument("--mass-scaling", type=float, nargs="+", default=[250.0, 4000.0, 16000.0],
+                    help="pad pseudo-mass factors of the curve at the default dx")
     args = ap.parse_args(argv)
+    if args.curve:
+        arch = backend.init(args.arch)
+        dxs = args.dx or [2e-3, 1.5e-3, default_dx, 0.75e-3, 0.5e-3]
+        points = [(dx, DEFAULT_MASS_SCALING) for dx in dxs] + [(default_dx, m) for m in args.mass_scaling]
+        t0 = time.perf_counter()
+        curve = speed_curve(points, args.indenters[0], args.depths[-1])
+        text = (f"on {arch} ({os.cpu_count()} cores), total {time.perf_counter() - t0:.0f} s\n\n"
+                + format_curve(curve, args.indenters[0], args.depths[-1]))
+        print(text)
+        os.makedirs(args.out, exist_ok=True)
+        with open(os.path.join(args.out, "curve.md"), "w") as f:
+            f.write(text + "\n")
+        return 0
     dxs = args.dx or ([2e-3, 1.5e-3, 1e-3] if args.quick else [default_dx, 0.75e-3, 0.5e-3])
     protocol = QUICK if args.quick else FULL
     arch = backend.init(args.arch)

@@ -63,3 +63,28 @@ def test_coarse_press_and_slide(tmp_path):
     text = bench.format_tables(cases, ana, 2e-3)
     assert "| plate | 1 | slide | 1.5 |" in text and ana["verdict"] in text
     assert len(bench.plot_maps(cases, str(tmp_path))) in (0, 4)
+
+
+def _fake_case(fn):
+    """run_case stand-in: Fn = fn(dx, mass_scaling); guards speed_curve's bookkeeping, not physics."""
+    def run_case(dx, indenter, depths, protocol=None, bar=None, mass_scaling=None, **_):
+        return dict(particles=int(1e-6 / dx ** 3), substeps=10.0, step_ms=1e-3 / dx,
+                    phases=[dict(Fn=fn(dx, mass_scaling), F_spread=0.0, F_stress=0.95 * fn(dx, mass_scaling))])
+    return run_case
+
+
+def test_speed_curve_reference_and_errors(monkeypatch):
+    # first-order convergence to 2 N: the reference is the Richardson limit, not the finest run
+    monkeypatch.setattr(bench, "run_case", _fake_case(lambda dx, ms: 2.0 + 100.0 * dx + (0.1 if ms > 1e3 else 0.0)))
+    pts = [(2e-3, 1e3), (1e-3, 1e3), (0.5e-3, 1e3), (1e-3, 4e3)]
+    curve = bench.speed_curve(pts, progress=False)
+    assert curve["reference"] == pytest.approx(2.0, rel=1e-6)
+    assert "Richardson" in curve["reference_from"]
+    err = {(r["dx"], r["mass_scaling"]): r["err"] for r in curve["runs"]}
+    assert err[(1e-3, 1e3)] == pytest.approx(0.05) and err[(1e-3, 4e3)] == pytest.approx(0.1)
+    table = bench.format_curve(curve, "sphere", 1e-3)
+    assert table.count("\n| ") == 1 + len(pts) and "-5.0%" in table  # header + one row per point
+    # no usable order (not monotone): the finest run is the reference
+    monkeypatch.setattr(bench, "run_case", _fake_case(lambda dx, ms: {2e-3: 1.0, 1e-3: 1.3, 0.5e-3: 1.2}[dx]))
+    curve = bench.speed_curve(pts[:3], progress=False)
+    assert curve["reference"] == 1.2 and curve["reference_from"].startswith("finest run")
