@@ -259,6 +259,33 @@ class GaussTacSim:
         px, py = p.spec.layout.pitch
         return float(self.tactile()[p.name]["pressure"].sum()) * px * py
 
+    def pad_stress_force(self, pad: str) -> np.ndarray:
+        """Total force [N] that contacts exert on ``pad``, read from its stress by virtual
+        work, in the sensor frame (x along the finger, y across, z out of the pad; pressing
+        gives a negative z). Rigid and soft contacts alike.
+
+        With a test field φ = 1 − d/h over the soft layer (d the rest depth below the pad
+        surface, h the layer thickness; φ = 1 on the contact surface, 0 at the bond), the
+        weak form of equilibrium gives ∫ σ ∇φ dV = ∫ φ t dA = the contact force, since the
+        free surface carries no traction. Quadrature over the soft particles:
+        f = Σ_p V0_p J_p σ_p F_p⁻ᵀ N_p / h, N_p the rest outward normal. Exact at
+        equilibrium up to quadrature, for any contact position on the layer; unlike the
+        pressure map it does not assume the load is carried along the sensor axis.
+        """
+        p = self._pad(pad)
+        if not self._awake[p.name]:
+            return np.zeros(3)
+        w = self.world
+        soft = ~p.kinematic
+        F = w.deformation_gradients(p.name)[soft].astype(np.float64)
+        sigma = w.stresses(p.name)[soft].astype(np.float64)
+        N = p.normal[soft] @ w.binding_rotation(p.name).T  # rest normals, world frame at binding
+        grad_phi = np.linalg.solve(np.transpose(F, (0, 2, 1)), N[..., None])[..., 0] / p.spec.thickness
+        vol = w.rest_volumes(p.name)[soft] * np.linalg.det(F)
+        f = np.einsum("n,nij,nj->i", vol, sigma, grad_phi)
+        R = self._link_pose[p.spec.link][:3, :3] @ p.sensor_frame[:3, :3]
+        return R.T @ f
+
     def pad_normal_force(self, pad: str) -> float:
         """Total normal contact force [N] on ``pad`` in the last step (sum of its force map)."""
         return float(self.tactile()[self._pad(pad).name]["force"].sum())

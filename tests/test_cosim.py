@@ -73,6 +73,27 @@ def test_force_map_sums_to_the_collider_reaction(pressed):
     assert abs(total - reaction_along_normal) <= 0.02 * reaction_along_normal
 
 
+def test_stress_reading_matches_the_contact_force(hand_poses):
+    """The pad's stress, read by virtual work (pad_stress_force), against the collider's
+    reaction: two independent readings of one force, at the default dx = 1 mm (issue 10:
+    within 5 %; measured -3.6 % for a 5 mm sphere on a level pad). The pressure-map
+    estimate is 10-15 % low on this curved pad, so it would fail here. The hand pose turns
+    the link, so the binding and sensor frames are exercised too."""
+    spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
+    sim = GaussTacSim([spec], {INDEX: hand_poses[INDEX]}, settings=default_hand_settings(dx=1e-3))
+    centre = add_ball(sim, hand_poses, friction=0.0)
+    for k in range(6):
+        sim.step({INDEX: hand_poses[INDEX]}, 0.05, {"ball": centre(0.8e-3 * min(1.0, (k + 1) / 3))})
+    F, _ = sim.object_wrench("ball")
+    W = apex_frame(sim, hand_poses)
+    contact = W[:3, :3].T @ F  # reaction on the ball, sensor axes: the pad pushes it out (+z)
+    stress = sim.pad_stress_force(INDEX)  # force on the pad, sensor axes: pushed in (-z)
+    print("contact", contact, "stress", stress, "pressure map", sim.pad_pressure_force(INDEX))
+    assert contact[2] > 0.05
+    assert abs(-stress[2] / contact[2] - 1.0) <= 0.05
+    assert np.linalg.norm(stress[:2]) <= 0.05 * contact[2]  # centred frictionless press: no shear
+
+
 def test_centred_press_map_is_symmetric(pressed):
     _, maps, _ = pressed
     depth = maps[INDEX]["depth"].numpy()

@@ -192,12 +192,14 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
             Fs.append(F)
             ms.append(m)
             areas.append(_contact_area(sim, pad))
-            Fstress.append(sim.pad_pressure_force(INDEX))
+            Fstress.append((-sim.pad_stress_force(INDEX)[2], sim.pad_pressure_force(INDEX)))
         Fs = np.array(Fs)
         maps = {k: np.mean([m[k] for m in ms], axis=0) for k in MAPS}
         Fn = float(Fs[:, 2].mean())
         return dict(phase=phase, d=d, Fn=Fn, Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
-                    F_map=float(maps["force"].sum()), F_stress=float(np.mean(Fstress)), F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
+                    F_map=float(maps["force"].sum()), F_stress=float(np.mean([f[0] for f in Fstress])),
+                    F_pressure=float(np.mean([f[1] for f in Fstress])),
+                    F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
                     area_taxel=float((maps["force"] > AREA_FORCE).sum() * taxel_area),
                     area_particle=float(np.mean(areas)), peak_depth=float(maps["depth"].max()), maps=maps)
 
@@ -361,7 +363,8 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
     ``points``: (dx [m], mass_scaling) pairs; each presses ``indenter`` ``depth`` [m] into
     the index pad (:data:`CURVE` protocol) and records the held normal force Fn [N] and
     the MPM wall time per 50 ms step [ms], and the normal force read from the pad's stress
-    (:meth:`GaussTacSim.pad_pressure_force`, for the consistency of the two readings). The reference is the Richardson extrapolation
+    (:meth:`GaussTacSim.pad_stress_force`, virtual work; and the older pressure-map estimate
+    :meth:`GaussTacSim.pad_pressure_force`), for the consistency of the readings. The reference is the Richardson extrapolation
     of Fn over the three finest grids at the default mass scaling when it gives an order
     in (0.5, 4), else the finest run; errors are Fn / reference − 1.
     Returns ``{"runs": [...], "reference": float, "reference_from": str}``.
@@ -375,7 +378,7 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
             c = run_case(dx, indenter, [depth], protocol=CURVE, bar=bar, mass_scaling=ms)
             runs.append(dict(dx=dx, mass_scaling=ms, particles=c["particles"], substeps=c["substeps"],
                              step_ms=c["step_ms"], Fn=c["phases"][0]["Fn"], F_spread=c["phases"][0]["F_spread"],
-                             F_stress=c["phases"][0]["F_stress"]))
+                             F_stress=c["phases"][0]["F_stress"], F_pressure=c["phases"][0]["F_pressure"]))
     base = sorted((r for r in runs if r["mass_scaling"] == DEFAULT_MASS_SCALING), key=lambda r: r["dx"])
     ref, src = base[0]["Fn"], f"finest run (dx = {base[0]['dx'] * 1e3:g} mm)"
     if len(base) >= 3:
@@ -395,12 +398,13 @@ def format_curve(curve: dict, indenter: str, depth: float) -> str:
            f"reference {curve['reference']:.4f} N ({curve['reference_from']})", "",
            "| dx [mm] | cells in the 4 mm layer | pad mass scaling | particles | substeps / step | "
            "MPM wall / 50 ms step [ms] | Fn [N] | Fn spread over hold | error | "
-           "force from pad stress [N] | stress / contact |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "Fn from pad stress [N] | stress / contact | pressure map × area / contact |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(curve["runs"], key=lambda r: r["step_ms"]):
         out.append(f"| {r['dx'] * 1e3:g} | {4e-3 / r['dx']:.1f} | {r['mass_scaling']:g} | {r['particles']} | "
                    f"{r['substeps']:.0f} | {r['step_ms']:.0f} | {r['Fn']:.4f} | {100 * r['F_spread']:.1f}% | "
-                   f"{_pct(r['err'])} | {r['F_stress']:.4f} | {_pct(r['F_stress'] / r['Fn'] - 1)} |")
+                   f"{_pct(r['err'])} | {r['F_stress']:.4f} | {_pct(r['F_stress'] / r['Fn'] - 1)} | "
+                   f"{_pct(r['F_pressure'] / r['Fn'] - 1)} |")
     return "\n".join(out)
 
 

@@ -39,8 +39,10 @@ Example::
 """
 from __future__ import annotations
 
+import atexit
 import math
 import time
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +58,17 @@ from .kinematics import FRAME
 from .materials import material_table
 
 __all__ = ["MPMWorld", "StepInfo", "Group"]
+
+_WORLDS: "weakref.WeakSet[MPMWorld]" = weakref.WeakSet()
+
+
+@atexit.register
+def _release_packs() -> None:
+    """Free every world's kernel argument packs while Taichi still runs: a pack left to the
+    interpreter's teardown prints a TypeError from Taichi's ArgPack.__del__ at exit."""
+    for world in list(_WORLDS):
+        world._pack.clear()
+
 
 _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id")
 
@@ -133,6 +146,7 @@ class MPMWorld:
         self._reach = 0.0
         self._link_radius: list[float] = []
         self._pack: dict = {}  # kernel argument packs (kernels.Particles, Grid, Scene, Order)
+        _WORLDS.add(self)
 
     # ------------------------------------------------------------------ building
     def add_link(self, name: str, pose) -> int:
@@ -327,6 +341,16 @@ class MPMWorld:
     def rest_positions(self, group: str | None = None) -> np.ndarray:
         """Kinematic particles' rest coordinates [N, 3] in their link frame (0 for others)."""
         return self._read("X0", group)
+
+    def rest_volumes(self, group: str | None = None) -> np.ndarray:
+        """Rest volume V0 [m³] of each particle, [N]."""
+        return self._read("vol", group)
+
+    def binding_rotation(self, group: str) -> np.ndarray:
+        """World rotation (3x3) of a group's link when the group was added: the frame its
+        deformation gradients are measured from (identity for a group without a link)."""
+        self._pull()
+        return quat_to_matrix(self._host["group_bind"][self.groups.index(self.group(group))].astype(np.float64))
 
     def kinematic_mask(self, group: str | None = None) -> np.ndarray:
         """[N] bool: which particles are kinematic."""
