@@ -268,21 +268,17 @@ class GaussTacSim:
         surface, h the layer thickness; φ = 1 on the contact surface, 0 at the bond), the
         weak form of equilibrium gives ∫ σ ∇φ dV = ∫ φ t dA = the contact force, since the
         free surface carries no traction. Quadrature over the soft particles:
-        f = Σ_p V0_p J_p σ_p F_p⁻ᵀ N_p / h, N_p the rest outward normal. Exact at
+        f = Σ_p V0_p J_p σ_p F_p⁻ᵀ N_p / h, N_p the rest outward normal
+        (:meth:`MPMWorld.virtual_work_force`). Exact at
         equilibrium up to quadrature, for any contact position on the layer; unlike the
         pressure map it does not assume the load is carried along the sensor axis.
         """
         p = self._pad(pad)
         if not self._awake[p.name]:
             return np.zeros(3)
-        w = self.world
-        soft = ~p.kinematic
-        F = w.deformation_gradients(p.name)[soft].astype(np.float64)
-        sigma = w.stresses(p.name)[soft].astype(np.float64)
-        N = p.normal[soft] @ w.binding_rotation(p.name).T  # rest normals, world frame at binding
-        grad_phi = np.linalg.solve(np.transpose(F, (0, 2, 1)), N[..., None])[..., 0] / p.spec.thickness
-        vol = w.rest_volumes(p.name)[soft] * np.linalg.det(F)
-        f = np.einsum("n,nij,nj->i", vol, sigma, grad_phi)
+        grad_phi = (p.normal @ self.world.binding_rotation(p.name).T) / p.spec.thickness  # world at binding
+        grad_phi[p.kinematic] = 0.0
+        f = self.world.virtual_work_force(p.name, grad_phi)
         R = self._link_pose[p.spec.link][:3, :3] @ p.sensor_frame[:3, :3]
         return R.T @ f
 

@@ -225,3 +225,37 @@ def test_pad_never_sleeps_deformed(hand_poses):
             assert u < 1e-6  # asleep means at rest
     assert awake[0], "the pad fell asleep still deformed"
     assert not awake[-1], "the pad never settled"
+
+
+@pytest.mark.xfail(strict=True, reason="known gap (issue 10): where two quasi-static groups meet on the shared grid "
+                   "(pad on a bound sponge), the pad's stress reads ~0.60 N and the sponge's own stress ~0.09 N in "
+                   "equilibrium; the same sponge under a rigid ball reads within 3 % of the ball's reaction")
+def test_pad_reads_the_force_of_a_soft_object():
+    """A sponge bound to a holder link is lifted 1.3 mm into the index pad: no collider
+    touches the pad (its contact force map reads 0), so only the stress reading sees the
+    load. Equal and opposite: the pad's reading against the sponge's own (virtual work with
+    φ = 1 on its top, 0 at its bond)."""
+    from gausstac_maniskill.config import Material
+    from gausstac_maniskill.mpm.sampling import box_particles
+
+    pose = np.eye(4)
+    pose[2, 3] = 0.1
+    spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
+    sim = GaussTacSim([spec], {INDEX: pose}, settings=default_hand_settings(dx=1e-3))
+    W = pose @ sim.pads[INDEX].sensor_frame
+    R, H, bond = W[:3, :3], 6e-3, 5e-3  # sponge frame: z along the sensor axis; 6 mm thick, bound below 5 mm
+    local = box_particles(np.array([-6e-3, -6e-3, -H]), np.array([6e-3, 6e-3, 0.0]), sim.settings.particle_spacing)
+    base = W[:3, 3] + R[:, 2] * 0.3e-3  # top 0.3 mm clear of the pad's apex
+    sim.world.add_link("holder", make_pose(base, R))
+    kin = local[:, 2] < -bond
+    sim.add_soft_object("sponge", local @ R.T + base, Material(E=5e4, nu=0.3, density=60.0), link="holder",
+                        kinematic=kin)
+    for k in range(6):
+        lift = 1.3e-3 * min(1.0, (k + 1) / 3)
+        maps = sim.step({INDEX: pose, "holder": make_pose(base - R[:, 2] * lift, R)}, 0.05)
+    on_pad = sim.pad_stress_force(INDEX)[2]  # sensor z: negative when pushed in
+    grad = np.where(kin[:, None], 0.0, R[:, 2] / bond)  # φ = 1 + z/bond: 1 on top, 0 at the bond
+    on_sponge = float(sim.world.virtual_work_force("sponge", grad) @ R[:, 2])
+    assert float(maps[INDEX]["force"].sum()) == 0.0  # no collider: the contact map cannot see it
+    assert on_sponge > 0.05
+    assert abs(-on_pad / on_sponge - 1.0) <= 0.10

@@ -346,6 +346,29 @@ class MPMWorld:
         """Rest volume V0 [m³] of each particle, [N]."""
         return self._read("vol", group)
 
+    def virtual_work_force(self, group: str, grad_phi) -> np.ndarray:
+        """Force [N, world frame] that a group's boundary loads exert where a test field φ is 1,
+        read from its stress: ∫ σ ∇φ dV = ∫ φ t dA (weak form of equilibrium, exact in
+        equilibrium when φ vanishes wherever else the group is loaded, e.g. at its bond).
+
+        Args:
+            group: group name.
+            grad_phi: [N, 3] ∇φ of each particle [1/m] in the rest configuration (world frame
+                at binding, see :meth:`binding_rotation`); zero rows drop a particle.
+        Returns:
+            [3] Σ_p V0_p J_p σ_p F_p⁻ᵀ ∇φ_p.
+        """
+        g = np.asarray(grad_phi, np.float64)
+        n = self.group(group).count
+        if g.shape != (n, 3):
+            raise ConfigError(f"virtual_work_force({group!r}): grad_phi must have shape {(n, 3)}, got {g.shape}")
+        use = np.any(g != 0.0, axis=1)
+        F = self.deformation_gradients(group)[use].astype(np.float64)
+        sigma = self.stresses(group)[use].astype(np.float64)
+        grad_x = np.linalg.solve(np.transpose(F, (0, 2, 1)), g[use][..., None])[..., 0]
+        vol = self.rest_volumes(group)[use] * np.linalg.det(F)
+        return np.einsum("n,nij,nj->i", vol, sigma, grad_x)
+
     def binding_rotation(self, group: str) -> np.ndarray:
         """World rotation (3x3) of a group's link when the group was added: the frame its
         deformation gradients are measured from (identity for a group without a link)."""
