@@ -19,6 +19,10 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench splat
 	$(PY) -m gausstac_maniskill.bench hand
 	$(PY) -m gausstac_maniskill.bench envs
+	$(PY) -m gausstac_maniskill.bench thinlayer
+	$(PY) -m gausstac_maniskill.bench pad --curve --indenters sphere --out out/bench_pad_sphere
+	$(PY) -m gausstac_maniskill.bench pad --curve --indenters plate --out out/bench_pad_plate
+	$(PY) -m gausstac_maniskill.bench kernels
 
 clean:
 	rm -rf .venv out build *.egg-info
