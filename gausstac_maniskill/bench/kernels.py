@@ -30,13 +30,9 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     import taichi as ti
 
-    from ..cosim import GaussTacSim, default_hand_settings
     from . import pad as P
 
-    spec = P.index_spec()
-    sim = GaussTacSim([spec], {P.INDEX: P.LINK_POSE}, settings=default_hand_settings(dx=args.dx))
-    W = P.LINK_POSE @ sim.pads[P.INDEX].sensor_frame
-    sim.add_rigid_object("indenter", P._collider(args.indenter, P.indenter_pose(args.indenter, W, P.GAP), 0.5))
+    sim, W = P.make_sim(args.dx, args.indenter)
 
     def step(z: float):
         sim.step({P.INDEX: P.LINK_POSE}, P.DT, {"indenter": P.indenter_pose(args.indenter, W, z)})

@@ -61,7 +61,6 @@ class Protocol:
 
 FULL, QUICK = Protocol(3, 4, 3), Protocol(2, 2, 2)
 CURVE = Protocol(press=2, slide=0, hold=2)  # press and hold only (speed-vs-error curve)
-DEFAULT_MASS_SCALING = 1000.0  # default_hand_settings' pseudo-mass of pads
 
 
 # ---------------------------------------------------------------------------- numerics
@@ -150,6 +149,21 @@ def _contact_area(sim, pad) -> float:
     return len(cells) * pad.spacing ** 2
 
 
+def make_sim(dx: float, indenter: str, thickness: float | None = None, friction: float = FRICTION,
+             mass_scaling: float | None = None):
+    """The benchmark's scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
+    :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
+    factor ``mass_scaling``) and ``indenter`` ("plate" | "sphere") 0.2 mm clear of its apex.
+    Returns (sim, W): W the sensor frame's world pose (4x4)."""
+    from ..cosim import GaussTacSim, default_hand_settings
+
+    extra = {} if mass_scaling is None else {"mass_scaling": float(mass_scaling)}
+    sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra))
+    W = LINK_POSE @ sim.pads[INDEX].sensor_frame
+    sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
+    return sim, W
+
+
 def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
              friction: float = FRICTION, bar=None, mass_scaling: float | None = None) -> dict:
     """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
@@ -162,15 +176,10 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     of Fn, ``area_taxel``, ``area_particle`` [m²], ``peak_depth`` [m] and ``maps``
     (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
     """
-    from ..cosim import GaussTacSim, default_hand_settings
-
     t0 = time.perf_counter()
-    spec = index_spec(thickness)
-    extra = {} if mass_scaling is None else {"mass_scaling": float(mass_scaling)}
-    sim = GaussTacSim([spec], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra))
+    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling)
     pad = sim.pads[INDEX]
-    W = LINK_POSE @ pad.sensor_frame
-    sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
+    spec = pad.spec
     build_s = time.perf_counter() - t0
     lay = spec.layout
     taxel_area = lay.pitch[0] * lay.pitch[1]
@@ -219,7 +228,8 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
             step(z, SLIDE * (k + 1) / protocol.slide)
         phases.append(hold("slide", d, z, SLIDE))
         sim.load_state_dict(pressed)
-    return dict(dx=dx, indenter=indenter, mass_scaling=sim.settings.mass_scaling, particles=pad.num_particles, soft=int((~pad.kinematic).sum()),
+    return dict(dx=dx, indenter=indenter, mass_scaling=sim.settings.mass_scaling, particles=pad.num_particles,
+                soft=int((~pad.kinematic).sum()),
                 substeps=float(np.mean(subs)), step_ms=1e3 * float(np.mean(walls)), build_s=build_s,
                 thickness=spec.thickness, phases=phases)
 
@@ -361,12 +371,13 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
     """Speed against force error on the product pad (``bench pad --curve``).
 
     ``points``: (dx [m], mass_scaling) pairs; each presses ``indenter`` ``depth`` [m] into
-    the index pad (:data:`CURVE` protocol) and records the held normal force Fn [N] and
-    the MPM wall time per 50 ms step [ms], and the normal force read from the pad's stress
-    (:meth:`GaussTacSim.pad_stress_force`, virtual work; and the older pressure-map estimate
-    :meth:`GaussTacSim.pad_pressure_force`), for the consistency of the readings. The reference is the Richardson extrapolation
-    of Fn over the three finest grids at the default mass scaling when it gives an order
-    in (0.5, 4), else the finest run; errors are Fn / reference − 1.
+    the index pad (:data:`CURVE` protocol) and records the held normal force Fn [N], the
+    MPM wall time per 50 ms step [ms], and the normal force read from the pad's stress
+    (:meth:`GaussTacSim.pad_stress_force`, virtual work; and the older pressure-map
+    estimate :meth:`GaussTacSim.pad_pressure_force`), for the consistency of the readings.
+    The reference is the Richardson extrapolation of Fn over the three finest grids at the
+    default mass scaling when it gives an order in (0.5, 4), else the finest run; errors
+    are Fn / reference − 1.
     Returns ``{"runs": [...], "reference": float, "reference_from": str}``.
     """
     from tqdm import tqdm
@@ -379,7 +390,10 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
             runs.append(dict(dx=dx, mass_scaling=ms, particles=c["particles"], substeps=c["substeps"],
                              step_ms=c["step_ms"], Fn=c["phases"][0]["Fn"], F_spread=c["phases"][0]["F_spread"],
                              F_stress=c["phases"][0]["F_stress"], F_pressure=c["phases"][0]["F_pressure"]))
-    base = sorted((r for r in runs if r["mass_scaling"] == DEFAULT_MASS_SCALING), key=lambda r: r["dx"])
+    from ..cosim import default_hand_settings
+
+    default_ms = default_hand_settings().mass_scaling
+    base = sorted((r for r in runs if r["mass_scaling"] == default_ms), key=lambda r: r["dx"])
     ref, src = base[0]["Fn"], f"finest run (dx = {base[0]['dx'] * 1e3:g} mm)"
     if len(base) >= 3:
         rich = richardson([r["dx"] for r in base[:3]], [r["Fn"] for r in base[:3]])
@@ -411,7 +425,7 @@ def format_curve(curve: dict, indenter: str, depth: float) -> str:
 def main(argv: list[str] | None = None) -> int:
     from ..cosim import default_hand_settings
 
-    default_dx = default_hand_settings().dx
+    default_dx, default_ms = default_hand_settings().dx, default_hand_settings().mass_scaling
     ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench pad", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="dx 2, 1.5, 1 mm and fewer control steps")
@@ -431,7 +445,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.curve:
         arch = backend.init(args.arch)
         dxs = args.dx or [2e-3, 1.5e-3, default_dx, 0.75e-3, 0.5e-3]
-        points = [(dx, DEFAULT_MASS_SCALING) for dx in dxs] + [(default_dx, m) for m in args.mass_scaling]
+        points = [(dx, default_ms) for dx in dxs] + [(default_dx, m) for m in args.mass_scaling]
         t0 = time.perf_counter()
         curve = speed_curve(points, args.indenters[0], args.depths[-1])
         text = (f"on {arch} ({os.cpu_count()} cores), total {time.perf_counter() - t0:.0f} s\n\n"

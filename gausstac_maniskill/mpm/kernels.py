@@ -19,7 +19,7 @@ import taichi as ti
 
 from . import materials as mat
 from .colliders import collider_contact
-from .kinematics import FRAME, frame_at, quat_to_mat, write_frames
+from .kinematics import frame_at, quat_to_mat, write_frames
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3

@@ -356,7 +356,7 @@ class MPMWorld:
             grad_phi: [N, 3] ∇φ of each particle [1/m] in the rest configuration (world frame
                 at binding, see :meth:`binding_rotation`); zero rows drop a particle.
         Returns:
-            [3] Σ_p V0_p J_p σ_p F_p⁻ᵀ ∇φ_p.
+            [3] Σ_p V0_p J_p σ_p F_p⁻ᵀ ∇φ_p = Σ_p V0_p τ_p F_p⁻ᵀ ∇φ_p (τ Kirchhoff).
         """
         g = np.asarray(grad_phi, np.float64)
         n = self.group(group).count
@@ -364,10 +364,9 @@ class MPMWorld:
             raise ConfigError(f"virtual_work_force({group!r}): grad_phi must have shape {(n, 3)}, got {g.shape}")
         use = np.any(g != 0.0, axis=1)
         F = self.deformation_gradients(group)[use].astype(np.float64)
-        sigma = self.stresses(group)[use].astype(np.float64)
+        tau = self._read("tau", group)[use].astype(np.float64)
         grad_x = np.linalg.solve(np.transpose(F, (0, 2, 1)), g[use][..., None])[..., 0]
-        vol = self.rest_volumes(group)[use] * np.linalg.det(F)
-        return np.einsum("n,nij,nj->i", vol, sigma, grad_x)
+        return np.einsum("n,nij,nj->i", self.rest_volumes(group)[use], tau, grad_x)
 
     def binding_rotation(self, group: str) -> np.ndarray:
         """World rotation (3x3) of a group's link when the group was added: the frame its
