@@ -1,5 +1,6 @@
 """GaussTac's packaged assets: one folder per hand (``allegro_hand_right/gaussians.ply`` +
-``links.json``, ``ability_hand_right/finger_L2_hull.obj``).
+``links.json``, ``ability_hand_right/finger_L2_hull.obj``) and the example captured scene
+(``tabletop_scene/gaussians.ply``, made by :mod:`gausstac_maniskill.splat.example_scene`).
 
 The repository's top-level ``assets/`` is installed as the package
 ``gausstac_maniskill.assets`` (``pyproject.toml``: package-dir + package-data), so the

@@ -20,3 +20,8 @@ class SimulationError(GaussTacError, RuntimeError):
 
 class ResolutionWarning(UserWarning):
     """A simulated feature spans too few grid cells for its result to be converged."""
+
+
+class AssetWarning(UserWarning):
+    """An input file loads but looks wrong: mis-scaled, very large, or with values that
+    suggest a different convention. The message names the file, the field and a fix."""

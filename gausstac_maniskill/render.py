@@ -8,19 +8,23 @@
 * soft Gaussians on the surface particles of the pads and soft objects, bound to
   those particles (Σ = F Σ0 Fᵀ, SH view direction rotated by polar(F)ᵀ).
 
-and renders them with :func:`gausstac_maniskill.splat.rasterize`. Units: metres.
+and renders them with :func:`gausstac_maniskill.splat.rasterize`. Gaussians the
+co-simulator does not move — a captured background, captured objects riding on SAPIEN
+actors — join as :class:`RigidLayer` s (:meth:`SceneGaussians.add_layer`): they are
+splatted in the same rasterizer pass and sorted by depth with the hand's, so each
+occludes the other correctly. Units: metres.
 """
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import torch
 
 from .errors import ConfigError
-from .splat import GaussianSet, SoftBinding, pose_gaussians
+from .splat import GaussianSet, PosedGaussians, SoftBinding, pose_gaussians
 
-__all__ = ["SceneGaussians", "box_gaussians", "particle_gaussians"]
+__all__ = ["SceneGaussians", "RigidLayer", "box_gaussians", "particle_gaussians"]
 
 PAD_RGB = (0.55, 0.62, 0.78)      # translucent-looking blue-grey silicone
 SOFT_RGB = (0.95, 0.80, 0.25)     # foam yellow
@@ -79,6 +83,35 @@ def particle_gaussians(sim) -> tuple[GaussianSet, np.ndarray]:
     return gs, np.concatenate(idx)
 
 
+class RigidLayer:
+    """Gaussians outside the co-simulator that a :class:`SceneGaussians` splats with its own.
+
+    Args:
+        gaussians: the set. With ``poses=None`` its means are world coordinates (a captured
+            background; posed once and cached). Otherwise each Gaussian lies in the frame
+            ``link_id[g]`` indexes in ``poses()`` (captured objects in their actors' frames).
+        poses: ``None`` or a function returning the current ``[L, 4, 4]`` frame -> world
+            rigid transforms (metres); called every time the scene is posed.
+    """
+
+    def __init__(self, gaussians: GaussianSet, poses: Callable[[], object] | None = None):
+        self.gaussians = gaussians
+        self.poses = poses
+        self._static: PosedGaussians | None = None
+
+    def __len__(self) -> int:
+        return len(self.gaussians)
+
+    def posed(self) -> PosedGaussians:
+        """World-space Gaussians (full covariances) for the current poses."""
+        if self.poses is None:
+            if self._static is None:
+                self._static = pose_gaussians(self.gaussians)
+            return self._static
+        T = torch.as_tensor(np.asarray(self.poses(), dtype=np.float64), dtype=torch.float32)
+        return pose_gaussians(self.gaussians, T)
+
+
 class SceneGaussians:
     """Gaussians of a :class:`~gausstac_maniskill.cosim.GaussTacSim` scene.
 
@@ -109,6 +142,14 @@ class SceneGaussians:
         rest = torch.as_tensor(sim.world.positions())
         self.binding = SoftBinding.from_nearest(self.gaussians, rest,
                                                 gaussian_index=torch.arange(self.n_rigid, len(self.gaussians)))
+        self.layers: list[RigidLayer] = []
+
+    def add_layer(self, layer: RigidLayer) -> None:
+        """Splat ``layer`` (e.g. a captured scene or captured objects) with this scene's
+        Gaussians from now on, in the same pass (depth-sorted together)."""
+        if not isinstance(layer, RigidLayer):
+            raise ConfigError(f"add_layer takes a RigidLayer, got {type(layer).__name__}")
+        self.layers.append(layer)
 
     def _drop_pad_regions(self, hand: GaussianSet) -> GaussianSet:
         """Remove rigid Gaussians where a soft pad replaces the link's surface."""
@@ -123,8 +164,9 @@ class SceneGaussians:
             keep[sel[torch.as_tensor(d < 2.5 * pad.spacing)]] = False
         return hand[torch.nonzero(keep).flatten()]
 
-    def posed(self):
-        """World-space Gaussians for the simulator's current link, object and particle state."""
+    def posed(self) -> PosedGaussians:
+        """World-space Gaussians for the simulator's current link, object and particle state,
+        followed by those of the layers."""
         sim = self.sim
         poses = []
         for name in self.hand_links:
@@ -136,7 +178,10 @@ class SceneGaussians:
             poses.append(sim.world.colliders[sim._objects[name]].pose)
         link_poses = torch.as_tensor(np.array(poses) if poses else np.zeros((1, 4, 4)), dtype=torch.float32)
         x, F = sim.particles()
-        return pose_gaussians(self.gaussians, link_poses, self.binding, torch.as_tensor(x), torch.as_tensor(F))
+        posed = pose_gaussians(self.gaussians, link_poses, self.binding, torch.as_tensor(x), torch.as_tensor(F))
+        if self.layers:
+            posed = PosedGaussians.cat([posed, *(layer.posed() for layer in self.layers)])
+        return posed
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render; ``viewmats`` [C, 4, 4] world-to-camera (OpenCV), ``Ks`` [C, 3, 3].

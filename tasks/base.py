@@ -16,6 +16,11 @@ Tasks subclass it like any ManiSkill task (``_load_scene``, ``_initialize_episod
 poses ``_initialize_episode`` leaves, and their state is part of ``get_state_dict`` so
 that replaying recorded env states reproduces the tactile maps exactly.
 
+A captured 3DGS scene (``scene_ply=``, placed by ``scene_pose=``) replaces SAPIEN's picture
+of the surroundings for the splat camera, and captured objects (:meth:`GaussTacEnv.add_captured_object`)
+ride on SAPIEN actors; both are splatted in the same rasterizer pass as the hand, so
+occlusion between them is depth-correct.
+
 Pads touch objects only through the MPM: the pad links' SAPIEN collisions with the
 registered objects are turned off (otherwise the rigid fingertip would stop before the
 pad compresses); the pad reaction goes back to SAPIEN as an external wrench on
@@ -29,8 +34,12 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import os
 import time
+import warnings
 from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -45,16 +54,19 @@ from .. import backend
 from ..agents.base import GaussTacAgent, load_hand_gaussians
 from ..config import Material
 from ..cosim import GaussTacSim, default_hand_settings
-from ..errors import ConfigError
+from ..errors import AssetWarning, ConfigError
 from ..mpm.colliders import Collider
 from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
+from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
                        TactileSensorConfig, stack_tactile)
 
-__all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "batched_pose"]
+__all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND"]
 
 #: Collision group-2 bit shared by pad links and MPM objects (shapes sharing it do not collide).
 PAD_OBJECT_BIT = 29
+#: splat camera background [RGB in 0..1] behind a captured scene (``splat_background=None``)
+SCENE_BACKGROUND = (0.0, 0.0, 0.0)
 
 
 @dataclass
@@ -66,6 +78,15 @@ class RigidObject:
     collider: Collider
     gaussians: object = None
     two_way: bool = False
+
+
+@dataclass
+class CapturedObject:
+    """A SAPIEN actor drawn by captured Gaussians (in the actor frame) that follow its pose."""
+
+    name: str
+    actor: object
+    gaussians: object
 
 
 @dataclass
@@ -90,7 +111,27 @@ class GaussTacEnv(BaseEnv):
         mpm_sleep_margin: a pad farther than this from every object sleeps [m].
         splat_size: (width, height) of the default splat camera ``splat_camera``.
         render_size: (width, height) of the human render camera (``render_mode="rgb_array"``).
-        splat_background: ``"sapien"`` (composite over SAPIEN's render) or an RGB triple.
+        splat_background: ``"sapien"`` (composite over SAPIEN's render), an RGB triple in
+            [0, 1], or ``None`` (default): ``"sapien"`` without a ``scene_ply``,
+            :data:`SCENE_BACKGROUND` (black) with one.
+        scene_ply: a captured 3DGS scene (INRIA ``.ply``, SH degree 0..3, e.g. exported by
+            gsplat, nerfstudio or the INRIA code) drawn around the task by the splat camera,
+            or ``"example"`` for the packaged table-top capture
+            (:mod:`gausstac_maniskill.splat.example_scene`). Its Gaussians are splatted in the
+            same pass as the hand's and depth-sorted with them. **With a scene, SAPIEN's
+            background picture is skipped** (``splat_background=None`` gives a plain colour):
+            the capture replaces the surroundings (ground plane, SAPIEN lighting), the
+            hand, pads and task objects have Gaussians of their own, and the frame costs no
+            SAPIEN render. SAPIEN actors without Gaussians are then invisible to the splat
+            camera; ``splat_background="sapien"`` composites over SAPIEN's render again
+            (the ground plane then shows where it is nearer than the capture). Needs
+            ``camera="splat"``.
+        scene_pose: the capture frame -> world similarity: a
+            :class:`~gausstac_maniskill.splat.capture.Similarity`, a dict ``{"scale": s,
+            "rotation": (w, x, y, z), "translation": (x, y, z) m}`` (JSON-friendly, what
+            ManiSkill's recorder stores) or a 4x4 ``[[s R, t], [0, 1]]``. ``None``: identity,
+            or ``EXAMPLE_PLACEMENT`` for ``scene_ply="example"``. A placed scene wider than
+            100 m or narrower than 1 mm gets an ``AssetWarning`` suggesting a scale.
         camera: ``"splat"`` (default cameras are :class:`GaussianSplatCamera`) or ``"sapien"``
             (plain SAPIEN cameras at the same poses: rigid meshes only, no pad deformation).
         record_mpm_state: put the MPM state in ``get_state_dict`` (exact replay; ~150 B per
@@ -102,7 +143,8 @@ class GaussTacEnv(BaseEnv):
 
     def __init__(self, *args, robot_uids="allegro_hand_right_gausstac", mpm_dx: float = 1.0e-3,
                  mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
-                 splat_background="sapien", record_mpm_state: bool = True, camera: str = "splat", **kwargs):
+                 splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
+                 scene_ply: str | os.PathLike | None = None, scene_pose=None, **kwargs):
         backend.ensure_init()
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
@@ -110,11 +152,17 @@ class GaussTacEnv(BaseEnv):
         self.mpm_sleep_margin = float(mpm_sleep_margin)
         self.splat_size = tuple(int(v) for v in splat_size)
         self.render_size = tuple(int(v) for v in render_size)
-        self.splat_background = splat_background
         self.record_mpm_state = bool(record_mpm_state)
         if camera not in ("splat", "sapien"):
             raise ConfigError(f"camera={camera!r}: use 'splat' (Gaussian Splatting) or 'sapien'")
         self.camera_kind = camera
+        #: the placed captured scene (world frame) or None; see ``scene_ply``
+        self.scene_gaussians = _load_scene_capture(scene_ply, scene_pose, camera)
+        self._scene_layer = None if self.scene_gaussians is None else RigidLayer(self.scene_gaussians)
+        if splat_background is None:
+            splat_background = "sapien" if self.scene_gaussians is None else SCENE_BACKGROUND
+        self.splat_background = splat_background
+        self._captured: dict[str, CapturedObject] = {}
         self.cosims: list[GaussTacSim] = []
         self._rigid: dict[str, RigidObject] = {}
         self._soft: dict[str, SoftObject] = {}
@@ -152,17 +200,64 @@ class GaussTacEnv(BaseEnv):
         taken as identity; the actor's pose drives it). ``two_way``: apply the pads'
         reaction wrench to the (dynamic) actor in SAPIEN. ``gaussians``: the actor's look
         for the splat camera (actor frame); without them SAPIEN draws it."""
-        if name in self._rigid or name in self._soft:
+        if name in self._rigid or name in self._soft or name in self._captured:
             raise ConfigError(f"MPM object {name!r} already registered")
         if two_way and getattr(actor, "px_body_type", "dynamic") != "dynamic":
             raise ConfigError(f"two_way coupling needs a dynamic actor; {name!r} is {actor.px_body_type}")
         self._rigid[name] = RigidObject(name, actor, collider, gaussians, bool(two_way))
         actor.set_collision_group_bit(2, PAD_OBJECT_BIT, 1)
 
+    def add_captured_object(self, name: str, actor, capture, placement=None) -> None:
+        """Draw ``actor`` in the splat camera with captured Gaussians that follow its pose
+        every step (call it in ``_load_scene``).
+
+        Args:
+            name: unique among the env's objects.
+            actor: a ManiSkill ``Actor`` with a collision shape (``add_*_collision`` in its
+                builder): SAPIEN simulates it, the Gaussians only draw it. Its SAPIEN
+                visuals are hidden while the splat camera takes SAPIEN's background.
+            capture: an INRIA ``.ply`` path (read by
+                :func:`~gausstac_maniskill.splat.capture.load_capture`, with its checks) or
+                a ``GaussianSet``, in the capture's frame.
+            placement: capture frame -> actor frame (``Similarity``, dict or 4x4, as
+                ``scene_pose``); ``None``: identity.
+
+        Raises:
+            ConfigError: a name already used, or an actor without a collision shape.
+
+        Warns:
+            AssetWarning: the placed Gaussians are more than twice as large or small as the
+                actor's collision mesh (the message gives the scale that would match).
+
+        For the pads to feel the object too, register it with :meth:`add_mpm_rigid`
+        instead, with ``gaussians=load_capture(ply, placement)``.
+        """
+        from ..splat import GaussianSet
+        from ..splat.capture import Similarity, capture_extent, load_capture, transform_gaussians
+
+        if name in self._rigid or name in self._soft or name in self._captured:
+            raise ConfigError(f"object {name!r} already registered")
+        placement = Similarity.coerce(placement, f"add_captured_object({name!r}).placement")
+        if isinstance(capture, GaussianSet):
+            g, label = transform_gaussians(capture, placement), f"captured object {name!r}"
+        else:
+            g, label = load_capture(capture, placement), f"{Path(capture).name} (captured object {name!r})"
+        mesh = actor.get_first_collision_mesh(to_world_frame=False)
+        if mesh is None:
+            raise ConfigError(f"add_captured_object({name!r}): actor {actor.name!r} has no collision shape; "
+                              "a captured object rides on an actor that SAPIEN simulates (add_*_collision)")
+        size, mesh_size = capture_extent(g.means), float(np.max(mesh.extents))
+        if size > 0 and not 0.5 <= size / mesh_size <= 2.0:
+            hint = placement.scale * mesh_size / size
+            warnings.warn(f"{label}: the placed Gaussians span {size:.3g} m but actor {actor.name!r}'s "
+                          f"collision mesh spans {mesh_size:.3g} m; placement scale={hint:.4g} would match them",
+                          AssetWarning, stacklevel=2)
+        self._captured[name] = CapturedObject(name, actor, g)
+
     def add_mpm_soft(self, name: str, particles: Callable[[int], tuple], material: Material) -> None:
         """A deformable MPM object (not in SAPIEN; the splat camera draws it): see
         :class:`SoftObject`. ``particles`` is called when each episode's co-simulator is built."""
-        if name in self._rigid or name in self._soft:
+        if name in self._rigid or name in self._soft or name in self._captured:
             raise ConfigError(f"MPM object {name!r} already registered")
         self._soft[name] = SoftObject(name, particles, material)
 
@@ -170,6 +265,7 @@ class GaussTacEnv(BaseEnv):
         # a reconfiguration rebuilds the scene: tasks register their MPM objects again
         self._rigid.clear()
         self._soft.clear()
+        self._captured.clear()
         self._wrench = {}
         self.cosims = []
         self._pad_geometry = {}
@@ -299,13 +395,32 @@ class GaussTacEnv(BaseEnv):
                     link = f"{name}_anchor"
                     sim.world.add_link(link, np.eye(4) if anchor is None else np.asarray(anchor, np.float64))
                 sim.add_soft_object(name, x, soft.material, link=link, kinematic=kin)
-            if hand is not None or any(o.gaussians is not None for o in self._rigid.values()) or self._soft:
+            if hand is not None or any(o.gaussians is not None for o in self._rigid.values()) or self._soft \
+                    or self._scene_layer is not None or self._captured:
                 sim.attach_gaussians(hand[0] if hand else None, hand[1] if hand else (),
                                      {n: o.gaussians for n, o in self._rigid.items() if o.gaussians is not None})
+                self._add_captured_layers(sim, b)
             self.cosims.append(sim)
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
         self._cosim_stale = False
         self.step_timing["cosim_build"] = time.perf_counter() - t0
+
+    def _add_captured_layers(self, sim: GaussTacSim, b: int) -> None:
+        """Give env ``b``'s splat scene the captured background and captured objects."""
+        if self._scene_layer is not None:
+            sim.add_render_layer(self._scene_layer)  # static: one posed copy shared by every env
+        if self._captured:
+            from ..splat import GaussianSet
+
+            objs = list(self._captured.values())
+            g = GaussianSet.cat([o.gaussians.replace(link_id=torch.full_like(o.gaussians.link_id, i))
+                                 for i, o in enumerate(objs)])
+            sim.add_render_layer(RigidLayer(g, poses=partial(self._captured_poses, b)))
+
+    def _captured_poses(self, b: int) -> np.ndarray:
+        """[A, 4, 4] world poses of env ``b``'s captured-object actors (registration order)."""
+        return np.stack([vec7_to_matrix(o.actor.pose.raw_pose)[b].detach().cpu().double().numpy()
+                         for o in self._captured.values()])
 
     def _ensure_cosims(self) -> None:
         if self._cosim_stale or not self.cosims:
@@ -476,6 +591,24 @@ class GaussTacEnv(BaseEnv):
                 self._wrench[name][rows.numpy()] = w.double().numpy()
 
 
+def _load_scene_capture(scene_ply, scene_pose, camera: str):
+    """The placed captured scene of ``GaussTacEnv(scene_ply=..., scene_pose=...)``, or None."""
+    if scene_ply is None:
+        if scene_pose is not None:
+            raise ConfigError("scene_pose was given without scene_ply (the captured scene it places)")
+        return None
+    if camera != "splat":
+        raise ConfigError(f"scene_ply needs camera='splat' (SAPIEN's camera cannot draw Gaussians), got "
+                          f"camera={camera!r}")
+    from ..splat.capture import Similarity, load_capture
+
+    if isinstance(scene_ply, str) and scene_ply == "example":
+        from ..splat.example_scene import EXAMPLE_PLACEMENT, EXAMPLE_SCENE
+
+        scene_ply, scene_pose = EXAMPLE_SCENE, EXAMPLE_PLACEMENT if scene_pose is None else scene_pose
+    return load_capture(scene_ply, Similarity.coerce(scene_pose, "scene_pose"))
+
+
 def batched_pose(p, q) -> Pose:
     """ManiSkill pose of n envs from positions [n, 3] m and quaternions (w, x, y, z) [n, 4]."""
     return Pose.create_from_pq(torch.as_tensor(np.asarray(p), dtype=torch.float32),
@@ -532,16 +665,19 @@ class _EnvSplatSource(SplatSource):
 
     @contextlib.contextmanager
     def hidden(self):
-        """Hide the hand's SAPIEN visuals while the splat camera takes its background (CPU sim;
-        only when the hand has Gaussians to replace it)."""
+        """Hide the hand's SAPIEN visuals (when it has Gaussians to replace them) and the
+        captured objects' actors while the splat camera takes its background (CPU sim)."""
         env = self.env
+        entities = []
+        if not env.gpu_sim_enabled:
+            if type(env.agent).gausstac_gaussians:
+                entities += [obj.entity for link in env.agent.robot.links for obj in link._objs]
+            entities += [ent for o in env._captured.values() for ent in o.actor._objs]
         bodies = []
-        if type(env.agent).gausstac_gaussians and not env.gpu_sim_enabled:
-            for link in env.agent.robot.links:
-                for obj in link._objs:
-                    rb = obj.entity.find_component_by_type(sapien.render.RenderBodyComponent)
-                    if rb is not None and rb.visibility != 0:
-                        bodies.append(rb)
+        for ent in entities:
+            rb = ent.find_component_by_type(sapien.render.RenderBodyComponent)
+            if rb is not None and rb.visibility != 0:
+                bodies.append(rb)
         for rb in bodies:
             rb.visibility = 0
         try:

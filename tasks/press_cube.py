@@ -5,6 +5,11 @@ with its index finger bent; a fixed cube faces the index pad, its face 2–4 mm 
 of the pad's apex (drawn per episode). The normal force is the sum of the index pad's
 tactile force map (the MPM contact force, not a SAPIEN contact). Success when it is
 within ``tolerance`` (relative) of the target force, drawn in [0.8, 2.0] N.
+
+Its captured-scene variant: ``gym.make("GaussTac-PressCube-v1", scene_ply="example")`` (the
+packaged table top, placed by ``EXAMPLE_PLACEMENT``) or any INRIA ``.ply`` with
+``scene_pose=`` (see :class:`~gausstac_maniskill.tasks.base.GaussTacEnv`): the splat camera
+then draws the capture around the hand instead of SAPIEN's ground.
 """
 from __future__ import annotations
 

@@ -5,6 +5,7 @@ from .gaussians import (SH_C0, GaussianSet, covariance_from_scale_rotation, load
                         rotmat_to_quat, save_ply, sh_dc_to_rgb)
 from .deform import (PosedGaussians, SoftBinding, polar_rotation, pose_gaussians,
                      rigid_transform, soft_deform)
+from .capture import Similarity, load_capture, transform_gaussians
 from .rasterizer import (RenderOutput, intrinsics_from_fov, look_at, rasterize, render,
                          sapien_pose_to_opencv_extrinsic)
 
@@ -16,4 +17,5 @@ __all__ = [
     "sapien_pose_to_opencv_extrinsic",
     "rigid_transform", "polar_rotation", "SoftBinding", "soft_deform", "PosedGaussians",
     "pose_gaussians",
+    "Similarity", "load_capture", "transform_gaussians",
 ]

@@ -194,6 +194,24 @@ class PosedGaussians:
     opacities: torch.Tensor
     sh: torch.Tensor
 
+    @staticmethod
+    def cat(parts) -> "PosedGaussians":
+        """Concatenate posed sets (same leading batch shape) into one, so that a single
+        :meth:`render` sorts all of them by depth together; lower SH degrees are
+        zero-padded to the highest."""
+        parts = list(parts)
+        if not parts:
+            raise ConfigError("PosedGaussians.cat needs at least one set")
+        batch = {tuple(p.means.shape[:-2]) for p in parts}
+        if len(batch) > 1:
+            raise ConfigError(f"PosedGaussians.cat: leading batch shapes differ: {sorted(batch)}")
+        k = max(p.sh.shape[1] for p in parts)
+        sh = [torch.nn.functional.pad(p.sh, (0, 0, 0, k - p.sh.shape[1])) for p in parts]
+        return PosedGaussians(torch.cat([p.means for p in parts], dim=-2),
+                              torch.cat([p.covars for p in parts], dim=-3),
+                              torch.cat([p.sh_rotations for p in parts], dim=-3),
+                              torch.cat([p.opacities for p in parts]), torch.cat(sh))
+
     def __getitem__(self, b: int) -> "PosedGaussians":
         """The poses of batch element (environment) ``b``."""
         if self.means.dim() != 3:

@@ -339,18 +339,26 @@ def save_ply(path: str | os.PathLike, gaussians: GaussianSet, *,
     PlyData([PlyElement.describe(rec, "vertex")], text=False, byte_order="<").write(str(path))
 
 
-def load_ply(path: str | os.PathLike, *, device: torch.device | str | None = None) -> GaussianSet:
+def load_ply(path: str | os.PathLike, *, device: torch.device | str | None = None,
+             max_gaussians: int | None = None) -> GaussianSet:
     """Read an INRIA 3DGS ``.ply`` (see the module docstring for the layout).
 
     The SH degree (0..3) is inferred from the number of ``f_rest_*`` properties.
     Quaternions are normalised (INRIA files store them unnormalised); every other
     value is kept bit-exact, so ``save_ply`` -> ``load_ply`` is lossless.
 
+    Args:
+        path: the ``.ply`` file.
+        device: torch device of the returned tensors.
+        max_gaussians: refuse files with more vertices than this (checked from the
+            header, before any column is read); ``None``: no limit.
+
     Raises:
         AssetError: the file is missing, truncated or unreadable, or a required
             vertex property is missing, is a list, is not numeric, holds
             non-finite values, or the ``f_rest`` count is not 3((d+1)^2-1) for
-            d in 0..3. The message names the file and the property.
+            d in 0..3, or the file has more than ``max_gaussians`` vertices. The
+            message names the file and the property (or the count).
     """
     from plyfile import PlyData, PlyElementParseError
 
@@ -369,6 +377,10 @@ def load_ply(path: str | os.PathLike, *, device: torch.device | str | None = Non
     vertex = ply["vertex"]
     props = {p.name: p for p in vertex.properties}
     n = vertex.count
+    if max_gaussians is not None and n > max_gaussians:
+        raise AssetError(f"{name}: element 'vertex' holds {n:,} Gaussians, more than "
+                         f"max_gaussians={max_gaussians:,}; prune or downsample the capture, "
+                         "or raise max_gaussians")
 
     def column(field: str, integer: bool = False) -> np.ndarray:
         prop = props.get(field)

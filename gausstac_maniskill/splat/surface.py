@@ -41,6 +41,7 @@ __all__ = [
     "OPACITY_LOGIT",
     "GREY",
     "ColoredMesh",
+    "colored_mesh",
     "load_link_meshes",
     "sample_surface_blue_noise",
     "gaussians_from_surface",
@@ -131,6 +132,13 @@ def _mesh_color_source(mesh, urdf_rgba) -> tuple[Callable, str]:
     if urdf_rgba is not None:
         return _const_colors(urdf_rgba[:3]), "urdf"
     return _const_colors(GREY), "grey"
+
+
+def colored_mesh(mesh, rgba=None) -> ColoredMesh:
+    """A ``trimesh.Trimesh`` with its colour source (texture > vertex/face colours > mesh
+    material > ``rgba`` > grey), as :func:`load_link_meshes` makes them."""
+    fn, src = _mesh_color_source(mesh, rgba)
+    return ColoredMesh(mesh, fn, src)
 
 
 def _load_mesh_file(path: Path):
