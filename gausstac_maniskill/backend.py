@@ -39,7 +39,8 @@ def _try_cuda(seed: int, debug: bool) -> bool:
     reset and start again: one start-up line per process."""
     try:
         ti.init(arch=ti.cuda, default_fp=ti.f32, random_seed=seed, debug=debug,
-                log_level=ti.ERROR, offline_cache=True, enable_fallback=False)
+                log_level=ti.ERROR, offline_cache=True, enable_fallback=False,
+                kernel_profiler=os.environ.get("GAUSSTAC_KERNEL_PROFILER", "") == "1")
     except Exception:  # noqa: BLE001 - any CUDA failure means "no CUDA here"
         ti.reset()
         return False

@@ -131,6 +131,8 @@ class SolverSettings:
         fbar: F-bar anti-locking (default on): stresses use the grid-smoothed volume
             change J̄ (one per node) instead of each particle's own, so nearly
             incompressible silicone (ν → 0.5) does not lock; ``False`` is plain MLS-MPM.
+        soft_friction: Coulomb friction coefficient between bodies of different velocity
+            fields (a pad and a soft object; see ``MPMWorld.add_group``'s ``field``).
         grid_margin: empty cells kept around the active particles' bounding box.
         max_grid_cells: safety limit on the active grid's cell count.
     """
@@ -143,6 +145,7 @@ class SolverSettings:
     damping: float = 0.0
     gravity: tuple = (0.0, 0.0, -9.81)
     fbar: bool = True
+    soft_friction: float = 0.5
     grid_margin: int = 3
     max_grid_cells: int = 8_000_000
 
@@ -164,6 +167,8 @@ class SolverSettings:
         if len(g) != 3:
             raise ConfigError(f"SolverSettings.gravity={self.gravity!r} must have 3 components")
         object.__setattr__(self, "gravity", tuple(_finite("SolverSettings.gravity", v) for v in g))
+        if _finite("SolverSettings.soft_friction", self.soft_friction) < 0.0:
+            raise ConfigError(f"SolverSettings.soft_friction={self.soft_friction!r} must be >= 0")
         if not isinstance(self.fbar, bool):
             raise ConfigError(f"SolverSettings.fbar={self.fbar!r} must be True or False")
         if int(self.grid_margin) != self.grid_margin or self.grid_margin < 2:

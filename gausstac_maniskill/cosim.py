@@ -99,9 +99,13 @@ class GaussTacSim:
         self._update_sleep()
 
     def add_soft_object(self, name: str, positions, material: Material, **kwargs) -> None:
-        """A deformable object made of MPM particles at world ``positions`` [N, 3] (m)."""
+        """A deformable object made of MPM particles at world ``positions`` [N, 3] (m);
+        ``kwargs`` go to :meth:`MPMWorld.add_group`. It is a body of its own (velocity
+        field 1, the pads' is 0): pads touch it through a frictional contact rule
+        (``settings.soft_friction``), and their contact force maps read that contact."""
         if name in self._objects or name in self._soft or name in self.pads:
             raise ConfigError(f"object {name!r} already exists")
+        kwargs.setdefault("field", 1)
         self.world.add_group(name, positions, material, **kwargs)
         self._soft[name] = name
         self._update_sleep()
@@ -203,6 +207,16 @@ class GaussTacSim:
         from .render import SceneGaussians
 
         self._scene = SceneGaussians(self, hand, hand_links, objects)
+        self._posed = None
+
+    def add_render_layer(self, layer) -> None:
+        """Add Gaussians the co-simulator does not move (a captured scene, captured objects
+        on SAPIEN actors: a :class:`gausstac_maniskill.render.RigidLayer`) to the splat scene;
+        they are splatted in the same pass as the hand and depth-sorted with it. Call
+        :meth:`attach_gaussians` first."""
+        if not self.has_gaussians:
+            raise ConfigError("GaussTacSim.add_render_layer: call attach_gaussians(...) first")
+        self._scene.add_layer(layer)
         self._posed = None
 
     @property

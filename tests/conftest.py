@@ -1,7 +1,9 @@
-"""Test-wide set-up: Taichi runs on the CPU (CI has no GPU), once per session; tests that
+"""Test-wide set-up: Taichi runs on the CPU (CI has no GPU), once per session, unless
+``GAUSSTAC_TEST_ARCH=cuda`` asks for the CUDA backend (the GPU checks); tests that
 need SAPIEN (ManiSkill envs, SAPIEN cameras) skip with the reason where it finds no Vulkan
 device: mark them ``@pytest.mark.sapien`` (or a fixture takes ``sapien_vulkan``)."""
 import functools
+import os
 import subprocess
 import sys
 
@@ -49,6 +51,6 @@ def pytest_runtest_setup(item):
 
 
 @pytest.fixture(scope="session", autouse=True)
-def taichi_cpu():
-    backend.init("cpu")
+def taichi_backend():
+    backend.init(os.environ.get("GAUSSTAC_TEST_ARCH", "cpu"))
     yield

@@ -7,12 +7,22 @@ The grid is a dense box that covers only the active particles (plus a margin);
 node (i, j, k) of the box sits at world position ``(origin + (i, j, k)) * dx`` and is
 stored at flat index ``(i * ny + j) * nz + k``.
 
-Particle-to-grid without atomics: particles are counting-sorted into *slabs* two
-cells thick along the grid's longest axis. A particle whose stencil base cell is
-b touches nodes b..b+2, so slabs s and s+2 never write the same node; the even
+Two velocity fields (multi-field MPM, Bardenhagen et al. 2000, J. Comput. Phys.
+160:235 — written here from the paper's algorithm): when groups of both fields are
+awake (field 0 the pads, field 1 soft objects), every grid array holds two copies of
+the box, field f at offset ``f * ncell``. Each field is transferred, stressed and
+bounded on its own, so a pad and a sponge are two bodies, not one continuum; where
+both meet, :func:`field_contact` exchanges momentum by a frictional non-penetration
+rule. With one field (``two_field`` off) nothing of this is compiled in.
+
+Particle-to-grid without atomics (the CPU's way): particles are counting-sorted into
+*slabs* two cells thick along the grid's longest axis. A particle whose stencil base
+cell is b touches nodes b..b+2, so slabs s and s+2 never write the same node; the even
 slabs are scattered in parallel, then the odd ones. Within a slab particles are
 visited in a fixed order, which makes a substep bit-reproducible for any number
-of threads.
+of threads. A GPU needs thousands of threads, not one per slab: with ``atomic`` every
+particle scatters in its own thread with atomic adds (same sums, in a run-dependent
+order: not bit-reproducible).
 """
 
 import taichi as ti
@@ -32,6 +42,9 @@ NDM = ti.types.ndarray(dtype=mat3, ndim=1)
 
 DYNAMIC, KINEMATIC = 0, 1
 PIN_FRACTION = 0.25  # kinematic share of a node's mass that pins it to its link (see pinned)
+FILL = 0.9  # two fields touch at a node once their volumes fill this share of its cell (field_contact) ...
+SHARE = 0.1  # ... and each brings at least this share (the node lies at both surfaces)
+SOFT_CONTACT = -2  # contact_id of a particle touched by the other field (colliders are >= 0)
 BIG = 1 << 29
 NCHUNK = 16  # particle chunks of the bounds/health reductions (rows of their output arrays)
 
@@ -128,15 +141,49 @@ def sort_into_slabs(active: ti.template(), n: ti.template(), x: ti.template(),
 
 
 @ti.func
-def clear_grid(ncell: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template()):
-    for i in range(ncell):
+def slab_range(atomic: ti.template(), slab_start: ti.template(), color: ti.template(), h):
+    """Sorted particles [lo, hi) of outer iteration h of a scatter loop: slab 2h + color,
+    or (``atomic``) the single particle h."""
+    lo, hi = h, h + 1
+    if ti.static(not atomic):
+        s = 2 * h + color
+        lo, hi = slab_start[s], slab_start[s + 1]
+    return lo, hi
+
+
+@ti.func
+def add_to(a: ti.template(), idx, value, atomic: ti.template()):
+    """a[idx] += value: atomically, or as a plain read-modify-write where the slab
+    colouring guarantees that no other thread writes a[idx] meanwhile."""
+    if ti.static(atomic):
+        ti.atomic_add(a[idx], value)
+    else:
+        a[idx] = a[idx] + value
+
+
+@ti.func
+def field_offset(two_field: ti.template(), group_field: ti.template(), group: ti.template(), p, ncell):
+    """Offset of particle p's velocity field in the grid arrays (0 with one field)."""
+    off = 0
+    if ti.static(two_field):
+        off = group_field[group[p]] * ncell
+    return off
+
+
+@ti.func
+def clear_grid(ntot: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template(),
+        grid_vc: ti.template(), grid_ds: ti.template(), two_field: ti.template()):
+    for i in range(ntot):
         grid_v[i] = vec3(0.0)
         grid_dp[i] = vec3(0.0)
         grid_vol[i] = ti.Vector([0.0, 0.0])
         grid_m[i] = 0.0
         grid_mk[i] = 0.0
         grid_mq[i] = 0.0
+        if ti.static(two_field):
+            grid_vc[i] = 0.0
+            grid_ds[i] = vec3(0.0)
 
 
 @ti.func
@@ -147,8 +194,12 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
         ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
         grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(),
-        grid_vol: ti.template(), fbar: ti.template(), nh_only: ti.template()):
-    """Scatter mass and APIC momentum (with the stress impulse) to the grid.
+        grid_vol: ti.template(), fbar: ti.template(), nh_only: ti.template(),
+        group_field: ti.template(), ncell: ti.template(), two_field: ti.template(), grid_vc: ti.template(),
+        atomic: ti.template()):
+    """Scatter mass and APIC momentum (with the stress impulse) to the grid (to the
+    particle's own velocity field; with two fields also its deformed volume V0 J to
+    ``grid_vc``, for :func:`field_contact`).
 
     Momentum to node i: w_ip [m_p v_p + (m_p C_p - Δt V0_p (4/dx²) τ_p)(x_i - x_p)].
     Kinematic particles also scatter their mass to ``grid_mk`` and their link id;
@@ -157,15 +208,20 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
     nodal volume change that :func:`volume_scatter` left in ``grid_vol``.
     """
     origin = ti.Vector([ox, oy, oz])
-    for color in ti.static(range(2)):
-        ti.loop_config(block_dim=1)
-        for h in range((n_slabs - color + 1) // 2):
-            s = 2 * h + color
-            for ii in range(slab_start[s], slab_start[s + 1]):
+    for color in ti.static(range(1 if ti.static(atomic) else 2)):
+        ti.loop_config(block_dim=128 if ti.static(atomic) else 1)
+        for h in range(slab_start[n_slabs] if ti.static(atomic) else (n_slabs - color + 1) // 2):
+            lo, hi = slab_range(atomic, slab_start, color, h)
+            for ii in range(lo, hi):
                 p = order[ii]
                 base, fx, w = stencil(x[p], inv_dx, origin)
+                off = field_offset(two_field, group_field, group, p, ncell)
                 if ti.static(fbar):
-                    tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz)
+                    tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz,
+                                            off)
+                vj = 0.0
+                if ti.static(two_field):
+                    vj = vol[p] * F[p].determinant()
                 m = mass[p]
                 affine = m * C[p] - (dt * vol[p] * 4.0 * inv_dx * inv_dx) * tau[p]
                 # momentum plus this substep's weight impulse; weight is the physical mass
@@ -177,23 +233,23 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                 for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                     dpos = (ti.Vector([i, j, k]) - fx) / inv_dx
                     weight = w[i][0] * w[j][1] * w[k][2]
-                    idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
-                    # plain read-modify-write: slabs of one colour never share a node
-                    grid_v[idx] = grid_v[idx] + weight * (mv + affine @ dpos)
-                    grid_m[idx] = grid_m[idx] + weight * m
+                    idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
+                    add_to(grid_v, idx, weight * (mv + affine @ dpos), atomic)
+                    add_to(grid_m, idx, weight * m, atomic)
+                    if ti.static(two_field):
+                        add_to(grid_vc, idx, weight * vj, atomic)
                     if is_kin:
-                        grid_mk[idx] = grid_mk[idx] + weight * m
+                        add_to(grid_mk, idx, weight * m, atomic)
                         grid_link[idx] = lk
                     elif is_qs:
-                        grid_mq[idx] = grid_mq[idx] + weight * m
+                        add_to(grid_mq, idx, weight * m, atomic)
                         grid_link[idx] = lk
 
 
 @ti.func
-def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
+def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
-        dt: ti.template(), gx: ti.template(), gy: ti.template(), gz: ti.template(),
-        damping: ti.template(), relax: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        dt: ti.template(), damping: ti.template(), relax: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
         grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(), link_frames: ti.template(),
         walls: ti.template(),
         n_walls: ti.template(), grid_contact: ti.template(), n_col: ti.template(),
@@ -212,14 +268,15 @@ def grid_update(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
       wall is zeroed (bilateral).
     * With ``grid_contact`` set, colliders are enforced here on nodes with φ < 0
       (unilateral, Coulomb friction) and their reaction impulse is accumulated.
+    With two velocity fields each field's nodes (``ntot`` = 2 ``ncell``) are updated alike.
     """
-    g = ti.Vector([gx, gy, gz])
-    for idx in range(ncell):
+    for idx in range(ntot):
         m = grid_m[idx]
         if m > 0.0:
-            k = idx % nz
-            j = (idx // nz) % ny
-            i = idx // (ny * nz)
+            cell = idx % ncell
+            k = cell % nz
+            j = (cell // nz) % ny
+            i = cell // (ny * nz)
             xi = ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
             vel = grid_v[idx] / m
             vel *= damping
@@ -271,6 +328,65 @@ def pinned(grid_m: ti.template(), grid_mk: ti.template(), idx):
 
 
 @ti.func
+def mass_gradient(grid_m: ti.template(), idx, ny: ti.template(), nz: ti.template()):
+    """Direction of the nodal mass gradient at node idx (central differences; it points
+    into the body). The active box keeps >= 2 empty cells around every node with mass,
+    so the neighbours exist."""
+    g = ti.Vector([grid_m[idx + ny * nz] - grid_m[idx - ny * nz], grid_m[idx + nz] - grid_m[idx - nz],
+                   grid_m[idx + 1] - grid_m[idx - 1]])
+    return g / ti.max(g.norm(), 1e-30)
+
+
+@ti.func
+def field_contact(ncell: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
+        mu: ti.template(), grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
+        grid_vc: ti.template(), grid_ds: ti.template()):
+    """Contact between the two velocity fields (multi-field MPM, Bardenhagen et al. 2000).
+
+    At a node where both fields have mass, the contact normal n (from body 0 into
+    body 1) is the difference of the two unit mass gradients. The bodies touch there when
+    the node lies at both surfaces, each deformed volume V_f = Σ w V0 J ≥ SHARE dx³, and
+    together they fill its cell, V_0 + V_1 ≥ FILL dx³. Without this test the B-spline
+    supports make bodies meet up to 1.5 cells early; with it, a gap under 0.2 cells
+    (1D estimate for these constants) still counts as contact. If they approach,
+    (v_0 - v_1)·n > 0, the impulse P on body 0 stops their normal approach and resists
+    the slip with Coulomb friction μ:
+
+        P = -m* [(v_r·n) n + min(1, μ (v_r·n)/|v_t|) v_t],   v_r = v_0 - v_1,
+
+    m* = m0 m1/(m0 + m1), or the free body's mass where the other node is pinned to its
+    link (it is then rigid). Body 0 takes +P, body 1 -P: momentum is conserved, and no
+    pulling (adhesive) force can arise. Field 0's velocity change P/m0 is kept in
+    ``grid_ds``: :func:`g2p` turns it into the pad particles' contact impulses.
+    """
+    for i0 in range(ncell):
+        i1 = i0 + ncell
+        m0 = grid_m[i0]
+        m1 = grid_m[i1]
+        V0, V1, cell = grid_vc[i0], grid_vc[i1], dx * dx * dx
+        if m0 > 0.0 and m1 > 0.0 and ti.min(V0, V1) >= SHARE * cell and V0 + V1 >= FILL * cell:
+            pin0 = pinned(grid_m, grid_mk, i0)
+            pin1 = pinned(grid_m, grid_mk, i1)
+            if not (pin0 and pin1):
+                n = mass_gradient(grid_m, i1, ny, nz) - mass_gradient(grid_m, i0, ny, nz)
+                if n.norm() > 1e-6:
+                    n = n.normalized()
+                    vr = grid_v[i0] - grid_v[i1]
+                    vn = vr.dot(n)
+                    if vn > 0.0:
+                        m_eff = m1 if pin0 else (m0 if pin1 else m0 * m1 / (m0 + m1))
+                        vt = vr - vn * n
+                        vtn = vt.norm()
+                        stick = 1.0 if vtn <= mu * vn else mu * vn / vtn
+                        P = -m_eff * (vn * n + stick * vt)
+                        if not pin0:
+                            grid_v[i0] = grid_v[i0] + P / m0
+                            grid_ds[i0] = P / m0
+                        if not pin1:
+                            grid_v[i1] = grid_v[i1] - P / m1
+
+
+@ti.func
 def elastic_stress(nh_only: ti.template(), F, jp, mi, mat_table: ti.template()):
     """Kirchhoff stress τ [Pa] of material row ``mi`` at deformation gradient F."""
     tau = ti.Matrix.zero(ti.f32, 3, 3)
@@ -312,7 +428,9 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
         group: ti.template(), group_frames: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(),
         inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), fbar: ti.template()):
+        grid_mk: ti.template(), fbar: ti.template(), group_field: ti.template(), ncell: ti.template(),
+        two_field: ti.template(), grid_ds: ti.template(), mass: ti.template(), impulse: ti.template(),
+        contact_id: ti.template()):
     """Gather velocity and its gradient, update F (and plasticity) and stress, advect.
 
     Bound (kinematic) particles keep their link-given position and velocity, but strain
@@ -322,25 +440,38 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
     where its bound particles are, not a cell deeper (``bench thinlayer``). Where every
     node of the stencil is pinned, F is the rotation Q1 and the stress zero.
     With ``fbar`` the stress is left to the next :func:`p2g` (:func:`fbar_stress_at`).
+    With two fields a particle gathers from its own field, and a dynamic particle of
+    field 0 records its share m_p Σ w_ip Δv_i of the other field's contact impulse
+    (:func:`field_contact`) in ``impulse``, with ``contact_id`` SOFT_CONTACT where no
+    collider touched it.
     """
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
         p = order[ii]
         is_kin = kind[p] == KINEMATIC
         base, fx, w = stencil(x[p], inv_dx, origin)
+        off = field_offset(two_field, group_field, group, p, ncell)
         new_v = vec3(0.0)
         new_C = ti.Matrix.zero(ti.f32, 3, 3)
+        soft_dv = vec3(0.0)
         all_pinned = True
         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
             dpos = ti.Vector([i, j, k]) - fx
             weight = w[i][0] * w[j][1] * w[k][2]
-            idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
+            idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
             gv = grid_v[idx]
             new_v += weight * gv
             new_C += (4.0 * inv_dx * weight) * gv.outer_product(dpos)
+            if ti.static(two_field):
+                soft_dv += weight * grid_ds[idx]
             if is_kin:
                 all_pinned = all_pinned and pinned(grid_m, grid_mk, idx)
         mi = matid[p]
+        if ti.static(two_field):
+            if off == 0 and not is_kin and soft_dv.norm_sqr() > 0.0:
+                impulse[p] += mass[p] * soft_dv
+                if contact_id[p] == -1:
+                    contact_id[p] = SOFT_CONTACT
         if not is_kin:
             # deformation gradient: F <- (I + Δt ∇v) F, then the material's return map
             Fn = (ti.Matrix.identity(ti.f32, 3) + dt * new_C) @ F[p]
@@ -373,27 +504,30 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
 def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
         x: ti.template(), F: ti.template(), vol: ti.template(), kind: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(), inv_dx: ti.template(),
-        grid_vol: ti.template()):
+        grid_vol: ti.template(), group: ti.template(), group_field: ti.template(), ncell: ti.template(),
+        two_field: ti.template(), atomic: ti.template()):
     """F-bar, step 1: each node gathers the rest volume Σ w V0 and the deformed volume
-    Σ w V0 J of the particles around it (slab-ordered like :func:`p2g`)."""
+    Σ w V0 J of the particles around it (slab-ordered like :func:`p2g`; per field, so
+    two bodies that touch do not average their volume change)."""
     origin = ti.Vector([ox, oy, oz])
-    for color in ti.static(range(2)):
-        ti.loop_config(block_dim=1)
-        for h in range((n_slabs - color + 1) // 2):
-            s = 2 * h + color
-            for ii in range(slab_start[s], slab_start[s + 1]):
+    for color in ti.static(range(1 if ti.static(atomic) else 2)):
+        ti.loop_config(block_dim=128 if ti.static(atomic) else 1)
+        for h in range(slab_start[n_slabs] if ti.static(atomic) else (n_slabs - color + 1) // 2):
+            lo, hi = slab_range(atomic, slab_start, color, h)
+            for ii in range(lo, hi):
                 p = order[ii]
                 if kind[p] == DYNAMIC:
                     base, fx, w = stencil(x[p], inv_dx, origin)
+                    off = field_offset(two_field, group_field, group, p, ncell)
                     vj = vol[p] * ti.Vector([1.0, F[p].determinant()])
                     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                        idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
-                        grid_vol[idx] = grid_vol[idx] + (w[i][0] * w[j][1] * w[k][2]) * vj
+                        idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
+                        add_to(grid_vol, idx, (w[i][0] * w[j][1] * w[k][2]) * vj, atomic)
 
 
 @ti.func
 def fbar_stress_at(nh_only: ti.template(), Fp, jp, mi, mat_table: ti.template(), grid_vol: ti.template(),
-        base, w, ny: ti.template(), nz: ti.template()):
+        base, w, ny: ti.template(), nz: ti.template(), off):
     """F-bar, step 2 (anti-locking for ν → 0.5): Kirchhoff stress of a particle with
     deformation gradient Fp and stencil (base, w) whose λ (bulk) term is evaluated at the
     grid-smoothed volume change J̄ = Σ_i w_ip J_i, J_i = (Σ w V0 J)_i / (Σ w V0)_i, instead
@@ -406,7 +540,7 @@ def fbar_stress_at(nh_only: ti.template(), Fp, jp, mi, mat_table: ti.template(),
     J = ti.max(Fp.determinant(), mat.MIN_J)
     J_sum, w_sum = 0.0, 0.0
     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-        gv = grid_vol[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
+        gv = grid_vol[off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
         if gv[0] > 0.0:
             weight = w[i][0] * w[j][1] * w[k][2]
             J_sum += weight * gv[1] / gv[0]
@@ -421,13 +555,15 @@ def fbar_stress_at(nh_only: ti.template(), Fp, jp, mi, mat_table: ti.template(),
 def fbar_stress(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.template(),
         F: ti.template(), tau: ti.template(), Jp: ti.template(), matid: ti.template(),
         mat_table: ti.template(), ox: ti.template(), oy: ti.template(), oz: ti.template(),
-        ny: ti.template(), nz: ti.template(), inv_dx: ti.template(), grid_vol: ti.template()):
+        ny: ti.template(), nz: ti.template(), inv_dx: ti.template(), grid_vol: ti.template(),
+        group: ti.template(), group_field: ti.template(), ncell: ti.template(), two_field: ti.template()):
     """:func:`fbar_stress_at` for every particle (the stress reported after a step)."""
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
         p = order[ii]
         base, _fx, w = stencil(x[p], inv_dx, origin)
-        tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz)
+        off = field_offset(two_field, group_field, group, p, ncell)
+        tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz, off)
 
 
 @ti.func
@@ -440,8 +576,9 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         grid_dp: ti.template(), n_col: ti.template(), col_kind: ti.template(),
         col_prm: ti.template(), col_frames: ti.template(), col_mu: ti.template(),
         col_sticky: ti.template(), sdf: ti.template(), sdf_info: ti.template(),
-        max_push: ti.template(), reach: ti.template()):
-    """Particle-detected contact, applied as momentum on the grid.
+        max_push: ti.template(), reach: ti.template(), group: ti.template(), group_field: ti.template(),
+        ncell: ti.template(), two_field: ti.template(), atomic: ti.template()):
+    """Particle-detected contact, applied as momentum on the grid (of the particle's field).
 
     For each dynamic particle near a collider, its free velocity v* is gathered
     from the grid and its end-of-substep position x + Δt v* is tested against the
@@ -455,14 +592,14 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
     that reaches free nodes, Σ_free w_ip · m_p Δv: that is the impulse the pad really
     exchanged, stored per particle (contact forces / tactile) and, negated, acting on
     the collider.
-    Slab-ordered like :func:`p2g`, hence atomic-free and deterministic.
+    Slab-ordered like :func:`p2g` (atomic-free and deterministic), or atomic.
     """
     origin = ti.Vector([ox, oy, oz])
-    for color in ti.static(range(2)):
-        ti.loop_config(block_dim=1)
-        for h in range((n_slabs - color + 1) // 2):
-            s = 2 * h + color
-            for ii in range(slab_start[s], slab_start[s + 1]):
+    for color in ti.static(range(1 if ti.static(atomic) else 2)):
+        ti.loop_config(block_dim=128 if ti.static(atomic) else 1)
+        for h in range(slab_start[n_slabs] if ti.static(atomic) else (n_slabs - color + 1) // 2):
+            lo, hi = slab_range(atomic, slab_start, color, h)
+            for ii in range(lo, hi):
                 p = order[ii]
                 if kind[p] == DYNAMIC:
                     near = False
@@ -472,9 +609,11 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                             near = True
                     if near:
                         base, fx, w = stencil(x[p], inv_dx, origin)
+                        off = field_offset(two_field, group_field, group, p, ncell)
                         v0 = vec3(0.0)
                         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                            v0 += w[i][0] * w[j][1] * w[k][2] * grid_v[((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
+                            v0 += w[i][0] * w[j][1] * w[k][2] * grid_v[off + ((base[0] + i) * ny + base[1] + j) * nz
+                                                                        + base[2] + k]
                         vp = v0
                         for c in range(n_col):
                             phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info,
@@ -496,27 +635,28 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                             J = mass[p] * (vp - v0)
                             free = 0.0
                             for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                                idx = ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
+                                idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
                                 wi = w[i][0] * w[j][1] * w[k][2]
-                                grid_dp[idx] = grid_dp[idx] + wi * J
+                                add_to(grid_dp, idx, wi * J, atomic)
                                 if not pinned(grid_m, grid_mk, idx):
                                     free += wi
                             impulse[p] += free * J
 
 
 @ti.func
-def contact_apply(ncell: ti.template(), ox: ti.template(), oy: ti.template(),
+def contact_apply(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
         grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
         grid_dp: ti.template(), walls: ti.template(), n_walls: ti.template()):
     """Add the scattered contact momentum to free nodes (not pinned, walls kept)."""
-    for idx in range(ncell):
+    for idx in range(ntot):
         m = grid_m[idx]
         dp = grid_dp[idx]
         if m > 0.0 and not pinned(grid_m, grid_mk, idx) and dp.norm_sqr() > 0.0:
-            k = idx % nz
-            j = (idx // nz) % ny
-            i = idx // (ny * nz)
+            cell = idx % ncell
+            k = cell % nz
+            j = (cell // nz) % ny
+            i = cell // (ny * nz)
             xi = ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
             dv = dp / m
             for w in range(n_walls):
@@ -628,7 +768,7 @@ BOX = 8  # active box layout: origin xyz, dims xyz (nodes), number of slabs, sla
 SLAB_CAP = 1 << 16  # slabs are 2 cells: the active box may span 131072 cells along one axis
 # rows of Scene.counts and Scene.consts
 N_LINKS, N_GROUPS, N_COL, N_WALLS, N_ACTIVE, N_KIN = range(6)
-DX, GX, GY, GZ, DAMPING, RELAXATION, REACH, MARGIN = range(8)
+DX, GX, GY, GZ, DAMPING, RELAXATION, REACH, MARGIN, FIELD_MU = range(9)
 
 Particles = ti.types.argpack(  # member names are unique over the packs (Taichi flattens them)
     x=NDV, v=NDV, C=NDM, F=NDM, tau=NDM, Jp=NDF,  # state: position [m], velocity, APIC C, F, τ [Pa], plastic J
@@ -638,11 +778,12 @@ Particles = ti.types.argpack(  # member names are unique over the packs (Taichi 
 Grid = ti.types.argpack(
     grid_v=NDV, grid_m=NDF,  # momentum then velocity [m/s], mass [kg]
     grid_mk=NDF, grid_mq=NDF, grid_link=NDI,  # kinematic mass, quasi-static mass, link of those
-    grid_dp=NDV, grid_vol=NDV2)  # contact momentum [N s]; (Σ w V0, Σ w V0 J) for F-bar
+    grid_dp=NDV, grid_vol=NDV2,  # contact momentum [N s]; (Σ w V0, Σ w V0 J) for F-bar
+    grid_vc=NDF, grid_ds=NDV)  # two fields: deformed volume Σ w V0 J [m³]; field 0's contact Δv [m/s]
 Scene = ti.types.argpack(
-    counts=NDI, consts=NDF,  # rows N_LINKS.., and DX.. [m, m/s², 1/s, 1/s, m, cells]
+    counts=NDI, consts=NDF,  # rows N_LINKS.., and DX.. [m, m/s², 1/s, 1/s, m, cells, -]
     mat_table=NDF2,  # materials.material_table rows
-    group_qs=NDI, group_frames=NDF2,  # per group: quasi-static?, binding rotation frames
+    group_qs=NDI, group_frames=NDF2, group_field=NDI,  # per group: quasi-static?, binding frames, field
     link_frames=NDF2, walls=NDF2,  # kinematics frame rows of links; slip walls (axis, position, side)
     col_kind=NDI, col_prm=NDF2, col_frames=NDF2, col_mu=NDF, col_sticky=NDI,
     sdf=NDF, sdf_info=NDI2, col_impulse=NDF2)
@@ -702,20 +843,24 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32) -> ti.type
 
 
 @ti.kernel
-def advance(W: World, dt: ti.f32, fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template()):
+def advance(W: World, dt: ti.f32, fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template(),
+            two_field: ti.template(), atomic: ti.template()):
     """One MLS-MPM substep of ``dt`` seconds on the box that :func:`prepare` left in
     ``W.O.active_box``: clear grid, (F-bar volume scatter), P2G, grid update + BCs,
-    contact, G2P.
+    (contact between the two fields), collider contact, G2P.
 
     ``contact_mode``: 0 no colliders, 1 particle-detected (grid-applied), 2 grid nodes.
     ``nh_only``: every material is Neo-Hookean (no SVD compiled in).
+    ``two_field``: groups of both velocity fields are awake (the grid arrays hold 2 boxes).
+    ``atomic``: scatter with atomic adds, one thread per particle (GPUs), not by slabs.
     """
-    substep(W.P, W.G, W.S, W.O, dt, fbar, contact_mode, nh_only)
+    substep(W.P, W.G, W.S, W.O, dt, fbar, contact_mode, nh_only, two_field, atomic)
 
 
 @ti.func
 def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), dt,
-            fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template()):
+            fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template(), two_field: ti.template(),
+            atomic: ti.template()):
     """Body of :func:`advance` on the packs of its World (P, G, S, O)."""
     dx = S.consts[DX]
     inv_dx = 1.0 / dx
@@ -728,43 +873,52 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     ox, oy, oz = O.active_box[0], O.active_box[1], O.active_box[2]
     ny, nz, n_slabs = O.active_box[4], O.active_box[5], O.active_box[6]
     ncell = O.active_box[3] * ny * nz
-    clear_grid(ncell, G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_dp, G.grid_vol)
+    ntot = ncell * (2 if ti.static(two_field) else 1)
+    clear_grid(ntot, G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_dp, G.grid_vol, G.grid_vc, G.grid_ds,
+               two_field)
     if ti.static(fbar):
         volume_scatter(O.order, O.slab_start, n_slabs, P.x, P.F, P.vol, P.kind, ox, oy, oz, ny, nz, inv_dx,
-                       G.grid_vol)
+                       G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
     p2g(gravity, O.order, O.slab_start, n_slabs, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.mass, P.vol, P.kind,
         P.link, P.matid, S.mat_table, P.group, S.group_qs, ox, oy, oz, ny, nz, inv_dx, dt,
-        G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only)
-    grid_update(ncell, ox, oy, oz, ny, nz, dx, dt, gravity[0], gravity[1], gravity[2], damping, relax,
+        G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only,
+        S.group_field, ncell, two_field, G.grid_vc, atomic)
+    grid_update(ntot, ncell, ox, oy, oz, ny, nz, dx, dt, damping, relax,
                 G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
                 1 if ti.static(contact_mode == 2) else 0, n_col, S.col_kind, S.col_prm, S.col_frames,
                 S.col_mu, S.col_sticky, S.sdf, S.sdf_info, S.col_impulse)
+    if ti.static(two_field):
+        field_contact(ncell, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_mk, G.grid_vc, G.grid_ds)
     if ti.static(contact_mode == 1):
         contact_scatter(O.order, O.slab_start, n_slabs, P.x, P.kind, P.mass, P.radius, P.impulse,
                         P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp,
                         n_col, S.col_kind, S.col_prm, S.col_frames, S.col_mu, S.col_sticky, S.sdf, S.sdf_info,
-                        max_push, reach)
-        contact_apply(ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls, n_walls)
+                        max_push, reach, P.group, S.group_field, ncell, two_field, atomic)
+        contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls,
+                      n_walls)
     g2p(nh_only, O.order, n, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.kind, P.matid, S.mat_table, P.group,
-        S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, fbar)
+        S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, fbar,
+        S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id)
 
 
 @ti.kernel
-def fbar_update(W: World, nh_only: ti.template()):
+def fbar_update(W: World, nh_only: ti.template(), two_field: ti.template(), atomic: ti.template()):
     """The F-bar stress of every particle at its current F and position, on the box from
     :func:`prepare`: the substeps evaluate it in P2G, this leaves it current after a step."""
-    stress_pass(W.P, W.G, W.S, W.O, nh_only)
+    stress_pass(W.P, W.G, W.S, W.O, nh_only, two_field, atomic)
 
 
 @ti.func
-def stress_pass(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), nh_only: ti.template()):
+def stress_pass(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), nh_only: ti.template(),
+                two_field: ti.template(), atomic: ti.template()):
     """Body of :func:`fbar_update`."""
     inv_dx = 1.0 / S.consts[DX]
     ox, oy, oz = O.active_box[0], O.active_box[1], O.active_box[2]
     ny, nz = O.active_box[4], O.active_box[5]
-    for i in range(O.active_box[3] * ny * nz):
+    ncell = O.active_box[3] * ny * nz
+    for i in range(ncell * (2 if ti.static(two_field) else 1)):
         G.grid_vol[i] = ti.Vector([0.0, 0.0])
     volume_scatter(O.order, O.slab_start, O.active_box[6], P.x, P.F, P.vol, P.kind, ox, oy, oz, ny, nz, inv_dx,
-                   G.grid_vol)
+                   G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
     fbar_stress(nh_only, O.order, S.counts[N_ACTIVE], P.x, P.F, P.tau, P.Jp, P.matid, S.mat_table,
-                ox, oy, oz, ny, nz, inv_dx, G.grid_vol)
+                ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_field, ncell, two_field)

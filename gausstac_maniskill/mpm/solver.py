@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import atexit
 import math
+import os
 import time
 import weakref
 from dataclasses import dataclass
@@ -87,6 +88,7 @@ class Group:
     quasi_static: bool = False  # pseudo-mass (settings.mass_scaling) + relaxation; see add_group
     mass_scale: float = 1.0  # density multiplier of its dynamic particles (1: physical inertia)
     relaxation: float = 0.0  # damping rate ζ [1/s] of its motion relative to its link
+    field: int = 0  # velocity field (0 or 1): groups of different fields are separate bodies in contact
     awake: bool = True
     sleep_pose: np.ndarray | None = None  # link pose when the group fell asleep
 
@@ -146,6 +148,7 @@ class MPMWorld:
         self._reach = 0.0
         self._link_radius: list[float] = []
         self._pack: dict = {}  # kernel argument packs (kernels.Particles, Grid, Scene, Order)
+        self._atomic = atomic_scatter()
         _WORLDS.add(self)
 
     # ------------------------------------------------------------------ building
@@ -174,7 +177,7 @@ class MPMWorld:
     def add_group(self, name: str, positions, material: Material, *, link=None, kinematic=None,
                   velocity=None, particle_volume: float | None = None,
                   spacing: float | None = None, quasi_static: bool | None = None,
-                  relaxation: float | None = None) -> Group:
+                  relaxation: float | None = None, field: int = 0) -> Group:
         """Add a group of particles.
 
         Args:
@@ -197,9 +200,18 @@ class MPMWorld:
                 frequency, with c_s the (pseudo-mass) shear wave speed and L the largest
                 distance of a dynamic particle from the kinematic core. (Measured on a
                 block pad: ζ = ω1/4 … ω1 relax alike, 2·ω1 is slower.)
+            field: velocity field, 0 or 1 (multi-field MPM). Groups in one field form one
+                continuum where they touch (their particles share grid velocities); groups
+                in different fields are separate bodies that touch through a frictional,
+                non-adhesive contact rule on the grid (friction
+                ``settings.soft_friction``). Pads use field 0 and soft objects field 1
+                (:class:`~gausstac_maniskill.cosim.GaussTacSim` does this). While groups
+                of both fields are awake the grid holds two copies of the active box.
         """
         if any(g.name == name for g in self.groups):
             raise ConfigError(f"group {name!r} already exists")
+        if field not in (0, 1) or isinstance(field, bool):
+            raise ConfigError(f"add_group({name!r}): field={field!r} must be 0 or 1")
         if not isinstance(material, Material):
             raise ConfigError(f"add_group({name!r}): material must be a Material, got {type(material).__name__}")
         pts = np.asarray(positions, dtype=np.float64)
@@ -270,7 +282,8 @@ class MPMWorld:
         bind = matrix_to_quat(self._link_next[lidx][:3, :3]) if lidx >= 0 else np.array([1.0, 0, 0, 0])
         self._host["group_bind"] = np.concatenate(
             [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])
-        group = Group(name, self._n, n, material, lidx, int(kin.sum()), h, bool(quasi_static), scale, relax)
+        group = Group(name, self._n, n, material, lidx, int(kin.sum()), h, bool(quasi_static), scale, relax,
+                      int(field))
         self.groups.append(group)
         self._n += n
         self._dirty = True
@@ -589,7 +602,7 @@ class MPMWorld:
             # substep's start); with F-bar the stress is then brought up to the final F
             self._prepare(1.0, 1.0 + 1e-6, dt_sub)
             if self.settings.fbar:
-                K.fbar_update(self._world_pack(), self._nh_only())
+                K.fbar_update(self._world_pack(), self._nh_only(), self._two_field(), self._atomic)
         if self._n_active and self.contact == "particle":
             K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
                              d["col_pose"], d["col_impulse"])
@@ -615,9 +628,14 @@ class MPMWorld:
         if ncell > s.max_grid_cells or n_slabs < 0:
             raise SimulationError(self._explode_message(np.array([ox, oy, oz]) + s.grid_margin,
                                                         np.array([ox + nx, oy + ny, oz + nz]) - s.grid_margin - 3))
-        if ncell > self._grid_cap:
-            self._alloc_grid(int(min(ncell * 1.5, s.max_grid_cells)))
+        need = ncell * (2 if self._two_field() else 1)
+        if need > self._grid_cap:
+            self._alloc_grid(int(min(need * 1.5, 2 * s.max_grid_cells)))
         return box
+
+    def _two_field(self) -> bool:
+        """Groups of both velocity fields are awake (see :meth:`add_group`'s ``field``)."""
+        return len({g.field for g in self.groups if g.awake}) == 2
 
     def _world_pack(self):
         """The kernels' argument pack (kernels.World) over the current device arrays."""
@@ -633,16 +651,17 @@ class MPMWorld:
         s = self.settings
         box = self._prepare(a0, a1, dt)
         mode = 0 if not self.colliders else (1 if self.contact == "particle" else 2)
-        K.advance(self._world_pack(), dt, bool(s.fbar), mode, self._nh_only())
+        K.advance(self._world_pack(), dt, bool(s.fbar), mode, self._nh_only(), self._two_field(), self._atomic)
         return int(box[3] * box[4] * box[5])
 
     def _upload_consts(self) -> None:
         """Scene constants of the kernels (kernels.DX ...): spacing, gravity, damping rate,
-        relaxation rate ζ of the quasi-static nodes (the largest of the awake groups), reach."""
+        relaxation rate ζ of the quasi-static nodes (the largest of the awake groups), reach,
+        margin, friction between the two velocity fields."""
         s = self.settings
         rate = max((g.relaxation for g in self.groups if g.awake and g.quasi_static), default=0.0)
-        self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, rate, self._reach, s.grid_margin],
-                                                np.float32))
+        self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, rate, self._reach, s.grid_margin,
+                                                 s.soft_friction], np.float32))
 
     def _alloc_grid(self, cap: int) -> None:
         d = self._dev
@@ -653,10 +672,12 @@ class MPMWorld:
         d["grid_link"] = ti.ndarray(ti.i32, shape=cap)
         d["grid_dp"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         d["grid_vol"] = ti.Vector.ndarray(2, ti.f32, shape=cap)
+        d["grid_vc"] = ti.ndarray(ti.f32, shape=cap)
+        d["grid_ds"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         self._grid_cap = cap
         self._pack["W"] = None
         self._pack["G"] = K.Grid(**{k: d[k] for k in ("grid_v", "grid_m", "grid_mk", "grid_mq", "grid_link",
-                                                       "grid_dp", "grid_vol")})
+                                                       "grid_dp", "grid_vol", "grid_vc", "grid_ds")})
 
     def _explode_message(self, lo, hi) -> str:
         x = self._dev["x"].to_numpy()
@@ -747,6 +768,7 @@ class MPMWorld:
         d["vmax_chunk"] = ti.ndarray(ti.f32, shape=K.NCHUNK)
         upload("mat_table", material_table(self.materials), ti.f32)
         upload("group_qs", np.array([int(g.quasi_static) for g in self.groups] or [0], np.int32), ti.i32)
+        upload("group_field", np.array([g.field for g in self.groups] or [0], np.int32), ti.i32)
         walls = np.array(self._walls, np.float32).reshape(-1, 3)
         upload("walls", walls if len(walls) else np.zeros((1, 3), np.float32), ti.f32)
         # colliders
@@ -781,7 +803,7 @@ class MPMWorld:
         d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
         upload("counts", np.array([len(self.link_names), len(self.groups), len(self.colliders), len(self._walls),
                                    self._n_active, self._n_kin], np.int32), ti.i32)
-        d["consts"] = ti.ndarray(ti.f32, shape=8)
+        d["consts"] = ti.ndarray(ti.f32, shape=9)
         self._upload_consts()
         self._build_packs()
         if self._grid_cap == 0:
@@ -808,7 +830,8 @@ class MPMWorld:
                                      "cursor", "order", "slab_start")},
                 link_poses=d["link_pose"], col_poses=d["col_pose"], kin=d["active_kin"], active_box=d["box"])
         pk["S"] = K.Scene(**{k: d[k] for k in (
-            "counts", "consts", "mat_table", "group_qs", "group_frames", "link_frames", "walls", "col_kind",
+            "counts", "consts", "mat_table", "group_qs", "group_frames", "group_field", "link_frames", "walls",
+            "col_kind",
             "col_prm", "col_frames", "col_mu", "col_sticky", "sdf", "sdf_info", "col_impulse")})
         pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
 
@@ -868,6 +891,16 @@ class MPMWorld:
         self._col_impulse = state["collider_impulse"].copy()
         self._last_dt_ctrl = float(state["last_dt_ctrl"])
         self._dirty = True
+
+
+def atomic_scatter() -> bool:
+    """How the kernels scatter particles to the grid: with atomic adds, one thread per
+    particle, on CUDA (a GPU needs thousands of threads); by slab colouring, atomic-free and
+    bit-reproducible, on the CPU. ``GAUSSTAC_SCATTER=atomic|slabs`` overrides (benchmarks)."""
+    mode = os.environ.get("GAUSSTAC_SCATTER", "")
+    if mode not in ("", "atomic", "slabs"):
+        raise ConfigError(f"GAUSSTAC_SCATTER={mode!r} must be 'atomic' or 'slabs' (or unset)")
+    return mode == "atomic" if mode else backend.current_arch() == "cuda"
 
 
 def _twist(a: np.ndarray, b: np.ndarray, dt: float) -> np.ndarray:
