@@ -23,6 +23,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench pad --curve --indenters sphere --out out/bench_pad_sphere
 	$(PY) -m gausstac_maniskill.bench pad --curve --indenters plate --out out/bench_pad_plate
 	$(PY) -m gausstac_maniskill.bench kernels
+	$(PY) -m gausstac_maniskill.bench soft
 
 clean:
 	rm -rf .venv out build *.egg-info

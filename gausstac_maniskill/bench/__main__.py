@@ -16,6 +16,7 @@ BENCHMARKS = {
     "thinlayer": "gausstac_maniskill.bench.thinlayer",
     "pad": "gausstac_maniskill.bench.pad",
     "kernels": "gausstac_maniskill.bench.kernels",
+    "soft": "gausstac_maniskill.bench.soft",
 }
 
 

@@ -801,9 +801,12 @@ Placement = ti.types.argpack(  # what prepare reads and writes
 
 
 @ti.kernel
-def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32) -> ti.types.vector(BOX, ti.i32):
+def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
+            atomic: ti.template()) -> ti.types.vector(BOX, ti.i32):
     """Interpolate link, group and collider frames for the substep [alpha0, alpha1] of the
-    control step, move kinematic particles, find the active box, sort particles into slabs.
+    control step, move kinematic particles, find the active box, sort particles into slabs
+    (with ``atomic`` scatter no sort is needed: the order is the active list, and the
+    serial counting sort would cost a GPU more than the whole substep).
 
     Writes the box to ``W.active_box`` (BOX layout) for :func:`advance` and returns it
     (the host sizes the grid); the number of slabs is -1 if it would exceed SLAB_CAP
@@ -812,6 +815,9 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32) -> ti.type
     n = W.counts[N_ACTIVE]
     inv_dx = 1.0 / W.consts[DX]
     margin = ti.cast(W.consts[MARGIN], ti.i32)
+    if ti.static(atomic):  # a top-level loop (parallel); inside a runtime branch it would run serially
+        for ii in range(n):
+            W.order[ii] = W.active[ii]
     write_frames(W.link_poses, W.counts[N_LINKS], alpha0, alpha1, W.link_frames)
     write_frames(W.col_poses, W.counts[N_COL], alpha0, alpha1, W.col_frames)
     write_binding_frames(W.link_frames, W.group_bind, W.group_link, W.counts[N_GROUPS], W.group_frames)
@@ -832,6 +838,9 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32) -> ti.type
     n_slabs = (hi[axis] - lo[axis]) // 2 + 1
     if n_slabs < 1 or n_slabs + 1 > SLAB_CAP:  # too wide, or int overflow from a NaN position
         n_slabs = -1
+    elif ti.static(atomic):
+        W.slab_start[0] = 0
+        W.slab_start[n_slabs] = n  # the atomic scatter loops run over slab_start[n_slabs] particles
     else:
         sort_into_slabs(W.active, n, W.x, inv_dx, axis, lo[axis], n_slabs, W.slab_of,
                         W.slab_start, W.cursor, W.order)

@@ -322,6 +322,12 @@ class MPMWorld:
         raise ConfigError(f"unknown group {name!r}; groups: {[g.name for g in self.groups]}")
 
     @property
+    def bit_reproducible(self) -> bool:
+        """Whether a step from a given state always gives the same bits (the CPU's slab
+        scatter); the atomic scatter on CUDA sums in a run-dependent order."""
+        return not self._atomic
+
+    @property
     def num_particles(self) -> int:
         return self._n
 
@@ -622,7 +628,7 @@ class MPMWorld:
         """Frames, kinematic particles and the slab sort for the substep [a0, a1] of the
         control step; returns the active box (see :func:`kernels.prepare`)."""
         s = self.settings
-        box = K.prepare(self._pack["placement"], a0, a1, dt)
+        box = K.prepare(self._pack["placement"], a0, a1, dt, self._atomic)
         ox, oy, oz, nx, ny, nz, n_slabs, _axis = (int(b) for b in box)
         ncell = nx * ny * nz
         if ncell > s.max_grid_cells or n_slabs < 0:

@@ -174,6 +174,8 @@ def test_soft_block_moved_rigidly_by_its_base_stays_undeformed():
 
 def test_state_dict_round_trip_is_bit_exact_and_deterministic():
     world = pad_world(dx=1.5e-3)
+    if not world.bit_reproducible:
+        pytest.skip("atomic scatter (CUDA) sums in a run-dependent order: not bit-reproducible")
     c, dt = press(world, depth=0.6e-3, steps=5)
     state = world.state_dict()
     # continue 3 steps, remember, then restore and redo them

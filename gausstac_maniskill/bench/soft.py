@@ -1,0 +1,177 @@
+"""Soft contact benchmark: a pad and a soft object as two bodies (two velocity fields).
+
+``python -m gausstac_maniskill.bench soft [--arch cpu|cuda] [--out DIR]`` (about 2 min on 2 cores)
+
+Two scenes, each run with the soft object in its own velocity field (the default of
+:meth:`GaussTacSim.add_soft_object`, multi-field MPM) and, for comparison, in the pads'
+field (one continuum where they touch: what the co-simulator did before):
+
+* **sponge**: the default index pad (dx = 1 mm, the product's settings) and a foam sponge
+  (12 × 12 × 6 mm, E = 50 kPa, ν = 0.3, 60 kg/m³) whose far 1 mm is bound to a holder link.
+  The sponge's face starts 0.3 mm clear of the pad's apex and is pressed 1.3 mm into it over
+  three 50 ms steps, then held. Three readings of the same force, which must agree: the
+  pad's contact force map (summed), the pad's stress (virtual work,
+  :meth:`GaussTacSim.pad_stress_force`), and the sponge's own stress (virtual work with
+  φ = 1 on its face, 0 at its bond, :meth:`MPMWorld.virtual_work_force`). Also the closest
+  approach of a sponge particle to a pad particle (touching surfaces keep their centres
+  about one particle spacing apart) and the MPM time per step.
+* **blocks**: two free 10 × 8 × 8 mm blocks (100 kPa, ν = 0.3, 1000 kg/m³, dx = 1 mm, no
+  gravity) 1 mm apart, closing at 0.1 m/s and at 1 m/s. Reported: the closest approach of
+  particles of the two blocks (in particle spacings), the coefficient of restitution (their
+  separation speed over the approach speed, 12 ms after the start) and the change of total
+  momentum relative to one block's momentum.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+INDEX = "link_3.0_tip"
+SPONGE = dict(E=5e4, nu=0.3, density=60.0)  # Pa, -, kg/m³
+SPONGE_SIZE = (12e-3, 12e-3, 6e-3)  # m
+BOND = 5e-3  # m: the sponge is bound to its holder beyond this height above its face
+CLEARANCE = 0.3e-3  # m: face to pad apex at the start
+PRESS = 1.3e-3  # m
+BLOCK = dict(E=1e5, nu=0.3, density=1000.0)  # the free blocks: Pa, -, kg/m³
+
+
+def sponge_scene(field: int = 1, dx: float = 1e-3):
+    """The index pad (link pose: 10 cm up) and the bound sponge below its sensor axis.
+
+    Returns ``(sim, press, reading)``: ``press(depth)`` steps 50 ms with the holder moved
+    ``depth`` [m] towards the pad (negative: away) and returns the tactile maps;
+    ``reading()`` returns ``(map_force, pad_stress_force, sponge_stress_force)`` [N], the
+    normal force in three readings (pressing positive)."""
+    from ..config import Material
+    from ..cosim import GaussTacSim, default_hand_settings
+    from ..mpm.sampling import box_particles
+    from ..tactile import allegro_pad_specs
+    from ..transforms import make_pose
+
+    pose = np.eye(4)
+    pose[2, 3] = 0.1
+    spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
+    sim = GaussTacSim([spec], {INDEX: pose}, settings=default_hand_settings(dx=dx))
+    W = pose @ sim.pads[INDEX].sensor_frame  # sensor z: out of the pad, towards the sponge
+    R = W[:3, :3]
+    sx, sy, sz = SPONGE_SIZE
+    local = box_particles(np.array([-sx / 2, -sy / 2, 0.0]), np.array([sx / 2, sy / 2, sz]),
+                          sim.settings.particle_spacing)
+    base = W[:3, 3] + R[:, 2] * CLEARANCE
+    sim.world.add_link("holder", make_pose(base, R))
+    kin = local[:, 2] > BOND
+    sim.add_soft_object("sponge", local @ R.T + base, Material(**SPONGE), link="holder", kinematic=kin,
+                        field=field)
+    grad = np.where(kin[:, None], 0.0, -R[:, 2] / BOND)  # ∇φ of φ = 1 - z/BOND (sponge frame z)
+    last = {}
+
+    def press(depth: float):
+        last["maps"] = sim.step({INDEX: pose, "holder": make_pose(base - R[:, 2] * depth, R)}, 0.05)
+        return last["maps"]
+
+    def reading():
+        in_map = float(last["maps"][INDEX]["force"].sum())
+        on_pad = -float(sim.pad_stress_force(INDEX)[2])  # sensor z is negative when pushed in
+        on_sponge = float(sim.world.virtual_work_force("sponge", grad) @ R[:, 2])
+        return in_map, on_pad, on_sponge
+
+    return sim, press, reading
+
+
+def closest_approach(a: np.ndarray, b: np.ndarray) -> float:
+    """Smallest distance [m] between a point of ``a`` [N, 3] and one of ``b`` [M, 3]."""
+    from scipy.spatial import cKDTree
+
+    return float(cKDTree(a).query(b)[0].min())
+
+
+def run_sponge(field: int, steps: int = 6) -> dict:
+    """Press the sponge (3 ramp steps, then held); readings of the last step."""
+    sim, press, reading = sponge_scene(field)
+    walls, closest = [], np.inf
+    for k in range(steps):
+        press(PRESS * min(1.0, (k + 1) / 3))
+        walls.append(sim.world.last_step.wall_time)
+        closest = min(closest, closest_approach(sim.pad_particles(INDEX)[0], sim.world.positions("sponge")))
+    in_map, on_pad, on_sponge = reading()
+    return dict(field=field, map=in_map, pad_stress=on_pad, sponge_stress=on_sponge,
+                closest=closest / sim.settings.particle_spacing, step_ms=1e3 * float(np.mean(walls[3:])),
+                substeps=sim.world.last_step.substeps)
+
+
+def collide(field_b: int, speed: float = 0.1, steps: int = 12, dx: float = 1e-3) -> dict:
+    """Two free blocks closing at ``speed`` [m/s] (block b in field ``field_b``), ``steps``
+    steps of 1 ms. Returns the mean x velocities [m/s] after, the total momentum before and
+    after [kg m/s], one block's momentum [kg m/s], the closest approach [m] and the particle
+    spacing [m]."""
+    from ..config import Material, SolverSettings
+    from ..mpm import MPMWorld, box_particles
+
+    s = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0))
+    w = MPMWorld(s)
+    m = Material(**BLOCK)
+    a = box_particles([-0.0105, -0.004, -0.004], [-0.0005, 0.004, 0.004], s.particle_spacing)
+    w.add_group("a", a, m, velocity=[speed / 2, 0, 0])
+    w.add_group("b", a + [0.011, 0.0, 0.0], m, velocity=[-speed / 2, 0, 0], field=field_b)
+    mass = m.density * s.particle_spacing ** 3
+
+    def momentum():
+        return mass * (w.velocities("a").sum(0) + w.velocities("b").sum(0))
+
+    p0, closest = momentum(), np.inf
+    for _ in range(steps):
+        w.step(1e-3)
+        closest = min(closest, closest_approach(w.positions("a"), w.positions("b")))
+    return dict(va=float(w.velocities("a").mean(0)[0]), vb=float(w.velocities("b").mean(0)[0]), p0=p0,
+                p1=momentum(), p_block=mass * len(a) * speed / 2, closest=closest, spacing=s.particle_spacing,
+                speed=speed)
+
+
+def format_tables(sponges: list[dict], blocks: list[dict]) -> str:
+    name = {0: "one field (shared)", 1: "two fields (default)"}
+    out = ["Sponge pressed 1.3 mm into the index pad (dx = 1 mm, default hand settings); held-step readings [N]",
+           "", "| sponge in | map | pad stress | sponge stress | map / sponge | pad stress / sponge | "
+           "closest approach [spacings] | MPM ms / 50 ms step |", "|---|---|---|---|---|---|---|---|"]
+    for r in sponges:
+        out.append(f"| {name[r['field']]} | {r['map']:.3f} | {r['pad_stress']:.3f} | {r['sponge_stress']:.3f} | "
+                   f"{r['map'] / r['sponge_stress'] - 1:+.1%} | {r['pad_stress'] / r['sponge_stress'] - 1:+.1%} | "
+                   f"{r['closest']:.2f} | {r['step_ms']:.0f} |")
+    out += ["", "Two free blocks colliding (dx = 1 mm, 12 steps of 1 ms)", "",
+            "| block b in | closing speed [m/s] | closest approach [spacings] | restitution | "
+            "momentum change / block momentum |", "|---|---|---|---|---|"]
+    for r in blocks:
+        e = (r["vb"] - r["va"]) / r["speed"]
+        dp = float(np.abs(r["p1"] - r["p0"]).max() / r["p_block"])
+        out.append(f"| {name[r['field']]} | {r['speed']:g} | {r['closest'] / r['spacing']:.2f} | {e:.2f} | {dp:.1e} |")
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench soft", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    ap.add_argument("--out", default="out/bench_soft", help="folder for soft.md")
+    args = ap.parse_args(argv)
+    from tqdm import tqdm
+
+    from .. import backend
+
+    arch = backend.init(args.arch)
+    t0 = time.perf_counter()
+    jobs = [("sponge", f) for f in (1, 0)] + [("blocks", f, v) for v in (0.1, 1.0) for f in (1, 0)]
+    sponges, blocks = [], []
+    for job in tqdm(jobs, desc="soft contact"):
+        if job[0] == "sponge":
+            sponges.append(run_sponge(job[1]))
+        else:
+            blocks.append(dict(collide(job[1], job[2]), field=job[1]))
+    text = (f"on {arch} ({os.cpu_count()} cores), total {time.perf_counter() - t0:.0f} s\n\n"
+            + format_tables(sponges, blocks))
+    print(text)
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, "soft.md"), "w") as f:
+        f.write(text + "\n")
+    return 0
