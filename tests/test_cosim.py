@@ -183,6 +183,12 @@ def test_pads_for_any_link_list():
         pad_specs_for_links("link_3.0_tip")
 
 
+def test_pad_surface_is_checked(hand_poses):
+    spec = allegro_pad_specs()[1]
+    with pytest.raises(ConfigError, match="pad_surface='skin'"):
+        GaussTacSim([spec], hand_poses, pad_surface="skin")
+
+
 def test_flat_state_round_trip_is_bit_exact(hand_poses):
     """flat_state (the form stored in ManiSkill env states) restores the scene exactly:
     stepping on from the restored state gives the same particles and maps."""

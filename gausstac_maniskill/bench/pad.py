@@ -150,22 +150,25 @@ def _contact_area(sim, pad) -> float:
 
 
 def make_sim(dx: float, indenter: str, thickness: float | None = None, friction: float = FRICTION,
-             mass_scaling: float | None = None):
+             mass_scaling: float | None = None, pad_surface: str = "particles"):
     """The benchmark's scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
     :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
-    factor ``mass_scaling``) and ``indenter`` ("plate" | "sphere") 0.2 mm clear of its apex.
-    Returns (sim, W): W the sensor frame's world pose (4x4)."""
+    factor ``mass_scaling``; ``pad_surface`` as in :class:`GaussTacSim`) and ``indenter``
+    ("plate" | "sphere") 0.2 mm clear of its apex. Returns (sim, W): W the sensor frame's
+    world pose (4x4)."""
     from ..cosim import GaussTacSim, default_hand_settings
 
     extra = {} if mass_scaling is None else {"mass_scaling": float(mass_scaling)}
-    sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra))
+    sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra),
+                      pad_surface=pad_surface)
     W = LINK_POSE @ sim.pads[INDEX].sensor_frame
     sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
     return sim, W
 
 
 def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
-             friction: float = FRICTION, bar=None, mass_scaling: float | None = None) -> dict:
+             friction: float = FRICTION, bar=None, mass_scaling: float | None = None,
+             pad_surface: str = "particles") -> dict:
     """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
     (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
     (default: :func:`default_hand_settings`').
@@ -177,7 +180,7 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
     """
     t0 = time.perf_counter()
-    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling)
+    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling, pad_surface)
     pad = sim.pads[INDEX]
     spec = pad.spec
     build_s = time.perf_counter() - t0
@@ -367,7 +370,8 @@ def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=N
     return cases
 
 
-def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress: bool = True) -> dict:
+def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress: bool = True,
+                pad_surface: str = "particles") -> dict:
     """Speed against force error on the product pad (``bench pad --curve``).
 
     ``points``: (dx [m], mass_scaling) pairs; each presses ``indenter`` ``depth`` [m] into
@@ -386,7 +390,7 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
     with tqdm(total=len(points) * (1 + CURVE.press + CURVE.hold), disable=not progress, desc="curve") as bar:
         for dx, ms in sorted(points, key=lambda t: (-t[0], t[1])):
             bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}")
-            c = run_case(dx, indenter, [depth], protocol=CURVE, bar=bar, mass_scaling=ms)
+            c = run_case(dx, indenter, [depth], protocol=CURVE, bar=bar, mass_scaling=ms, pad_surface=pad_surface)
             runs.append(dict(dx=dx, mass_scaling=ms, particles=c["particles"], substeps=c["substeps"],
                              step_ms=c["step_ms"], Fn=c["phases"][0]["Fn"], F_spread=c["phases"][0]["F_spread"],
                              F_stress=c["phases"][0]["F_stress"], F_pressure=c["phases"][0]["F_pressure"]))
@@ -441,14 +445,17 @@ def main(argv: list[str] | None = None) -> int:
                          "--mass-scaling values at the default dx (first --indenters, first --depths)")
     ap.add_argument("--mass-scaling", type=float, nargs="+", default=[250.0, 4000.0, 16000.0],
                     help="pad pseudo-mass factors of the curve at the default dx")
+    ap.add_argument("--pad-surface", default="particles", choices=["particles", "mesh"],
+                    help="where the indenter touches the pad (GaussTacSim's pad_surface; curve only)")
     args = ap.parse_args(argv)
     if args.curve:
         arch = backend.init(args.arch)
         dxs = args.dx or [2e-3, 1.5e-3, default_dx, 0.75e-3, 0.5e-3]
         points = [(dx, default_ms) for dx in dxs] + [(default_dx, m) for m in args.mass_scaling]
         t0 = time.perf_counter()
-        curve = speed_curve(points, args.indenters[0], args.depths[-1])
-        text = (f"on {arch} ({os.cpu_count()} cores), total {time.perf_counter() - t0:.0f} s\n\n"
+        curve = speed_curve(points, args.indenters[0], args.depths[-1], pad_surface=args.pad_surface)
+        text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, "
+                f"total {time.perf_counter() - t0:.0f} s\n\n"
                 + format_curve(curve, args.indenters[0], args.depths[-1]))
         print(text)
         os.makedirs(args.out, exist_ok=True)

@@ -177,7 +177,7 @@ class MPMWorld:
     def add_group(self, name: str, positions, material: Material, *, link=None, kinematic=None,
                   velocity=None, particle_volume: float | None = None,
                   spacing: float | None = None, quasi_static: bool | None = None,
-                  relaxation: float | None = None, field: int = 0) -> Group:
+                  relaxation: float | None = None, field: int = 0, contact_radius=None) -> Group:
         """Add a group of particles.
 
         Args:
@@ -190,7 +190,9 @@ class MPMWorld:
             velocity: optional [N, 3] or [3] initial velocity [m/s].
             particle_volume: rest volume per particle [m^3]; default ``spacing**3``.
             spacing: particle spacing [m] of these positions; default
-                ``settings.particle_spacing``. The contact radius is ``spacing / 2``.
+                ``settings.particle_spacing``.
+            contact_radius: [N] or scalar distance [m] from a particle's centre to the
+                surface it stands for (colliders touch that surface); default ``spacing / 2``.
             quasi_static: solve the group by dynamic relaxation (pseudo-mass
                 ``settings.mass_scaling``, damping relative to its link). Default: True
                 when the group has kinematic particles. A free group (no kinematic
@@ -236,6 +238,11 @@ class MPMWorld:
         vol = float(particle_volume if particle_volume is not None else h ** 3)
         if not (vol > 0 and math.isfinite(vol)):
             raise ConfigError(f"add_group({name!r}): particle_volume={particle_volume!r} must be > 0")
+        radius = np.full(n, 0.5 * h)
+        if contact_radius is not None:
+            radius = np.broadcast_to(np.asarray(contact_radius, np.float64), (n,)).copy()
+            if not (np.all(np.isfinite(radius)) and np.all(radius > 0)):
+                raise ConfigError(f"add_group({name!r}): contact_radius must be > 0 and finite")
         vel = np.zeros((n, 3))
         if velocity is not None:
             vel = np.broadcast_to(np.asarray(velocity, np.float64), (n, 3)).copy()
@@ -269,7 +276,7 @@ class MPMWorld:
             "tau": np.zeros((n, 3, 3), np.float32), "Jp": np.ones(n, np.float32),
             "impulse": np.zeros((n, 3), np.float32), "contact_id": np.full(n, -1, np.int32),
             "mass": np.full(n, rho * vol, np.float32), "vol": np.full(n, vol, np.float32),
-            "radius": np.full(n, 0.5 * h, np.float32), "kind": kin.astype(np.int32),
+            "radius": radius.astype(np.float32), "kind": kin.astype(np.int32),
             "matid": np.full(n, mid, np.int32), "link": np.full(n, lidx, np.int32),
             "group": np.full(n, gid, np.int32), "X0": np.zeros((n, 3), np.float32),
         }

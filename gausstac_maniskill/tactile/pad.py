@@ -62,6 +62,17 @@ class Pad:
         S = self.sensor_frame
         return (self.rest - S[:3, 3]) @ S[:3, :3]
 
+    @property
+    def contact_radius(self) -> np.ndarray:
+        """[N] contact radius [m] of each particle: for the outermost layer (depth < spacing)
+        its distance below the link mesh (at least 5 % of a spacing), so the contact surface
+        is the mesh's own, whatever the lattice's alignment with it; half a spacing inside
+        (``GaussTacSim(pad_surface="mesh")``; the default puts every particle's surface half
+        a spacing out, which on a curved pad lies up to half a spacing off the mesh,
+        differently at each resolution)."""
+        h = self.spacing
+        return np.where(self.depth < h, np.clip(self.depth, 0.05 * h, h), 0.5 * h)
+
     def bounding_sphere(self) -> tuple[np.ndarray, float]:
         """(centre [3], radius) of the pad's particles in the link frame, metres."""
         c = self.rest.mean(0)

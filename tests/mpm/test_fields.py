@@ -27,9 +27,11 @@ def test_one_field_meets_a_cell_early():
     assert r["closest"] > 2.0 * r["spacing"]
 
 
-def test_field_and_friction_are_checked():
+def test_field_friction_and_contact_radius_are_checked():
     w = MPMWorld(SolverSettings())
     with pytest.raises(ConfigError, match="field=2 must be 0 or 1"):
         w.add_group("x", np.zeros((1, 3)), Material(), field=2)
+    with pytest.raises(ConfigError, match="contact_radius must be > 0"):
+        w.add_group("y", np.zeros((2, 3)), Material(), contact_radius=[1e-3, 0.0])
     with pytest.raises(ConfigError, match="soft_friction"):
         SolverSettings(soft_friction=-0.1)

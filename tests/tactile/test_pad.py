@@ -31,6 +31,17 @@ def test_pads_build_for_all_four_allegro_tips(spec):
     assert spec.link in ALLEGRO_TIPS
 
 
+def test_mesh_contact_radius_reaches_the_mesh():
+    """pad_surface="mesh": an outer particle's contact radius is its depth below the mesh
+    (so centre + radius along the normal is on the mesh); inner particles keep h/2."""
+    spec = allegro_pad_specs()[1]
+    pad = build_pad(spec, link_mesh(default_hand_urdf(), spec.link), H, DX)
+    r, outer = pad.contact_radius, pad.depth < H
+    np.testing.assert_allclose(r[outer], np.clip(pad.depth[outer], 0.05 * H, H))
+    assert np.all(r[~outer] == 0.5 * H)
+    assert 0.0 < r.min() and r.max() <= H
+
+
 def test_wrong_link_name_suggests_the_right_one():
     with pytest.raises(ConfigError, match=r"'link_3.0_tipp' is not in allegro_hand_right.urdf.*link_3.0_tip"):
         link_mesh(default_hand_urdf(), "link_3.0_tipp")
