@@ -24,6 +24,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench pad --curve --indenters plate --out out/bench_pad_plate
 	$(PY) -m gausstac_maniskill.bench kernels
 	$(PY) -m gausstac_maniskill.bench soft
+	$(PY) -m gausstac_maniskill.bench patch
 
 clean:
 	rm -rf .venv out build *.egg-info

@@ -17,6 +17,7 @@ BENCHMARKS = {
     "pad": "gausstac_maniskill.bench.pad",
     "kernels": "gausstac_maniskill.bench.kernels",
     "soft": "gausstac_maniskill.bench.soft",
+    "patch": "gausstac_maniskill.bench.patch",
 }
 
 
