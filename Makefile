@@ -25,6 +25,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench kernels
 	$(PY) -m gausstac_maniskill.bench soft
 	$(PY) -m gausstac_maniskill.bench patch
+	$(PY) -m gausstac_maniskill.bench look
 
 clean:
 	rm -rf .venv out build *.egg-info

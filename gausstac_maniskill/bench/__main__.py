@@ -18,6 +18,7 @@ BENCHMARKS = {
     "kernels": "gausstac_maniskill.bench.kernels",
     "soft": "gausstac_maniskill.bench.soft",
     "patch": "gausstac_maniskill.bench.patch",
+    "look": "gausstac_maniskill.bench.look",
 }
 
 
