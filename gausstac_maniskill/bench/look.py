@@ -16,13 +16,14 @@ its meshes, unlit, while SAPIEN shades the meshes with the scene's lights.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import time
 
 import numpy as np
 import torch
+
+from . import cli, write_report
 
 CAMERA = "splat_camera"
 
@@ -106,8 +107,7 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench look", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("look", __doc__)
     ap.add_argument("--sizes", nargs="+", default=["128x128", "320x240"], help="WxH of the camera")
     ap.add_argument("--out", default="out/bench_look", help="folder for look.md and the PNG strips")
     args = ap.parse_args(argv)
@@ -123,6 +123,5 @@ def main(argv: list[str] | None = None) -> int:
         iio.imwrite(os.path.join(args.out, f"look_{w}x{h}.png"), strip)
     text = f"total {time.perf_counter() - t0:.0f} s\n\n" + format_table(rows)
     print(text)
-    with open(os.path.join(args.out, "look.md"), "w") as f:
-        f.write(text + "\n")
+    write_report(args.out, "look.md", text)
     return 0

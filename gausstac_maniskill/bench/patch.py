@@ -16,11 +16,12 @@ a 20 and a 40 mm pad).
 """
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
 import numpy as np
+
+from . import arch_option, cli, write_report
 
 THICKNESS = 4e-3  # m, the product pad's soft layer
 DEPTH = 1e-3  # m
@@ -59,10 +60,9 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench patch", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("patch", __doc__)
     ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
-    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    arch_option(ap)
     ap.add_argument("--out", default="out/bench_patch", help="folder for patch.md")
     args = ap.parse_args(argv)
     from tqdm import tqdm
@@ -78,7 +78,5 @@ def main(argv: list[str] | None = None) -> int:
     text = (f"on {arch} ({os.cpu_count()} cores), dx = {args.dx * 1e3:g} mm, total "
             f"{time.perf_counter() - t0:.0f} s\n\n" + format_table(rows))
     print(text)
-    os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, "patch.md"), "w") as f:
-        f.write(text + "\n")
+    write_report(args.out, "patch.md", text)
     return 0

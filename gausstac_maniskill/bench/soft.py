@@ -23,11 +23,12 @@ field (one continuum where they touch: what the co-simulator did before):
 """
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
 import numpy as np
+
+from . import arch_option, cli, write_report
 
 INDEX = "link_3.0_tip"
 SPONGE = dict(E=5e4, nu=0.3, density=60.0)  # Pa, -, kg/m³
@@ -150,9 +151,8 @@ def format_tables(sponges: list[dict], blocks: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench soft", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    ap = cli("soft", __doc__)
+    arch_option(ap)
     ap.add_argument("--out", default="out/bench_soft", help="folder for soft.md")
     args = ap.parse_args(argv)
     from tqdm import tqdm
@@ -171,7 +171,5 @@ def main(argv: list[str] | None = None) -> int:
     text = (f"on {arch} ({os.cpu_count()} cores), total {time.perf_counter() - t0:.0f} s\n\n"
             + format_tables(sponges, blocks))
     print(text)
-    os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, "soft.md"), "w") as f:
-        f.write(text + "\n")
+    write_report(args.out, "soft.md", text)
     return 0
