@@ -13,6 +13,11 @@ co-simulator does not move — a captured background, captured objects riding on
 actors — join as :class:`RigidLayer` s (:meth:`SceneGaussians.add_layer`): they are
 splatted in the same rasterizer pass and sorted by depth with the hand's, so each
 occludes the other correctly. Units: metres.
+
+All of them are kept, once, as one :class:`~gausstac_maniskill.splat.FramedGaussians`
+in their frames (links, objects, the particles the soft Gaussians ride on, the layers'
+actors): posing the scene for a picture gathers only the F frames ([F, 3, 4]), and the
+rasterizer's projection kernel moves every Gaussian with its frame.
 """
 from __future__ import annotations
 
@@ -22,9 +27,10 @@ import numpy as np
 import torch
 
 from .errors import ConfigError
-from .splat import GaussianSet, PosedGaussians, SoftBinding, pose_gaussians
+from .splat import FramedGaussians, GaussianSet, PosedGaussians, SoftBinding, pose_gaussians
+from .splat.deform import particle_frames, rigid_frames
 
-__all__ = ["SceneGaussians", "RigidLayer", "box_gaussians", "particle_gaussians"]
+__all__ = ["SceneGaussians", "PosedScene", "RigidLayer", "box_gaussians", "particle_gaussians"]
 
 PAD_RGB = (0.55, 0.62, 0.78)      # translucent-looking blue-grey silicone
 SOFT_RGB = (0.95, 0.80, 0.25)     # foam yellow
@@ -98,6 +104,7 @@ class RigidLayer:
         self.gaussians = gaussians
         self.poses = poses
         self._static: PosedGaussians | None = None
+        self._framed: FramedGaussians | None = None
 
     def __len__(self) -> int:
         return len(self.gaussians)
@@ -110,6 +117,44 @@ class RigidLayer:
             return self._static
         T = torch.as_tensor(np.asarray(self.poses(), dtype=np.float64), dtype=torch.float32)
         return pose_gaussians(self.gaussians, T)
+
+    def _pose_matrices(self) -> torch.Tensor:
+        T = torch.as_tensor(np.asarray(self.poses(), dtype=np.float64), dtype=torch.float32)
+        if T.dim() != 3 or T.shape[1:] != (4, 4):
+            raise ConfigError(f"RigidLayer: poses() returned shape {list(T.shape)}, expected [L, 4, 4]")
+        return T
+
+    def framed(self) -> FramedGaussians:
+        """The layer in its frames (built once): one identity frame for a world-space layer,
+        otherwise one per pose of ``poses()`` (whose number must not change)."""
+        if self._framed is None:
+            n_frames = 1 if self.poses is None else self._pose_matrices().shape[0]
+            ids = torch.zeros(len(self.gaussians), dtype=torch.int64) if self.poses is None else None
+            self._framed = FramedGaussians.from_gaussians(self.gaussians, ids, n_frames)
+        return self._framed
+
+    def frames(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Current (frames [F, 3, 4], SH rotations [F, 3, 3]) of :meth:`framed`."""
+        if self.poses is None:
+            return rigid_frames(torch.eye(4)[None])
+        return rigid_frames(self._pose_matrices())
+
+
+class PosedScene:
+    """A :class:`SceneGaussians` posed at one instant: its Gaussians in their frames and the
+    frames' current poses ([F, 3, 4]) and SH rotations ([F, 3, 3] or None)."""
+
+    def __init__(self, gaussians: FramedGaussians, frames: torch.Tensor, rotations: torch.Tensor | None):
+        self.gaussians, self.frames, self.rotations = gaussians, frames, rotations
+
+    def render(self, viewmats, Ks, width: int, height: int, **kwargs):
+        """Render (see :meth:`FramedGaussians.render`); ``viewmats`` [C, 4, 4], ``Ks`` [C, 3, 3]."""
+        return self.gaussians.render(self.frames, self.rotations, torch.as_tensor(viewmats, dtype=torch.float32),
+                                     torch.as_tensor(Ks, dtype=torch.float32), width, height, **kwargs)
+
+    def world(self) -> PosedGaussians:
+        """The same Gaussians in world space (full covariances)."""
+        return self.gaussians.posed(self.frames, self.rotations)
 
 
 class SceneGaussians:
@@ -143,6 +188,7 @@ class SceneGaussians:
         self.binding = SoftBinding.from_nearest(self.gaussians, rest,
                                                 gaussian_index=torch.arange(self.n_rigid, len(self.gaussians)))
         self.layers: list[RigidLayer] = []
+        self._framed: FramedGaussians | None = None  # built on first use, again after add_layer
 
     def add_layer(self, layer: RigidLayer) -> None:
         """Splat ``layer`` (e.g. a captured scene or captured objects) with this scene's
@@ -150,6 +196,7 @@ class SceneGaussians:
         if not isinstance(layer, RigidLayer):
             raise ConfigError(f"add_layer takes a RigidLayer, got {type(layer).__name__}")
         self.layers.append(layer)
+        self._framed = None
 
     def _drop_pad_regions(self, hand: GaussianSet) -> GaussianSet:
         """Remove rigid Gaussians where a soft pad replaces the link's surface."""
@@ -164,10 +211,24 @@ class SceneGaussians:
             keep[sel[torch.as_tensor(d < 2.5 * pad.spacing)]] = False
         return hand[torch.nonzero(keep).flatten()]
 
-    def posed(self) -> PosedGaussians:
-        """World-space Gaussians for the simulator's current link, object and particle state,
-        followed by those of the layers."""
+    def framed(self) -> FramedGaussians:
+        """All Gaussians in their frames: links and objects (in that order), the particles
+        the soft Gaussians follow, then each layer's frames. Built once."""
+        if self._framed is None:
+            n_rigid_frames = len(self.hand_links) + len(self.object_names)
+            rigid = self.gaussians[torch.arange(self.n_rigid)]
+            soft, particles = FramedGaussians.from_binding(self.gaussians, self.binding)
+            self._particles = particles.numpy()
+            # polar(F) is only needed if a soft Gaussian's colour depends on the view direction
+            self._soft_rotations = bool(soft.sh.shape[1] > 1 and soft.sh[:, 1:].abs().max() > 0)
+            self._framed = FramedGaussians.cat([FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames),
+                                                soft, *(layer.framed() for layer in self.layers)])
+        return self._framed
+
+    def posed(self) -> PosedScene:
+        """The scene at the simulator's current link, object and particle state, with the layers."""
         sim = self.sim
+        framed = self.framed()
         poses = []
         for name in self.hand_links:
             if name not in sim._link_pose:
@@ -176,15 +237,20 @@ class SceneGaussians:
             poses.append(sim._link_pose[name])
         for name in self.object_names:
             poses.append(sim.world.colliders[sim._objects[name]].pose)
-        link_poses = torch.as_tensor(np.array(poses) if poses else np.zeros((1, 4, 4)), dtype=torch.float32)
+        rigid, rigid_rot = rigid_frames(np.array(poses) if poses else np.zeros((0, 4, 4)))
         x, F = sim.particles()
-        posed = pose_gaussians(self.gaussians, link_poses, self.binding, torch.as_tensor(x), torch.as_tensor(F))
-        if self.layers:
-            posed = PosedGaussians.cat([posed, *(layer.posed() for layer in self.layers)])
-        return posed
+        p = self._particles
+        soft, soft_rot = particle_frames(x[p], F[p], rotations=self._soft_rotations)
+        layers = [layer.frames() for layer in self.layers]
+        frames = torch.cat([rigid, soft, *(f for f, _ in layers)])
+        rotations = None  # SH degree 0 everywhere: colours do not depend on the view direction
+        if framed.sh.shape[1] > 1:
+            if soft_rot is None:  # no soft Gaussian's colour depends on it: any rotation will do
+                soft_rot = torch.eye(3).expand(len(p), 3, 3)
+            rotations = torch.cat([rigid_rot, soft_rot, *(r for _, r in layers)])
+        return PosedScene(framed, frames, rotations)
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render; ``viewmats`` [C, 4, 4] world-to-camera (OpenCV), ``Ks`` [C, 3, 3].
         Keyword arguments go to :func:`~gausstac_maniskill.splat.rasterize` (e.g. ``background``)."""
-        return self.posed().render(torch.as_tensor(viewmats, dtype=torch.float32),
-                                   torch.as_tensor(Ks, dtype=torch.float32), width, height, **kwargs)
+        return self.posed().render(viewmats, Ks, width, height, **kwargs)

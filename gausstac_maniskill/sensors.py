@@ -71,7 +71,10 @@ class SplatSource:
     ``render(viewmats [B,4,4], Ks [B,3,3], width, height, background, background_depth)``
     returns ``(rgb [B,H,W,3] float in [0,1], depth [B,H,W] m (inf where empty))`` and
     ``hidden()`` is a context manager during which SAPIEN does not draw what the
-    Gaussians replace (the hand).
+    Gaussians replace (the hand). ``background_key()`` returns a numpy array that is
+    equal between two calls (``np.array_equal``) only if nothing SAPIEN draws in that
+    background moved, or ``None`` when the source cannot tell (then every picture is
+    taken anew).
     """
 
     def render(self, viewmats, Ks, width, height, background, background_depth):  # pragma: no cover
@@ -80,6 +83,9 @@ class SplatSource:
     def hidden(self):  # pragma: no cover
         return contextlib.nullcontext()
 
+    def background_key(self):  # pragma: no cover
+        return None
+
 
 class GaussianSplatCamera(Camera):
     """A ManiSkill camera whose picture comes from the 3D Gaussian Splatting rasterizer.
@@ -87,6 +93,10 @@ class GaussianSplatCamera(Camera):
     It owns a SAPIEN camera like any ``Camera`` (pose, mount, intrinsics and, with
     ``background="sapien"``, the picture of the rest of the scene). The environment
     attaches the scene with :meth:`attach`; until then, capturing raises a clear error.
+    SAPIEN's background picture is reused while neither this camera (pose, intrinsics)
+    nor anything drawn in it moved (the source's ``background_key``); a change that moves
+    nothing (a material or light colour) is not seen: call :meth:`invalidate_background`
+    after one (GaussTac environments do so at every reset).
     Output keys and dtypes follow SAPIEN's minimal shader: ``rgb`` uint8 [B, H, W, 3],
     ``depth`` int16 [B, H, W, 1] in millimetres (0 where nothing is seen).
     ``position``/``segmentation`` (if asked for) are SAPIEN's, of the whole scene (a second
@@ -97,9 +107,16 @@ class GaussianSplatCamera(Camera):
 
     def __init__(self, camera_config: GaussianSplatCameraConfig, scene, articulation=None):
         super().__init__(camera_config, scene, articulation)
+        self._init_splat()
+
+    def _init_splat(self) -> None:
         self.source: SplatSource | None = None
         self._images: dict[str, torch.Tensor] | None = None
-        self._background_obs: dict[str, torch.Tensor] = {}
+        #: SAPIEN's background as (rgb [B,H,W,3] in [0,1], depth [B,H,W] m, inf where empty)
+        self._background: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._background_key: np.ndarray | None = None  # what it was taken of
+        #: number of SAPIEN background pictures taken (a reused one does not count)
+        self.background_renders = 0
 
     @classmethod
     def adopt(cls, camera: Camera) -> "GaussianSplatCamera":
@@ -108,28 +125,68 @@ class GaussianSplatCamera(Camera):
         builds a plain ``Camera`` for every ``CameraConfig``)."""
         obj = cls.__new__(cls)
         obj.__dict__.update(camera.__dict__)
-        obj.source, obj._images, obj._background_obs = None, None, {}
+        obj._init_splat()
         return obj
 
     def attach(self, source: SplatSource) -> None:
         """Render ``source``'s Gaussians from now on."""
         self.source = source
+        self.invalidate_background()
+
+    def invalidate_background(self) -> None:
+        """Take SAPIEN's background picture anew at the next capture."""
+        self._background = self._background_key = None
+
+    def _background_state(self) -> np.ndarray | None:
+        """The source's background key plus this camera's poses and intrinsics (None: unknown)."""
+        key = self.source.background_key()
+        if key is None:
+            return None
+        parts = [np.asarray(key, dtype=np.float64).ravel()]
+        for cam in self.camera._render_cameras:
+            pose = cam.global_pose
+            parts += [np.asarray(pose.p, np.float64), np.asarray(pose.q, np.float64),
+                      np.asarray(cam.get_intrinsic_matrix(), np.float64).ravel(),
+                      np.array([cam.get_near(), cam.get_far()], np.float64)]
+        return np.concatenate(parts)
 
     def capture(self):
+        from .splat.rasterizer import one_torch_thread
+
+        with one_torch_thread():
+            self._capture()
+
+    def _capture(self):
         if self.source is None:
             raise ConfigError(f"GaussianSplatCamera {self.config.uid!r} has no scene attached; it works in "
                               "GaussTac environments (gausstac_maniskill.tasks.base.GaussTacEnv)")
         self._images = None
-        self._background_obs = {}
-        if self.config.background == "sapien":
-            with self.source.hidden():
-                super().capture()
-                # read the picture now, while the hand is hidden
-                self._background_obs = super().get_obs(rgb=True, depth=True, position=False, segmentation=False)
+        if self.config.background != "sapien":
+            return
+        key = self._background_state()
+        if key is not None and self._background is not None and self._background_key is not None \
+                and np.array_equal(key, self._background_key):
+            return  # nothing SAPIEN draws there moved: its picture would be the same
+        with self.source.hidden():
+            super().capture()
+            # read the picture now, while the hand is hidden
+            obs = super().get_obs(rgb=True, depth=True, position=False, segmentation=False)
+        d = obs["depth"][..., 0].cpu().float() / 1000.0
+        self._background = (obs["rgb"][..., :3].cpu().float() / 255.0,
+                            torch.where(d > 0, d, torch.full_like(d, float("inf"))))
+        self._background_key = key
+        self.background_renders += 1
 
     def _render(self) -> dict[str, torch.Tensor]:
         if self._images is not None:
             return self._images
+        from .splat.rasterizer import one_torch_thread
+
+        with one_torch_thread():
+            self._images = self._render_images()
+        return self._images
+
+    def _render_images(self) -> dict[str, torch.Tensor]:
         cfg = self.config
         params = self.get_params()
         ext = torch.as_tensor(params["extrinsic_cv"], dtype=torch.float32).reshape(-1, 3, 4)
@@ -138,19 +195,16 @@ class GaussianSplatCamera(Camera):
         view[:, :3, :] = ext.cpu()
         K = torch.as_tensor(params["intrinsic_cv"], dtype=torch.float32).reshape(-1, 3, 3).cpu()
         if cfg.background == "sapien":
-            bg = self._background_obs["rgb"][..., :3].cpu().float() / 255.0
-            d = self._background_obs["depth"][..., 0].cpu().float() / 1000.0
-            bg_depth = torch.where(d > 0, d, torch.full_like(d, float("inf")))
+            bg, bg_depth = self._background
         else:
             bg, bg_depth = cfg.background, None
         rgb, depth = self.source.render(view, K, cfg.width, cfg.height, bg, bg_depth)
         device = ext.device  # the camera's (as_tensor keeps a tensor's device)
         mm = torch.where(torch.isfinite(depth), depth * 1000.0, torch.zeros_like(depth))
-        self._images = {
+        return {
             "rgb": (rgb.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).to(device),
             "depth": mm.round().clamp(0, 32767).to(torch.int16)[..., None].to(device),
         }
-        return self._images
 
     def get_obs(self, rgb: bool = True, depth: bool = True, position: bool = True, segmentation: bool = True,
                 normal: bool = False, albedo: bool = False, apply_texture_transforms: bool = True):

@@ -428,6 +428,11 @@ class GaussTacEnv(BaseEnv):
 
     def reset(self, seed=None, options=None):
         self._cosim_stale = True
+        for cams in (getattr(self, "_sensors", {}), getattr(self, "_human_render_cameras", {})):
+            # a new episode may look different in ways no pose shows (randomised materials)
+            for cam in cams.values():
+                if isinstance(cam, GaussianSplatCamera):
+                    cam.invalidate_background()
         t0 = time.perf_counter()
         out = super().reset(seed=seed, options=options)
         self.step_timing["reset"] = time.perf_counter() - t0
@@ -663,16 +668,39 @@ class _EnvSplatSource(SplatSource):
             rgbs.append(out.rgb)
         return torch.cat(rgbs), torch.cat(depths)
 
-    @contextlib.contextmanager
-    def hidden(self):
-        """Hide the hand's SAPIEN visuals (when it has Gaussians to replace them) and the
-        captured objects' actors while the splat camera takes its background (CPU sim)."""
+    def _hidden_entities(self) -> list:
+        """SAPIEN entities the Gaussians replace: the hand's links (when it has Gaussians) and
+        the captured objects' actors (CPU sim; none on the GPU sim)."""
         env = self.env
         entities = []
         if not env.gpu_sim_enabled:
             if type(env.agent).gausstac_gaussians:
                 entities += [obj.entity for link in env.agent.robot.links for obj in link._objs]
             entities += [ent for o in env._captured.values() for ent in o.actor._objs]
+        return entities
+
+    def background_key(self):
+        """Poses (and render visibility) of every SAPIEN entity that the background picture
+        may show, i.e. all but the hidden ones; ``None`` on the GPU sim (not tracked)."""
+        env = self.env
+        if env.gpu_sim_enabled:
+            return None
+        hidden = {e.global_id for e in self._hidden_entities()}
+        key = []
+        for sub in env.scene.sub_scenes:
+            for ent in sub.entities:
+                if ent.global_id in hidden:
+                    continue
+                pose = ent.pose
+                rb = ent.find_component_by_type(sapien.render.RenderBodyComponent)
+                key += [ent.global_id, *pose.p, *pose.q, -1.0 if rb is None else rb.visibility]
+        return np.asarray(key, dtype=np.float64)
+
+    @contextlib.contextmanager
+    def hidden(self):
+        """Hide the hand's SAPIEN visuals (when it has Gaussians to replace them) and the
+        captured objects' actors while the splat camera takes its background (CPU sim)."""
+        entities = self._hidden_entities()
         bodies = []
         for ent in entities:
             rb = ent.find_component_by_type(sapien.render.RenderBodyComponent)

@@ -70,3 +70,115 @@ def test_cat_pads_sh_degrees_and_checks_batches():
     batched = PosedGaussians(a.means[None], a.covars[None], a.sh_rotations[None], a.opacities, a.sh)
     with pytest.raises(ConfigError, match="batch shapes differ"):
         PosedGaussians.cat([a, batched])
+
+
+def test_layer_frames_render_like_its_posed_set():
+    """A layer's frames (identity for a world-space capture, its poses otherwise), posed by
+    the rasterizer, give the image of its world-space set."""
+    from gausstac_maniskill.render import PosedScene
+    from gausstac_maniskill.splat import FramedGaussians
+
+    g = wall(0.0, 0.1, (0.2, 0.8, 0.3), sh_degree=1)
+    g = g.replace(sh=g.sh + 0.3 * torch.randn(g.sh.shape, generator=torch.Generator().manual_seed(0)))
+    T = [make_pose([0.05, 0.0, 0.8], np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]))]  # 90° about z
+    for layer in (RigidLayer(g.replace(means=g.means + torch.tensor([0.0, 0.0, 1.0]))),
+                  RigidLayer(g, poses=lambda: np.array(T))):
+        f, r = layer.frames()
+        posed = PosedScene(layer.framed(), f, r)
+        a = posed.render(CAM, K, W, H, background=0.1)
+        b = layer.posed().render(CAM, K, W, H, background=0.1)
+        assert b.alpha.max() > 0.5
+        assert (a.rgb - b.rgb).abs().max() < 1e-4 and (a.depth - b.depth).abs().max() < 1e-4
+        assert isinstance(layer.framed(), FramedGaussians) and layer.framed() is layer.framed()
+
+
+@pytest.fixture(scope="module")
+def pressed_scene():
+    """An Allegro co-simulator with the hand's Gaussians, a ball (with Gaussians) pressed into
+    the index pad so that its soft Gaussians deform, and a captured wall (SH degree 1) behind
+    the fingertip as a layer; returns (sim, viewmats [1, 4, 4], Ks [1, 3, 3])."""
+    import json
+
+    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.demo import ASSET_DIR
+    from gausstac_maniskill.mpm import Sphere
+    from gausstac_maniskill.pose import MujocoPoseSource
+    from gausstac_maniskill.render import box_gaussians
+    from gausstac_maniskill.splat import load_ply
+    from gausstac_maniskill.tactile import allegro_pad_specs
+
+    src = MujocoPoseSource()
+    poses = dict(zip(src.link_names, src.link_poses()[0].numpy()))
+    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=2e-3))
+    index = "link_3.0_tip"
+    apex = poses[index] @ sim.pads[index].sensor_frame
+    R = 6e-3
+    ball = lambda d: make_pose(apex[:3, 3] + apex[:3, 2] * (R - d))  # noqa: E731
+    sim.add_rigid_object("ball", Sphere(radius=R, pose=ball(-0.5e-3)))
+    hand = load_ply(ASSET_DIR / "gaussians.ply")
+    links = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]
+    sim.attach_gaussians(hand, links, {"ball": box_gaussians((R, R, R), 1.5e-3)})
+    backdrop = wall(0.0, 0.15, (0.1, 0.3, 0.9), spacing=0.01, sh_degree=1)
+    backdrop = backdrop.replace(means=backdrop.means + torch.as_tensor(apex[:3, 3] - 0.1 * apex[:3, 2],
+                                                                       dtype=torch.float32),
+                                sh=backdrop.sh + 0.3 * torch.randn(backdrop.sh.shape,
+                                                                   generator=torch.Generator().manual_seed(2)))
+    sim.add_render_layer(RigidLayer(backdrop))
+    for k in range(6):
+        sim.step(poses, 0.02, {"ball": ball(1.0e-3 * (k + 1) / 6)})
+    view = look_at(apex[:3, 3] + 0.12 * apex[:3, 2] + np.array([0.0, 0.0, 0.04]), apex[:3, 3])
+    return sim, view[None], intrinsics_from_fov(96, 80, 0.9)[None]
+
+
+def world_space(sim):
+    """The scene's Gaussians moved in world space the way SceneGaussians did before it kept
+    frames: pose_gaussians on links, objects and particles, then the layers."""
+    scene = sim._scene
+    x, F = sim.particles()
+    link_poses = torch.as_tensor(np.array([sim._link_pose[n] for n in scene.hand_links]
+                                          + [sim.world.colliders[sim._objects[n]].pose for n in scene.object_names]),
+                                 dtype=torch.float32)
+    return PosedGaussians.cat([pose_gaussians(scene.gaussians, link_poses, scene.binding, torch.as_tensor(x),
+                                              torch.as_tensor(F)), *(layer.posed() for layer in scene.layers)])
+
+
+def test_scene_frames_render_like_the_world_space_path(pressed_scene):
+    """The scene posed as frames (links, object, particles, layer) renders like the same
+    Gaussians moved in world space, with the index pad deformed by the ball."""
+    sim, V, Kc = pressed_scene
+    scene = sim._scene
+    _, F = sim.particles()
+    assert np.abs(F[scene.binding.particle_index.numpy()] - np.eye(3)).max() > 1e-3, "the pad should deform"
+    posed = scene.posed()
+    world = world_space(sim)
+    assert len(posed.gaussians) == len(world.means)
+    a = posed.render(V, Kc, 96, 80, background=(1.0, 1.0, 1.0))
+    b = world.render(V, Kc, 96, 80, background=(1.0, 1.0, 1.0))
+    assert 0.2 < (b.alpha > 0.5).float().mean() < 0.99
+    for name in ("rgb", "depth", "alpha"):
+        assert (getattr(a, name) - getattr(b, name)).abs().max() < 1e-4, name
+    assert torch.allclose(posed.world().means, world.means, atol=1e-6)
+
+
+def test_soft_gaussians_with_view_dependent_colour_turn_with_polar_F(pressed_scene):
+    """Soft Gaussians whose SH have more than a DC term get polar(F) as their frames' SH
+    rotation (it is skipped when no soft Gaussian's colour depends on the view)."""
+    sim, V, Kc = pressed_scene
+    scene = sim._scene
+    g = scene.gaussians
+    soft = scene.binding.gaussian_index
+    sh = torch.zeros(len(g), 4, 3)
+    sh[:, 0] = g.sh[:, 0]
+    sh[soft, 1:] = torch.randn(len(soft), 3, 3, generator=torch.Generator().manual_seed(1))
+    scene.gaussians = g.replace(sh=sh)
+    scene._framed = None  # rebuilt from the new colours
+    try:
+        a = scene.posed().render(V, Kc, 96, 80)
+        b = world_space(sim).render(V, Kc, 96, 80)
+        assert scene._soft_rotations
+        assert (a.rgb - b.rgb).abs().max() < 1e-4
+    finally:
+        scene.gaussians = g
+        scene._framed = None
+    scene.posed()
+    assert not scene._soft_rotations  # the scene's own (DC-only) soft colours: no polar(F) needed

@@ -64,7 +64,49 @@ def test_splat_depth_agrees_with_sapien_on_the_hand(env):
     assert covered > 0.9, covered
     assert err.median().item() < 3.0, err.median()  # millimetres
     # the SAPIEN background taken for compositing had the hand hidden
-    assert (env._sensors["splat_camera"]._background_obs["depth"][0, ..., 0][hand] == depth_without[hand]).all()
+    bg_depth = env._sensors["splat_camera"]._background[1][0]  # metres, inf where empty
+    d = depth_without.float() / 1000.0
+    assert torch.equal(bg_depth[hand], torch.where(d > 0, d, torch.full_like(d, float("inf")))[hand])
+
+
+def test_background_is_reused_until_something_in_it_moves(env):
+    """SAPIEN's background picture is taken again only when the camera or a visible SAPIEN
+    entity moved (or after a reset); a reused picture gives the same image as a fresh one."""
+    from gausstac_maniskill.tasks.base import batched_pose
+
+    cam = env._sensors["splat_camera"]
+    rgb = lambda: env.get_obs()["sensor_data"]["splat_camera"]["rgb"].clone()  # noqa: E731
+    rgb()
+    n = cam.background_renders
+    first = rgb()
+    assert cam.background_renders == n, "nothing moved: the background picture is reused"
+    cam.invalidate_background()
+    fresh = rgb()
+    assert cam.background_renders == n + 1
+    assert torch.equal(fresh, first)  # the reused picture is the one SAPIEN takes now
+    # the cube moves (2 cm): the background is taken again, and the image changes
+    p, q = env.block.pose.p.clone(), env.block.pose.q.clone()
+    try:
+        env.block.set_pose(batched_pose(p + torch.tensor([0.0, 0.0, 0.02]), q))
+        moved = rgb()
+        assert cam.background_renders == n + 2
+        assert (moved.int() - first.int()).abs().max() > 50
+        rgb()
+        assert cam.background_renders == n + 2  # still again: reused at the new place
+    finally:
+        env.block.set_pose(batched_pose(p, q))
+    assert torch.equal(rgb(), first) and cam.background_renders == n + 3
+    # the camera moves: taken again
+    local = cam.camera.get_local_pose()
+    try:
+        cam.camera.set_local_pose(sapien.Pose(local.p[0].tolist(), local.q[0].tolist())
+                                  * sapien.Pose([0.0, 0.01, 0.0]))
+        assert not torch.equal(rgb(), first) and cam.background_renders == n + 4
+    finally:
+        cam.camera.set_local_pose(sapien.Pose(local.p[0].tolist(), local.q[0].tolist()))
+    # a new episode may look different in ways no pose shows: taken again
+    env.reset(seed=0)
+    assert cam.background_renders > n + 4
 
 
 def test_human_render_camera_is_a_splat_camera(env):

@@ -2,7 +2,8 @@
 tactile / render, reset time, and the task outcome, against SAPIEN's own camera and
 ManiSkill's FSR-tactile Allegro task.
 
-``python -m gausstac_maniskill.bench envs [--steps N] [--dx 2e-3 1.5e-3] [--out DIR]``
+``python -m gausstac_maniskill.bench envs [--steps N] [--dx 2e-3 1.5e-3] [--tasks ID ...] [--no-fsr]
+[--out DIR]``
 
 Rows:
 
@@ -15,7 +16,9 @@ Rows:
   FSR tactile: 16 contact impulses), random actions, the same obs mode and image size.
 
 The first step of each run (Taichi compilation) is not timed. Times are means over the
-timed steps, milliseconds.
+timed steps, milliseconds. "background pictures" counts the SAPIEN pictures the splat camera
+took of the scene without the hand during the timed steps (it reuses the last one while
+neither the camera nor anything SAPIEN draws there moved).
 """
 from __future__ import annotations
 
@@ -60,15 +63,21 @@ def run_gausstac(env_id: str, steps: int, camera: str = "splat", dx: float = 2e-
     expert = make_expert(env)
     expert.reset()
     rows, info, particles = [], {}, 0
+    cam = base._sensors.get("splat_camera")
+    pictures = None
     for k in range(steps + 1):
+        if k == 1 and hasattr(cam, "background_renders"):
+            pictures = cam.background_renders
         obs, _, _, _, info = env.step(expert.act(obs))
         particles = max(particles, sum(g.count for s in base.cosims for g in s.world.groups if g.awake))
         if k > 0:
             rows.append({p: base.step_timing[p] for p in PARTS + ("total",)})
+    if pictures is not None:
+        pictures = cam.background_renders - pictures
     env.close()
     out = {p: 1e3 * float(np.mean([r[p] for r in rows])) for p in PARTS + ("total",)}
     out.update(reset=1e3 * float(np.mean(reset_s[1:] or reset_s)), outcome=_outcome(env_id, info),
-               particles=particles)
+               particles=particles, bg_pictures=pictures)
     return out
 
 
@@ -102,7 +111,8 @@ def run_fsr(steps: int) -> dict:
     env.close()
     total, rend = 1e3 * float(np.mean(times)), 1e3 * float(np.mean(render[1:]))
     return dict(physics=total - rend, mpm=0.0, tactile=0.0, render=rend, total=total,
-                reset=1e3 * float(np.mean(reset_s[1:])), outcome="FSR impulses (16 links)", particles=0)
+                reset=1e3 * float(np.mean(reset_s[1:])), outcome="FSR impulses (16 links)", particles=0,
+                bg_pictures=None)
 
 
 def main(argv=None) -> int:
@@ -112,28 +122,33 @@ def main(argv=None) -> int:
     ap.add_argument("--dx", type=float, nargs="+", default=[2e-3, 1.5e-3],
                     help="MPM grid spacings [m] for the PressCube resolution sweep")
     ap.add_argument("--out", default="out/bench", help="folder for envs.json")
+    ap.add_argument("--tasks", nargs="+", default=TASKS, choices=TASKS, metavar="ENV_ID",
+                    help=f"GaussTac tasks to run (default: all of {', '.join(TASKS)})")
+    ap.add_argument("--no-fsr", action="store_true", help="skip ManiSkill's FSR-tactile Allegro row")
     args = ap.parse_args(argv)
     from .. import backend
 
     print(f"[bench envs] Taichi backend: {backend.init(os.environ.get('GAUSSTAC_ARCH', 'auto'))}, "
           f"machine: {platform.machine()}, {os.cpu_count()} cores")
     runs = []
-    for env_id in TASKS:
+    for env_id in args.tasks:
         runs.append((env_id, "splat", 2e-3, run_gausstac(env_id, args.steps, "splat")))
         runs.append((env_id, "sapien", 2e-3, run_gausstac(env_id, args.steps, "sapien")))
     for dx in args.dx:
         if dx != 2e-3:
             runs.append(("GaussTac-PressCube-v1", "splat", dx, run_gausstac("GaussTac-PressCube-v1", args.steps,
                                                                              "splat", dx)))
-    runs.append(("RotateSingleObjectInHandLevel0-v1 (allegro_hand_right_touch)", "sapien", None,
-                 run_fsr(args.steps)))
+    if not args.no_fsr:
+        runs.append(("RotateSingleObjectInHandLevel0-v1 (allegro_hand_right_touch)", "sapien", None,
+                     run_fsr(args.steps)))
     print("\n| task | camera | MPM dx [mm] | active particles | reset [ms] | step [ms] | physics | MPM | "
-          "tactile | render | outcome |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "tactile | render | background pictures | outcome |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for env_id, cam, dx, r in runs:
+        bg = "-" if r["bg_pictures"] is None else f"{r['bg_pictures']}/{args.steps}"
         print(f"| {env_id} | {cam} | {'-' if dx is None else f'{1e3 * dx:g}'} | {r['particles']} | "
               f"{r['reset']:.0f} | {r['total']:.0f} | {r['physics']:.0f} | {r['mpm']:.0f} | {r['tactile']:.1f} | "
-              f"{r['render']:.0f} | {r['outcome']} |")
+              f"{r['render']:.1f} | {bg} | {r['outcome']} |")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "envs.json"), "w") as f:
         json.dump([dict(env=e, camera=c, dx=d, **r) for e, c, d, r in runs], f, indent=1)

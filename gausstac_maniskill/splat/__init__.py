@@ -3,8 +3,8 @@
 from .gaussians import (SH_C0, GaussianSet, covariance_from_scale_rotation, load_ply,
                         num_sh_coeffs, quat_multiply, quat_to_rotmat, rgb_to_sh_dc,
                         rotmat_to_quat, save_ply, sh_dc_to_rgb)
-from .deform import (PosedGaussians, SoftBinding, polar_rotation, pose_gaussians,
-                     rigid_transform, soft_deform)
+from .deform import (FramedGaussians, PosedGaussians, SoftBinding, particle_frames,
+                     polar_rotation, pose_gaussians, rigid_frames, rigid_transform, soft_deform)
 from .capture import Similarity, load_capture, transform_gaussians
 from .rasterizer import (RenderOutput, intrinsics_from_fov, look_at, rasterize, render,
                          sapien_pose_to_opencv_extrinsic)
@@ -16,6 +16,6 @@ __all__ = [
     "RenderOutput", "rasterize", "render", "intrinsics_from_fov", "look_at",
     "sapien_pose_to_opencv_extrinsic",
     "rigid_transform", "polar_rotation", "SoftBinding", "soft_deform", "PosedGaussians",
-    "pose_gaussians",
+    "pose_gaussians", "FramedGaussians", "rigid_frames", "particle_frames",
     "Similarity", "load_capture", "transform_gaussians",
 ]

@@ -18,6 +18,13 @@ Two bindings, as in GaussTac:
 The result of :func:`pose_gaussians` is a :class:`PosedGaussians` with full
 world covariances, rendered by :func:`~gausstac_maniskill.splat.rasterizer.rasterize`
 through its ``covars`` and ``sh_rotations`` arguments.
+
+Both bindings are the same operation on a *frame*, an affine map ``x -> M x + t``
+with an SH rotation R: a link is (M = R_l, t = t_l, R = R_l), a particle is
+(M = F_p, t = x_p, R = polar(F_p)) with the rest offset o_g as the local mean and Σ⁰_g
+as the local covariance. :class:`FramedGaussians` keeps a scene's Gaussians in their
+frames once and for all and lets the rasterizer's projection kernel pose them: per
+picture only the [F, 3, 4] frames change, nothing per Gaussian is rebuilt or copied.
 """
 from __future__ import annotations
 
@@ -36,6 +43,9 @@ __all__ = [
     "soft_deform",
     "PosedGaussians",
     "pose_gaussians",
+    "FramedGaussians",
+    "rigid_frames",
+    "particle_frames",
 ]
 
 
@@ -271,3 +281,125 @@ def pose_gaussians(gaussians: GaussianSet, link_poses: torch.Tensor | None = Non
         covars[..., i, :, :] = s_covs.expand(batch + s_covs.shape[-3:])
         Rg[..., i, :, :] = s_rot.expand(batch + s_rot.shape[-3:])
     return PosedGaussians(means, covars, Rg.contiguous(), gaussians.opacities, gaussians.sh)
+
+
+def rigid_frames(poses: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Frames of rigid poses [F, 4, 4] (link -> world): (frames [F, 3, 4], SH rotations [F, 3, 3])."""
+    poses = torch.as_tensor(poses, dtype=torch.float32)
+    return poses[:, :3, :], poses[:, :3, :3]
+
+
+def particle_frames(x: torch.Tensor, F: torch.Tensor, rotations: bool = True
+                    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """Frames of MPM particles: M = F_p, t = x_p ([P, 3, 4]) and SH rotations polar(F_p)
+    ([P, 3, 3], or None with ``rotations=False``, when no bound Gaussian's colour depends
+    on the view direction)."""
+    x = torch.as_tensor(x, dtype=torch.float32)
+    F = torch.as_tensor(F, dtype=torch.float32)
+    frames = torch.cat([F, x.unsqueeze(-1)], dim=-1)
+    return frames, (polar_rotation(F) if rotations else None)
+
+
+@dataclass(eq=False)
+class FramedGaussians:
+    """Gaussians stored in F moving frames, posed inside the rasterizer (see the module docstring).
+
+    The per-Gaussian arrays are checked and converted once, at construction; a picture then
+    only needs the frames (do not modify the arrays in place afterwards).
+
+    Attributes:
+        means: [N, 3] centres in their frames, metres.
+        covars: [N, 6] covariances in their frames (xx, xy, xz, yy, yz, zz), m².
+        frame_ids: [N] integer frame of each Gaussian, in [0, n_frames).
+        opacities: [N] in [0, 1].
+        sh: [N, K, 3] SH coefficients (in each Gaussian's own frame).
+        n_frames: F.
+    """
+
+    means: torch.Tensor
+    covars: torch.Tensor
+    frame_ids: torch.Tensor
+    opacities: torch.Tensor
+    sh: torch.Tensor
+    n_frames: int
+
+    def __post_init__(self) -> None:
+        from .rasterizer import _gaussian_inputs
+
+        self.n_frames = int(self.n_frames)
+        self._inputs = _gaussian_inputs(self.means, None, None, self.opacities, self.sh, self.covars, None,
+                                        self.frame_ids, self.n_frames, frame_rotations=True)
+
+    def __len__(self) -> int:
+        return self.means.shape[0]
+
+    @classmethod
+    def from_gaussians(cls, gaussians: GaussianSet, frame_ids=None, n_frames: int | None = None
+                       ) -> "FramedGaussians":
+        """A :class:`GaussianSet` in frames ``frame_ids`` (default: its ``link_id``)."""
+        from .rasterizer import _cov6
+
+        ids = gaussians.link_id if frame_ids is None else torch.as_tensor(frame_ids)
+        if n_frames is None:
+            n_frames = int(ids.max()) + 1 if len(ids) else 1
+        return cls(gaussians.means, _cov6(gaussians.covariances()), ids, gaussians.opacities, gaussians.sh,
+                   n_frames)
+
+    @classmethod
+    def from_binding(cls, gaussians: GaussianSet, binding: SoftBinding) -> tuple["FramedGaussians", torch.Tensor]:
+        """The soft Gaussians of ``binding`` in the frames of their particles: local mean o_g,
+        local covariance Σ⁰_g. Returns them and the particle index of each frame ([F] int64,
+        ascending; pose the frames with :func:`particle_frames` of those particles)."""
+        from .rasterizer import _cov6
+
+        particles, frame = torch.unique(binding.particle_index, return_inverse=True)
+        soft = gaussians[binding.gaussian_index]
+        return cls(binding.rest_offset, _cov6(binding.rest_covariance), frame, soft.opacities, soft.sh,
+                   len(particles)), particles
+
+    @classmethod
+    def cat(cls, parts) -> "FramedGaussians":
+        """One set from several, frames numbered on (part 0's frames first, then part 1's, ...);
+        lower SH degrees are zero-padded to the highest."""
+        parts = list(parts)
+        if not parts:
+            raise ConfigError("FramedGaussians.cat needs at least one set")
+        k = max(p.sh.shape[1] for p in parts)
+        offsets = [0]
+        for p in parts:
+            offsets.append(offsets[-1] + p.n_frames)
+        return cls(torch.cat([p.means for p in parts]), torch.cat([p.covars for p in parts]),
+                   torch.cat([p.frame_ids.to(torch.int64) + o for p, o in zip(parts, offsets)]),
+                   torch.cat([p.opacities for p in parts]),
+                   torch.cat([torch.nn.functional.pad(p.sh, (0, 0, 0, k - p.sh.shape[1])) for p in parts]),
+                   offsets[-1])
+
+    def render(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None, viewmats, Ks,
+               width: int, height: int, *, background=None, background_depth=None, near: float = 0.01,
+               far: float = 1e4, timings: bool = False):
+        """Render with the frames posed at ``frames`` [F, 3, 4] (or [F, 4, 4]) and SH frames
+        rotated by ``frame_rotations`` [F, 3, 3] (``None``: not rotated); the other arguments
+        as in :func:`~gausstac_maniskill.splat.rasterizer.rasterize`. Returns its
+        ``RenderOutput``."""
+        from .rasterizer import _frame_inputs, _rasterize, one_torch_thread
+
+        with one_torch_thread():
+            frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames, self.means.device)
+            return _rasterize(self._inputs, frames, frame_rotations, viewmats, Ks, width, height, background,
+                              background_depth, near, far, timings)
+
+    def posed(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None = None) -> PosedGaussians:
+        """The same Gaussians in world space (full covariances), e.g. to check a render or
+        to hand them to other tools."""
+        from .rasterizer import _frame_inputs
+
+        frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames, self.means.device)
+        f = self._inputs.frame_id.long()
+        M, t = frames[f, :, :3], frames[f, :, 3]
+        c = self._inputs.cov6
+        S = torch.stack([c[:, [0, 1, 2]], c[:, [1, 3, 4]], c[:, [2, 4, 5]]], dim=1)
+        rot = frame_rotations[f] if frame_rotations is not None else \
+            torch.eye(3).expand(len(self), 3, 3)
+        return PosedGaussians((M @ self._inputs.means.unsqueeze(-1)).squeeze(-1) + t,
+                              M @ S @ M.transpose(-1, -2), rot.contiguous(), self._inputs.opacities,
+                              self._inputs.sh)

@@ -3,22 +3,29 @@
 The algorithm is the forward pass of Kerbl et al. (2023), written tile-first so
 that it runs well on a CPU:
 
-1. **Project** (one thread per camera × Gaussian): world -> camera, cull
-   z <= near or z >= far, EWA splatting Σ' = J W Σ Wᵀ Jᵀ (Zwicker et al. 2002)
-   with the perspective Jacobian J evaluated at x/z, y/z clamped to 1.3 ×
-   the half field of view, + 0.3 px² on the diagonal (anti-aliasing dilation),
-   conic = Σ'⁻¹, SH colour for the view direction, and the pixel box of the
-   Gaussian's support (see *Support* below).
+1. **Project** (one thread per camera × Gaussian): optionally move the Gaussian
+   out of its frame (see *Frames* below), world -> camera, cull z <= near or
+   z >= far, then cull Gaussians whose screen box cannot reach the image (a
+   bound from the trace of the covariance, checked before the covariance is
+   formed), EWA splatting Σ' = J W Σ Wᵀ Jᵀ (Zwicker et al. 2002) with the
+   perspective Jacobian J evaluated at x/z, y/z clamped to 1.3 × the half field
+   of view, + 0.3 px² on the diagonal (anti-aliasing dilation), conic = Σ'⁻¹,
+   SH colour for the view direction, and the pixel box of the Gaussian's support
+   (see *Support* below). Everything the later stages read about a Gaussian is
+   written to one 16-float record (one 64-byte cache line) per camera.
 2. **Bin**: count the 16×16 tiles each box touches, exclusive prefix sum,
    emit one 64-bit key ``(camera·tiles + tile) << 32 | float_bits(depth)`` per
-   (Gaussian, tile), a single stable ``torch.sort``, then each tile's
-   [start, end) range in the sorted list.
+   (Gaussian, tile) with a value (the Gaussian and the part of its box inside
+   the tile), a single stable ``torch.sort``, then each tile's [start, end)
+   range in the sorted list.
 3. **Rasterise** (one thread per camera × tile): the tile walks its Gaussians
-   front to back and, for each, only its pixels inside that Gaussian's support
-   ellipse (box ∩ tile, then per row the exact span of the ellipse; this
-   clipping is what makes a per-tile kernel fast on a CPU). T and the colour
-   sums of the tile's 256 pixels live in thread-local arrays.
-   Per pixel: α = min(0.99, o·exp(-½ dᵀ Σ'⁻¹ d)); α < 1/255 is skipped; if
+   front to back. A Gaussian whose box part covers no unfinished pixel (a 16-bit
+   mask per row) is passed over without reading its record; otherwise the rows
+   of its box part that still have unfinished pixels are drawn. Per pixel, the
+   exponent ``power = -½ dᵀ Σ'⁻¹ d`` is compared with the support bound
+   ``-ln(255 o)`` before any exponential is taken. T and the colour sums of the
+   tile's 256 pixels live in thread-local arrays.
+   Per pixel: α = min(0.99, o·exp(power)); α < 1/255 is skipped; if
    T·(1-α) < 1e-4 the pixel is finished *without* this Gaussian (as in the
    INRIA code); otherwise C += α·T·c, D += α·T·z, T *= 1-α. The tile stops
    when all its pixels are finished.
@@ -37,6 +44,18 @@ Conventions
   where nothing was drawn); :meth:`RenderOutput.normalized_depth` divides by
   alpha, :meth:`RenderOutput.composited_depth` adds T × background depth.
 
+Frames
+------
+With ``frames`` [F, 3, 4] (affine maps ``x -> M_f x + t_f``) and ``frame_ids``
+[N], Gaussian g's mean and covariance are given in frame f = frame_ids[g] and
+the projection kernel poses it: μ = M μ⁰ + t, Σ = M Σ⁰ Mᵀ, its SH evaluated at
+``R_fᵀ · view_dir`` with ``frame_rotations`` [F, 3, 3] (identity if omitted).
+A rigid link is a frame with M = R_f = its rotation; an MPM particle is a frame
+with M = F_p (deformation gradient), t = x_p and R_f = polar(F_p). Only the F
+frames change from one picture to the next, so the Gaussians' own arrays are
+neither rebuilt nor copied per frame (see
+:class:`~gausstac_maniskill.splat.deform.FramedGaussians`).
+
 Support
 -------
 A Gaussian can only contribute where α ≥ 1/255, i.e. inside the ellipse
@@ -51,11 +70,13 @@ drops anyway, so the image does not depend on the tiling and equals a dense
 Depth-aware compositing
 -----------------------
 With ``background_depth`` [C, H, W] (e.g. a mesh render's depth), a pixel is
-finished at the first Gaussian (in depth order) whose z exceeds the background
-depth there; the background colour is then composited with the remaining T.
+finished at the first Gaussian (in depth order) that reaches it (α ≥ 1/255)
+with its z beyond the background depth there (every later Gaussian lies
+deeper still); the background colour is then composited with the remaining T.
 """
 # no `from __future__ import annotations`: Taichi reads the kernels' annotations at runtime
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, field
@@ -84,6 +105,16 @@ ALPHA_MAX = 0.99  #: α clamp (keeps T > 0)
 T_MIN = 1e-4  #: a pixel is finished when T would fall below this
 DILATION = 0.3  #: px² added to the 2D covariance's diagonal (anti-aliasing)
 FOV_CLAMP = 1.3  #: the Jacobian is evaluated at x/z clamped to 1.3 tan(fov/2)
+K_MAX = math.sqrt(2.0 * math.log(255.0))  #: support radius (in σ) of an opaque Gaussian
+
+# One record per (camera, Gaussian), written by _project, read by the tiles: screen centre,
+# conic (Σ'⁻¹: a, b, c), opacity, depth z, colour and the support bound -ln(255 o) on the
+# exponent (padded to 16 floats: one 64-byte cache line). Binning reads a separate 16-byte
+# entry: number of tiles touched (0: culled), x0 | x1 << 16, y0 | y1 << 16 (the pixel box
+# [x0, x1) × [y0, y1)) and the depth's bits.
+REC = 16
+R_U, R_V, R_A, R_B, R_C, R_O, R_Z, R_R, R_G, R_BL, R_THR = range(11)
+B_TILES, B_X, B_Y, B_Z = range(4)
 
 _f32_1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
 _f32_2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
@@ -136,24 +167,41 @@ def _quat_scale_to_cov(q: ti.math.vec4, s: ti.math.vec3) -> ti.math.mat3:
     return M @ M.transpose()
 
 
-@ti.kernel
-def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, has_cov: ti.i32,
-             opac: _f32_1, sh: _f32_3, sh_rot: _f32_3,
-             has_sh_rot: ti.i32, degree: ti.i32, viewmats: _f32_3, Ks: _f32_3,
-             width: ti.i32, height: ti.i32, near: ti.f32, far: ti.f32,
-             # outputs, per camera c and Gaussian g
-             mean2d: _f32_3, conic: _f32_3, depth: _f32_2, color: _f32_3,
-             box: _i32_3, n_tiles: _i32_2):
-    """EWA projection of every Gaussian into every camera; n_tiles = 0 if culled.
+@ti.func
+def _box_1d(centre: ti.f32, radius: ti.f32, size: ti.i32):
+    """Pixels [lo, hi) whose centre (i + 0.5) lies within centre ± radius, clipped to [0, size)."""
+    lo = ti.max(ti.cast(ti.ceil(centre - radius - 0.5), ti.i32), 0)
+    hi = ti.min(ti.cast(ti.floor(centre + radius - 0.5), ti.i32) + 1, size)
+    return lo, hi
 
-    Only Gaussians with n_tiles > 0 get their other outputs written.
+
+@ti.kernel
+def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _f32_1,
+             sh: _f32_3, degree: ti.i32, sh_rot: _f32_3, frame_id: _i32_1, frames: _f32_3,
+             viewmats: _f32_3, Ks: _f32_3, width: ti.i32, height: ti.i32,
+             near: ti.f32, far: ti.f32,
+             use_cov: ti.template(), framed: ti.template(), rot_mode: ti.template(),
+             rec: _f32_3, bins: _i32_3):
+    """EWA projection of every Gaussian into every camera; bins[c, g, B_TILES] = 0 if culled.
+
+    ``use_cov``: covariances from ``cov6`` (else from ``quats``/``scales``); ``framed``:
+    means and covariances lie in ``frames[frame_id[g]]``; ``rot_mode``: SH frames not
+    rotated (0), rotated per Gaussian by ``sh_rot[g]`` (1) or per frame by
+    ``sh_rot[frame_id[g]]`` (2). Only entries of Gaussians that touch a tile are written.
     """
     for c, g in ti.ndrange(viewmats.shape[0], means.shape[0]):
-        n_tiles[c, g] = 0
+        bins[c, g, B_TILES] = 0
         W = ti.Matrix([[viewmats[c, i, j] for j in ti.static(range(3))]
                        for i in ti.static(range(3))])  # world -> camera rotation
         t = ti.math.vec3(viewmats[c, 0, 3], viewmats[c, 1, 3], viewmats[c, 2, 3])
         mu = ti.math.vec3(means[g, 0], means[g, 1], means[g, 2])
+        f = 0
+        M = ti.Matrix.identity(ti.f32, 3)  # frame -> world linear map
+        if ti.static(framed):
+            f = frame_id[g]
+            M = ti.Matrix([[frames[f, i, j] for j in ti.static(range(3))]
+                           for i in ti.static(range(3))])
+            mu = M @ mu + ti.math.vec3(frames[f, 0, 3], frames[f, 1, 3], frames[f, 2, 3])
         p = W @ mu + t  # camera-space centre
         o = opac[g]
         if p.z > near and p.z < far and o >= ALPHA_MIN:
@@ -170,71 +218,95 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, has_cov
             ty = ti.math.clamp(p.y * iz, -lim_yn, lim_yp) * p.z
             J = ti.Matrix([[fx * iz, 0.0, -fx * tx * iz * iz],
                            [0.0, fy * iz, -fy * ty * iz * iz]])
-            S = ti.Matrix.zero(ti.f32, 3, 3)  # world covariance, m²
-            if has_cov:
-                S = ti.Matrix([[cov6[g, 0], cov6[g, 1], cov6[g, 2]],
-                               [cov6[g, 1], cov6[g, 3], cov6[g, 4]],
-                               [cov6[g, 2], cov6[g, 4], cov6[g, 5]]])
-            else:
-                S = _quat_scale_to_cov(
-                    ti.math.vec4(quats[g, 0], quats[g, 1], quats[g, 2], quats[g, 3]),
-                    ti.math.vec3(scales[g, 0], scales[g, 1], scales[g, 2]))
             T = J @ W
-            S2 = T @ S @ T.transpose()  # EWA: 2D screen-space covariance, px²
-            a = S2[0, 0] + DILATION
-            b = S2[0, 1]
-            d = S2[1, 1] + DILATION
-            det = a * d - b * b
-            if det > 0.0:
-                # opacity-aware support: o·exp(-k²/2) = 1/255; +0.1 % so the box
-                # never clips a pixel that the α test would keep (rounding)
-                k = ti.sqrt(2.0 * ti.log(o * 255.0)) * 1.001
-                u = fx * p.x * iz + cx
-                v = fy * p.y * iz + cy
-                rx, ry = k * ti.sqrt(a), k * ti.sqrt(d)
-                # pixels whose centre (x + 0.5) lies within [u - rx, u + rx]
-                x0 = ti.max(ti.cast(ti.ceil(u - rx - 0.5), ti.i32), 0)
-                x1 = ti.min(ti.cast(ti.floor(u + rx - 0.5), ti.i32) + 1, width)
-                y0 = ti.max(ti.cast(ti.ceil(v - ry - 0.5), ti.i32), 0)
-                y1 = ti.min(ti.cast(ti.floor(v + ry - 0.5), ti.i32) + 1, height)
-                if x0 < x1 and y0 < y1:
-                    n_tiles[c, g] = (((x1 - 1) // TILE - x0 // TILE + 1)
-                                     * ((y1 - 1) // TILE - y0 // TILE + 1))
-                    box[c, g, 0], box[c, g, 1], box[c, g, 2], box[c, g, 3] = x0, y0, x1, y1
-                    mean2d[c, g, 0], mean2d[c, g, 1] = u, v
-                    conic[c, g, 0], conic[c, g, 1], conic[c, g, 2] = d / det, -b / det, a / det
-                    depth[c, g] = p.z
-                    # view direction (camera centre -> Gaussian), world frame; SH frame
-                    # of a deformed Gaussian is rotated by R: evaluate at Rᵀ dir
-                    cam = -(W.transpose() @ t)
-                    dirn = (mu - cam).normalized()
-                    if has_sh_rot:
-                        Rs = ti.Matrix([[sh_rot[g, i, j] for j in ti.static(range(3))]
-                                        for i in ti.static(range(3))])
-                        dirn = Rs.transpose() @ dirn
-                    rgb = _sh_to_rgb(sh, g, degree, dirn)
-                    color[c, g, 0], color[c, g, 1], color[c, g, 2] = rgb[0], rgb[1], rgb[2]
+            if ti.static(framed):
+                T = T @ M  # frame -> screen: Σ' = (J W M) Σ⁰ (J W M)ᵀ
+            u = fx * p.x * iz + cx
+            v = fy * p.y * iz + cy
+            # cheap cull first: Σ'ₓₓ = T₀ᵀ Σ T₀ <= tr(Σ) |T₀|² and k <= K_MAX, so this box
+            # contains the exact one (empty -> culled before the covariance is formed)
+            trace = 0.0
+            if ti.static(use_cov):
+                trace = cov6[g, 0] + cov6[g, 3] + cov6[g, 5]
+            else:
+                trace = scales[g, 0] ** 2 + scales[g, 1] ** 2 + scales[g, 2] ** 2
+            rxb = K_MAX * 1.01 * ti.sqrt(trace * (T[0, 0] ** 2 + T[0, 1] ** 2 + T[0, 2] ** 2) + DILATION)
+            ryb = K_MAX * 1.01 * ti.sqrt(trace * (T[1, 0] ** 2 + T[1, 1] ** 2 + T[1, 2] ** 2) + DILATION)
+            bx0, bx1 = _box_1d(u, rxb, width)
+            by0, by1 = _box_1d(v, ryb, height)
+            if bx0 < bx1 and by0 < by1:
+                S = ti.Matrix.zero(ti.f32, 3, 3)  # covariance (in its frame), m²
+                if ti.static(use_cov):
+                    S = ti.Matrix([[cov6[g, 0], cov6[g, 1], cov6[g, 2]],
+                                   [cov6[g, 1], cov6[g, 3], cov6[g, 4]],
+                                   [cov6[g, 2], cov6[g, 4], cov6[g, 5]]])
+                else:
+                    S = _quat_scale_to_cov(
+                        ti.math.vec4(quats[g, 0], quats[g, 1], quats[g, 2], quats[g, 3]),
+                        ti.math.vec3(scales[g, 0], scales[g, 1], scales[g, 2]))
+                S2 = T @ S @ T.transpose()  # EWA: 2D screen-space covariance, px²
+                a = S2[0, 0] + DILATION
+                b = S2[0, 1]
+                d = S2[1, 1] + DILATION
+                det = a * d - b * b
+                if det > 0.0:
+                    # opacity-aware support: o·exp(-k²/2) = 1/255; +0.1 % so the box
+                    # never clips a pixel that the α test would keep (rounding)
+                    ln255o = ti.log(o * 255.0)
+                    k = ti.sqrt(2.0 * ln255o) * 1.001
+                    x0, x1 = _box_1d(u, k * ti.sqrt(a), width)
+                    y0, y1 = _box_1d(v, k * ti.sqrt(d), height)
+                    if x0 < x1 and y0 < y1:
+                        bins[c, g, B_TILES] = (((x1 - 1) // TILE - x0 // TILE + 1)
+                                               * ((y1 - 1) // TILE - y0 // TILE + 1))
+                        bins[c, g, B_X], bins[c, g, B_Y] = x0 | (x1 << 16), y0 | (y1 << 16)
+                        bins[c, g, B_Z] = ti.bit_cast(p.z, ti.i32)
+                        rec[c, g, R_U], rec[c, g, R_V] = u, v
+                        rec[c, g, R_A], rec[c, g, R_B], rec[c, g, R_C] = d / det, -b / det, a / det
+                        rec[c, g, R_O], rec[c, g, R_Z] = o, p.z
+                        # the exponent's support bound, with slack: the α test decides
+                        rec[c, g, R_THR] = -ln255o - 1e-4
+                        # view direction (camera centre -> Gaussian), world frame; a rotated
+                        # SH frame (link, polar(F)) R is evaluated at Rᵀ dir
+                        cam = -(W.transpose() @ t)
+                        dirn = (mu - cam).normalized()
+                        if ti.static(rot_mode > 0):
+                            r = f
+                            if ti.static(rot_mode == 1):
+                                r = g
+                            Rs = ti.Matrix([[sh_rot[r, i, j] for j in ti.static(range(3))]
+                                            for i in ti.static(range(3))])
+                            dirn = Rs.transpose() @ dirn
+                        rgb = _sh_to_rgb(sh, g, degree, dirn)
+                        rec[c, g, R_R], rec[c, g, R_G], rec[c, g, R_BL] = rgb[0], rgb[1], rgb[2]
 
 
 @ti.kernel
-def _emit_keys(offsets: ti.types.ndarray(dtype=ti.i64, ndim=2), n_tiles: _i32_2,
-               box: _i32_3, depth: _f32_2,
-               tiles_x: ti.i32, tiles_per_cam: ti.i32, keys: _i64_1, ids: _i32_1):
-    """One key per (Gaussian, touched tile): (camera·tiles + tile) << 32 | depth bits.
+def _emit_keys(offsets: ti.types.ndarray(dtype=ti.i64, ndim=2), bins: _i32_3,
+               tiles_x: ti.i32, tiles_per_cam: ti.i32, keys: _i64_1, vals: _i64_1):
+    """One key per (Gaussian, touched tile): (camera·tiles + tile) << 32 | depth bits, and
+    its value: the part of the Gaussian's box inside the tile (4 bits each: first column,
+    last column, first row, last row, tile-local) << 32 | Gaussian index.
 
     Positive float32 depths compare like their bit patterns read as integers,
     so sorting the keys sorts by tile, then front to back.
     """
     for c, g in ti.ndrange(offsets.shape[0], offsets.shape[1]):
         off = offsets[c, g]
-        if n_tiles[c, g] > 0:
-            x0, y0, x1, y1 = box[c, g, 0], box[c, g, 1], box[c, g, 2], box[c, g, 3]
-            zbits = ti.cast(ti.bit_cast(depth[c, g], ti.i32), ti.i64)
+        if bins[c, g, B_TILES] > 0:
+            x0, x1 = bins[c, g, B_X] & 0xFFFF, bins[c, g, B_X] >> 16
+            y0, y1 = bins[c, g, B_Y] & 0xFFFF, bins[c, g, B_Y] >> 16
+            zbits = ti.cast(bins[c, g, B_Z], ti.i64)
             for ty in range(y0 // TILE, (y1 - 1) // TILE + 1):
+                ry0 = ti.max(y0 - ty * TILE, 0)
+                ry1 = ti.min(y1 - ty * TILE, TILE) - 1
                 for tx in range(x0 // TILE, (x1 - 1) // TILE + 1):
+                    rx0 = ti.max(x0 - tx * TILE, 0)
+                    rx1 = ti.min(x1 - tx * TILE, TILE) - 1
                     tile = ti.cast(c * tiles_per_cam + ty * tiles_x + tx, ti.i64)
                     keys[off] = (tile << 32) | zbits
-                    ids[off] = g
+                    part = rx0 | (rx1 << 4) | (ry0 << 8) | (ry1 << 12)
+                    vals[off] = (ti.cast(part, ti.i64) << 32) | ti.cast(g, ti.i64)
                     off += 1
 
 
@@ -251,21 +323,27 @@ def _tile_ranges(keys: _i64_1, ranges: _i32_2):
 
 
 @ti.kernel
-def _rasterize_tiles(ranges: _i32_2, ids: _i32_1, mean2d: _f32_3, conic: _f32_3,
-                     depth: _f32_2, color: _f32_3, opac: _f32_1, box: _i32_3,
-                     background: _f32_4, bg_is_image: ti.i32,
-                     bg_depth: _f32_3, use_bg_depth: ti.i32, tiles_x: ti.i32,
+def _rasterize_tiles(ranges: _i32_2, vals: _i64_1, rec: _f32_3,
+                     background: _f32_4, bg_is_image: ti.i32, bg_depth: _f32_3,
+                     use_bg_depth: ti.template(), tiles_x: ti.i32, spread: ti.template(),
                      out_rgb: _f32_4, out_depth: _f32_3, out_alpha: _f32_3):
     """Front-to-back α compositing, one thread per (camera, 16×16 tile).
 
     The tile's transmittance T and colour/depth sums live in thread-local arrays
     (pixel index li = row·16 + column); a finished pixel stores -T (T > 0
-    otherwise). Each tile owns its pixels: no atomics, deterministic.
+    otherwise) and has its bit cleared in its row's mask ``live``. A Gaussian whose
+    box (in its key's value) covers no unfinished pixel is skipped without reading its
+    record, and rows with nothing left to draw are skipped whole. Each tile owns its
+    pixels: no atomics, deterministic.
     """
     C, H, Wd = out_rgb.shape[0], out_rgb.shape[1], out_rgb.shape[2]
     tiles_y = (H + TILE - 1) // TILE
-    ti.loop_config(block_dim=1)  # tiles differ a lot in cost: hand them out one by one
-    for c, tile in ti.ndrange(C, tiles_y * tiles_x):
+    # Taichi's CPU backend hands a parallel loop out in blocks of at least 512 iterations
+    # (adaptive block size): a loop over the 64 tiles of a 128×128 picture would run on one
+    # thread. Each tile is therefore ``spread`` iterations of which the first does the work.
+    for c, tile, lane in ti.ndrange(C, tiles_y * tiles_x, spread):
+        if lane != 0:
+            continue
         px0 = (tile % tiles_x) * TILE
         py0 = (tile // tiles_x) * TILE
         px1 = ti.min(px0 + TILE, Wd)
@@ -275,50 +353,77 @@ def _rasterize_tiles(ranges: _i32_2, ids: _i32_1, mean2d: _f32_3, conic: _f32_3,
         acc_g = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)
         acc_b = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)
         acc_z = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)  # Σ w z
+        z_bg = ti.Vector([0.0] * (TILE * TILE), dt=ti.f32)  # the tile's background depth
+        if ti.static(use_bg_depth):
+            for y, x in ti.ndrange((py0, py1), (px0, px1)):
+                z_bg[(y - py0) * TILE + (x - px0)] = bg_depth[c, y, x]
+        live = ti.Vector([0] * TILE, dt=ti.u32)  # bit x - px0 of row y - py0: unfinished
+        for r in range(py1 - py0):
+            live[r] = ti.u32((1 << (px1 - px0)) - 1)
         alive = (px1 - px0) * (py1 - py0)
         j = ranges[c * tiles_x * tiles_y + tile, 0]
         end = ranges[c * tiles_x * tiles_y + tile, 1]
+        # the next Gaussian's record is read one step ahead: its cache line is then on
+        # its way while this one is drawn (records are visited in depth order, i.e.
+        # at random addresses)
+        g_next, u_next = 0, 0.0
+        if j < end:
+            g_next = ti.cast(vals[j], ti.i32)
+            u_next = rec[c, g_next, R_U]
         while j < end and alive > 0:  # Gaussians of this tile, front to back
-            g = ids[j]
+            val = vals[j]
+            g, u = g_next, u_next
             j += 1
-            u, v = mean2d[c, g, 0], mean2d[c, g, 1]
-            A, B, Cc = conic[c, g, 0], conic[c, g, 1], conic[c, g, 2]
-            o, z = opac[g], depth[c, g]
-            # support: o·exp(-½d²) >= 1/255  <=>  d² <= k² = 2 ln(255 o) (+ slack for rounding)
-            k2 = 2.0 * ti.log(255.0 * o) * 1.002 + 1e-4
-            bx0, bx1 = ti.max(px0, box[c, g, 0]), ti.min(px1, box[c, g, 2])
-            for y in range(ti.max(py0, box[c, g, 1]), ti.min(py1, box[c, g, 3])):
-                # the row's span inside the ellipse A dx² + 2B dx dy + C dy² <= k²
-                dy = y + 0.5 - v
-                disc = B * B * dy * dy - A * (Cc * dy * dy - k2)
-                if disc > 0.0:
-                    r = ti.sqrt(disc)
-                    xb = ti.max(bx0, ti.cast(ti.ceil(u + (-B * dy - r) / A - 0.5), ti.i32))
-                    xe = ti.min(bx1, ti.cast(ti.floor(u + (-B * dy + r) / A - 0.5), ti.i32) + 1)
-                    for x in range(xb, xe):
-                        li = (y - py0) * TILE + (x - px0)
-                        T = trans[li]
-                        if T > 0.0:
-                            if use_bg_depth != 0 and z > bg_depth[c, y, x]:
-                                trans[li] = -T  # hidden behind the background surface
-                                alive -= 1
-                                continue
-                            # Gaussian falloff α = o·exp(-½ dᵀ Σ'⁻¹ d), clamped to 0.99
-                            dx = x + 0.5 - u
-                            power = -0.5 * (A * dx * dx + Cc * dy * dy) - B * dx * dy
-                            alpha = ti.min(ALPHA_MAX, o * ti.exp(power))
-                            if alpha >= ALPHA_MIN:
-                                T_next = T * (1.0 - alpha)
-                                if T_next < T_MIN:
-                                    trans[li] = -T  # saturated: stop *before* this Gaussian
-                                    alive -= 1
-                                else:
-                                    w = alpha * T  # blending weight
-                                    acc_r[li] += w * color[c, g, 0]
-                                    acc_g[li] += w * color[c, g, 1]
-                                    acc_b[li] += w * color[c, g, 2]
-                                    acc_z[li] += w * z
-                                    trans[li] = T_next
+            if j < end:
+                g_next = ti.cast(vals[j], ti.i32)
+                u_next = rec[c, g_next, R_U]
+            part = ti.cast(val >> 32, ti.i32)  # the Gaussian's box inside this tile
+            cx0, cx1 = part & 15, ((part >> 4) & 15) + 1
+            cy0, cy1 = (part >> 8) & 15, ((part >> 12) & 15) + 1
+            box_bits = ti.u32(((1 << cx1) - 1) & ~((1 << cx0) - 1))
+            todo = ti.u32(0)
+            for r in range(cy0, cy1):
+                todo |= live[r] & box_bits
+            if todo != 0:
+                v = rec[c, g, R_V]
+                A, B, Cc = rec[c, g, R_A], rec[c, g, R_B], rec[c, g, R_C]
+                o, z, thr = rec[c, g, R_O], rec[c, g, R_Z], rec[c, g, R_THR]
+                cr, cg, cb = rec[c, g, R_R], rec[c, g, R_G], rec[c, g, R_BL]
+                half_a = -0.5 * A
+                for r in range(cy0, cy1):
+                    if live[r] & box_bits != 0:
+                        # power = -½(A dx² + C dy²) - B dx dy along the row
+                        y = py0 + r
+                        dy = y + 0.5 - v
+                        lin = -B * dy
+                        const = -0.5 * Cc * dy * dy
+                        dx = px0 + cx0 + 0.5 - u
+                        li = r * TILE + cx0
+                        for col in range(cx0, cx1):
+                            power = (half_a * dx + lin) * dx + const
+                            if power >= thr:  # inside the support: o·exp(power) may reach 1/255
+                                T = trans[li]
+                                if T > 0.0:
+                                    alpha = ti.min(ALPHA_MAX, o * ti.exp(power))
+                                    if alpha >= ALPHA_MIN:
+                                        T_next = T * (1.0 - alpha)
+                                        hidden = False
+                                        if ti.static(use_bg_depth):
+                                            hidden = z > z_bg[li]  # behind the background surface
+                                        if hidden or T_next < T_MIN:
+                                            # finished *before* this Gaussian
+                                            trans[li] = -T
+                                            alive -= 1
+                                            live[r] &= ~ti.u32(1 << col)
+                                        else:
+                                            w = alpha * T  # blending weight
+                                            acc_r[li] += w * cr
+                                            acc_g[li] += w * cg
+                                            acc_b[li] += w * cb
+                                            acc_z[li] += w * z
+                                            trans[li] = T_next
+                            dx += 1.0
+                            li += 1
         # write out, compositing the background with the remaining transmittance
         for y, x in ti.ndrange((py0, py1), (px0, px1)):
             li = (y - py0) * TILE + (x - px0)
@@ -379,6 +484,144 @@ def _check_shape(name: str, t, shape: tuple, text: str) -> torch.Tensor:
     return t
 
 
+def _cov6(covars: torch.Tensor) -> torch.Tensor:
+    """[..., 3, 3] symmetric -> [..., 6] (xx, xy, xz, yy, yz, zz)."""
+    i, j = (0, 0, 0, 1, 1, 2), (0, 1, 2, 1, 2, 2)
+    return covars[..., i, j]
+
+
+@contextlib.contextmanager
+def one_torch_thread():
+    """Run the enclosed torch operations on one intra-op thread (restored afterwards).
+
+    The camera's torch steps are small (sorting 10⁴-10⁵ keys, a few image-sized
+    element-wise ops). With two OpenMP threads on a two-core machine they are no
+    faster, and whenever another process holds a core each parallel region spins until
+    the descheduled thread returns: a 128×128 frame measured 0.3-2 s instead of 10-30 ms.
+    Taichi's kernels keep using every core.
+    """
+    n = torch.get_num_threads()
+    if n == 1:
+        yield
+        return
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(n)
+
+
+_DUMMIES: dict = {}
+
+
+def _dummy(shape: tuple, dtype, device) -> torch.Tensor:
+    """A small zero array for a kernel argument that the chosen code path does not read."""
+    key = (shape, dtype, str(device))
+    if key not in _DUMMIES:
+        _DUMMIES[key] = torch.zeros(shape, dtype=dtype, device=device)
+    return _DUMMIES[key]
+
+
+@dataclass
+class _Inputs:
+    """The Gaussians' arrays as the projection kernel reads them (checked, contiguous float32).
+
+    ``use_cov``: covariances in ``cov6`` [N, 6] (else ``quats``/``scales``); ``frame_id``
+    [N] int32 or None (world coordinates); ``rot_mode``: 0 no SH rotation, 1 per Gaussian
+    (``sh_rot`` [N, 3, 3]); per-frame rotations come with the frames (:func:`_rasterize`).
+    """
+
+    means: torch.Tensor
+    quats: torch.Tensor
+    scales: torch.Tensor
+    cov6: torch.Tensor
+    use_cov: bool
+    opacities: torch.Tensor
+    sh: torch.Tensor
+    degree: int
+    sh_rot: torch.Tensor
+    rot_mode: int
+    frame_id: torch.Tensor | None
+    n_frames: int
+
+    def __len__(self) -> int:
+        return self.means.shape[0]
+
+
+def _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations,
+                     frame_ids=None, n_frames: int = 0, frame_rotations: bool = False) -> _Inputs:
+    """Check and convert the per-Gaussian arguments of :func:`rasterize` (ConfigError if bad);
+    ``frame_rotations``: whether per-frame SH rotations will come with the frames."""
+    if not isinstance(means, torch.Tensor) or means.dim() != 2 or means.shape[1] != 3:
+        raise ConfigError(f"means has shape {list(getattr(means, 'shape', []))}, expected [N, 3]")
+    n = means.shape[0]
+    dev = means.device
+    f32 = dict(dtype=torch.float32, device=dev)
+    means = _check_shape("means", means, (n, 3), "[N, 3]").to(**f32).contiguous()
+    opacities = _check_shape("opacities", opacities, (n,), "[N]").to(**f32).contiguous()
+    if n and (opacities.min() < 0 or opacities.max() > 1):
+        raise ConfigError("opacities must lie in [0, 1] (pass sigmoid(opacity_logits))")
+    if not isinstance(sh, torch.Tensor) or sh.dim() != 3 or sh.shape[0] != n or sh.shape[2] != 3:
+        raise ConfigError(f"sh has shape {list(getattr(sh, 'shape', []))}, expected [N, K, 3], "
+                          f"K in (1, 4, 9, 16), N={n}")
+    degree = sh_degree_from_coeffs(sh.shape[1])
+    _check_finite("sh", sh)
+    sh = sh.to(**f32).contiguous()
+    if covars is not None:
+        if quats is not None or scales is not None:
+            raise ConfigError("pass either covars or quats+scales, not both")
+        if covars.dim() == 3:
+            cov6 = _cov6(_check_shape("covars", covars, (n, 3, 3), "[N, 3, 3] or [N, 6]"))
+        else:
+            cov6 = _check_shape("covars", covars, (n, 6), "[N, 3, 3] or [N, 6]")
+        cov6 = cov6.to(**f32).contiguous()
+        quats = scales = _dummy((1, 4), torch.float32, dev)
+    else:
+        if quats is None or scales is None:
+            raise ConfigError("quats and scales are required unless covars is given")
+        quats = _check_shape("quats", quats, (n, 4), "[N, 4]")
+        scales = _check_shape("scales", scales, (n, 3), "[N, 3]")
+        if n and (quats.abs().amax(dim=-1) == 0).any():
+            raise ConfigError("quats contains a zero quaternion")
+        quats, scales = quats.to(**f32).contiguous(), scales.to(**f32).contiguous()
+        cov6 = _dummy((1, 6), torch.float32, dev)
+    rot_mode = 0
+    sh_rot = _dummy((1, 3, 3), torch.float32, dev)
+    if sh_rotations is not None:
+        if frame_rotations:
+            raise ConfigError("pass either sh_rotations (per Gaussian) or frame_rotations, not both")
+        sh_rot = _check_shape("sh_rotations", sh_rotations, (n, 3, 3), "[N, 3, 3]")
+        sh_rot, rot_mode = sh_rot.to(**f32).contiguous(), 1
+    if frame_ids is not None:
+        if not isinstance(frame_ids, torch.Tensor) or tuple(frame_ids.shape) != (n,) \
+                or frame_ids.dtype.is_floating_point:
+            raise ConfigError(f"frame_ids must be an integer tensor of shape [N] = [{n}], got "
+                              f"{getattr(frame_ids, 'dtype', type(frame_ids).__name__)} "
+                              f"{list(getattr(frame_ids, 'shape', []))}")
+        if n and (int(frame_ids.min()) < 0 or int(frame_ids.max()) >= n_frames):
+            raise ConfigError(f"frame_ids must lie in [0, {n_frames}) for {n_frames} frames, got "
+                              f"[{int(frame_ids.min())}, {int(frame_ids.max())}]")
+        frame_ids = frame_ids.to(device=dev, dtype=torch.int32).contiguous()
+    return _Inputs(means, quats, scales, cov6, covars is not None, opacities, sh, degree, sh_rot,
+                   rot_mode, frame_ids, n_frames)
+
+
+def _frame_inputs(frames, frame_rotations, n_frames: int | None, device) -> tuple:
+    """Check ``frames`` [F, 3, 4] or [F, 4, 4] and ``frame_rotations`` [F, 3, 3] (or None)."""
+    if not isinstance(frames, torch.Tensor) or frames.dim() != 3 or frames.shape[1] not in (3, 4) \
+            or frames.shape[2] != 4 or (n_frames is not None and frames.shape[0] != n_frames):
+        want = "F" if n_frames is None else str(n_frames)
+        raise ConfigError(f"frames has shape {list(getattr(frames, 'shape', []))}, expected "
+                          f"[{want}, 3, 4] or [{want}, 4, 4]")
+    _check_finite("frames", frames)
+    frames = frames[:, :3, :].to(dtype=torch.float32, device=device).contiguous()
+    if frame_rotations is not None:
+        frame_rotations = _check_shape("frame_rotations", frame_rotations, (frames.shape[0], 3, 3),
+                                       f"[F, 3, 3] with F={frames.shape[0]}")
+        frame_rotations = frame_rotations.to(dtype=torch.float32, device=device).contiguous()
+    return frames, frame_rotations
+
+
 def _background_tensor(background, C: int, H: int, W: int, device) -> tuple[torch.Tensor, int]:
     """Background as [C, 1, 1, 3] (constant) or [C, H, W, 3] (image) + the is-image flag."""
     if background is None:
@@ -397,18 +640,119 @@ def _background_tensor(background, C: int, H: int, W: int, device) -> tuple[torc
                       f"[C, 3] or [C, H, W, 3] with C={C}, H={H}, W={W}")
 
 
+def _rasterize(g: _Inputs, frames: torch.Tensor | None, frame_rotations: torch.Tensor | None,
+               viewmats, Ks, width, height, background, background_depth, near, far,
+               timings: bool) -> RenderOutput:
+    """Camera checks and the three stages; ``g`` (and ``frames``) are already checked."""
+    with one_torch_thread():
+        return _rasterize_stages(g, frames, frame_rotations, viewmats, Ks, width, height, background,
+                                 background_depth, near, far, timings)
+
+
+def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, height, background,
+                      background_depth, near, far, timings: bool) -> RenderOutput:
+    backend.ensure_init()
+    t_start = time.perf_counter()
+    if int(width) != width or int(height) != height or not (0 < width < 32768 and 0 < height < 32768):
+        raise ConfigError(f"image size width={width!r}, height={height!r} must be ints in [1, 32767]")
+    width, height = int(width), int(height)
+    n = len(g)
+    dev = g.means.device
+    f32 = dict(dtype=torch.float32, device=dev)
+    viewmats = _check_shape("viewmats", viewmats, (None, 4, 4), "[C, 4, 4]").to(**f32).contiguous()
+    C = viewmats.shape[0]
+    Ks = _check_shape("Ks", Ks, (C, 3, 3), f"[C, 3, 3] with C={C}").to(**f32).contiguous()
+    if (Ks[:, 0, 0] <= 0).any() or (Ks[:, 1, 1] <= 0).any():
+        raise ConfigError("Ks: focal lengths fx, fy must be positive")
+    bg, bg_is_image = _background_tensor(background, C, height, width, dev)
+    if background_depth is not None:
+        if not isinstance(background_depth, torch.Tensor) or \
+                tuple(background_depth.shape) != (C, height, width):
+            raise ConfigError(f"background_depth has shape "
+                              f"{list(getattr(background_depth, 'shape', []))}, expected "
+                              f"[C, H, W] = [{C}, {height}, {width}]")
+        if torch.isnan(background_depth).any():
+            raise ConfigError("background_depth contains NaN (use inf for empty pixels)")
+        bg_depth = background_depth.to(**f32).contiguous()
+    else:
+        bg_depth = _dummy((1, 1, 1), torch.float32, dev)
+    if not (0 < near < far):
+        raise ConfigError(f"need 0 < near < far, got near={near}, far={far}")
+    framed = g.frame_id is not None
+    if framed and frames is None:
+        raise ConfigError("frame_ids need frames")
+    rot_mode, sh_rot = g.rot_mode, g.sh_rot
+    if frame_rotations is not None:
+        rot_mode, sh_rot = 2, frame_rotations
+    if g.degree == 0:
+        rot_mode = 0  # a constant colour does not depend on the view direction
+    frame_id = g.frame_id if framed else _dummy((1,), torch.int32, dev)
+    frames = frames if framed else _dummy((1, 3, 4), torch.float32, dev)
+
+    tiles_x = (width + TILE - 1) // TILE
+    tiles_y = (height + TILE - 1) // TILE
+    n_tile_total = C * tiles_x * tiles_y
+    sync = ti.sync if timings else (lambda: None)
+
+    # 1. project: one record per (camera, Gaussian) ------------------------------------
+    # only entries of Gaussians that touch a tile are written and ever read
+    rec = torch.empty(C, max(n, 1), REC, **f32)
+    bins = torch.empty(C, n, 4, dtype=torch.int32, device=dev)
+    if n:
+        _project(g.means, g.quats, g.scales, g.cov6, g.opacities, g.sh, g.degree, sh_rot,
+                 frame_id, frames, viewmats, Ks, width, height, float(near), float(far),
+                 g.use_cov, framed, rot_mode, rec, bins)
+    sync()
+    t_proj = time.perf_counter()
+
+    # 2. bin: one key per (Gaussian, tile), sort, per-tile ranges ---------------------
+    counts = bins[:, :, B_TILES].reshape(-1).to(torch.int64)
+    ends = torch.cumsum(counts, 0)
+    n_keys = int(ends[-1]) if n else 0
+    ranges = torch.zeros(n_tile_total, 2, dtype=torch.int32, device=dev)
+    if n_keys:
+        offsets = (ends - counts).reshape(C, n)
+        keys = torch.empty(n_keys, dtype=torch.int64, device=dev)
+        vals = torch.empty(n_keys, dtype=torch.int64, device=dev)
+        _emit_keys(offsets, bins, tiles_x, tiles_x * tiles_y, keys, vals)
+        keys, order = torch.sort(keys, stable=True)
+        vals = vals[order]
+        _tile_ranges(keys, ranges)
+    else:
+        vals = _dummy((1,), torch.int64, dev)
+    sync()
+    t_bin = time.perf_counter()
+
+    # 3. rasterise ----------------------------------------------------------------------
+    out_rgb = torch.empty(C, height, width, 3, **f32)
+    out_depth = torch.empty(C, height, width, **f32)
+    out_alpha = torch.empty(C, height, width, **f32)
+    spread = 256 if backend.current_arch() == "cpu" else 1
+    _rasterize_tiles(ranges, vals, rec, bg, bg_is_image, bg_depth, background_depth is not None,
+                     tiles_x, spread, out_rgb, out_depth, out_alpha)
+    sync()
+    t_end = time.perf_counter()
+    stats = {"n_keys": n_keys}
+    if timings:
+        stats.update(project=1e3 * (t_proj - t_start), bin_sort=1e3 * (t_bin - t_proj),
+                     raster=1e3 * (t_end - t_bin), total=1e3 * (t_end - t_start))
+    return RenderOutput(out_rgb, out_depth, out_alpha, stats)
+
+
 def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Tensor | None,
               opacities: torch.Tensor, sh: torch.Tensor, viewmats: torch.Tensor,
               Ks: torch.Tensor, width: int, height: int, *,
               covars: torch.Tensor | None = None,
               sh_rotations: torch.Tensor | None = None,
+              frames: torch.Tensor | None = None, frame_ids: torch.Tensor | None = None,
+              frame_rotations: torch.Tensor | None = None,
               background=None, background_depth: torch.Tensor | None = None,
               near: float = 0.01, far: float = 1e4,
               timings: bool = False) -> RenderOutput:
     """Render N Gaussians into C pinhole cameras (see the module docstring for the rules).
 
     Args:
-        means: [N, 3] world-space centres, metres.
+        means: [N, 3] centres, metres (world, or in their frames with ``frames``).
         quats: [N, 4] rotations (w, x, y, z), normalised here. ``None`` with ``covars``.
         scales: [N, 3] standard deviations along the Gaussian axes, metres
             (exponentiated, not log-scales). ``None`` with ``covars``.
@@ -417,11 +761,18 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
         viewmats: [C, 4, 4] world -> camera transforms (OpenCV axes).
         Ks: [C, 3, 3] pinhole intrinsics in pixels.
         width, height: image size W, H in pixels.
-        covars: optional precomputed world covariances, [N, 3, 3] or [N, 6]
+        covars: optional precomputed covariances, [N, 3, 3] or [N, 6]
             (xx, xy, xz, yy, yz, zz), m²; replaces ``quats``/``scales``.
         sh_rotations: optional [N, 3, 3] rotation of each Gaussian's SH frame
             (e.g. polar(F) of a deformed Gaussian): the SH are evaluated at
             ``Rᵀ · view_dir``.
+        frames: optional [F, 3, 4] (or [F, 4, 4]) affine frame -> world maps
+            ``x -> M x + t``; Gaussian g's mean and covariance are then given in
+            frame ``frame_ids[g]`` and posed by the kernel (μ = M μ⁰ + t,
+            Σ = M Σ⁰ Mᵀ). See *Frames* in the module docstring.
+        frame_ids: [N] integer frame of each Gaussian (with ``frames``).
+        frame_rotations: optional [F, 3, 3] rotation of the SH frames of each
+            frame's Gaussians (instead of ``sh_rotations``).
         background: colour behind the Gaussians: scalar, [3], [C, 3] or an
             image [C, H, W, 3]. Default black.
         background_depth: optional [C, H, W] camera-z depth (metres) of the
@@ -435,135 +786,23 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
 
     Raises:
         ConfigError: a wrong shape (the message gives the expected one), NaN/inf
-            in any input, opacities outside [0, 1], or non-positive image size.
+            in any input, opacities outside [0, 1], frame ids out of range, or
+            non-positive image size.
     """
-    backend.ensure_init()
-    t_start = time.perf_counter()
-    if int(width) != width or int(height) != height or width <= 0 or height <= 0:
-        raise ConfigError(f"image size width={width!r}, height={height!r} must be positive ints")
-    width, height = int(width), int(height)
-    if not isinstance(means, torch.Tensor) or means.dim() != 2 or means.shape[1] != 3:
-        raise ConfigError(f"means has shape {list(getattr(means, 'shape', []))}, expected [N, 3]")
-    n = means.shape[0]
-    dev = means.device
-    f32 = dict(dtype=torch.float32, device=dev)
-    means = _check_shape("means", means, (n, 3), "[N, 3]").to(**f32).contiguous()
-    opacities = _check_shape("opacities", opacities, (n,), "[N]").to(**f32).contiguous()
-    if n and (opacities.min() < 0 or opacities.max() > 1):
-        raise ConfigError("opacities must lie in [0, 1] (pass sigmoid(opacity_logits))")
-    if not isinstance(sh, torch.Tensor) or sh.dim() != 3 or sh.shape[0] != n or sh.shape[2] != 3:
-        raise ConfigError(f"sh has shape {list(getattr(sh, 'shape', []))}, expected [N, K, 3], "
-                          f"K in (1, 4, 9, 16), N={n}")
-    degree = sh_degree_from_coeffs(sh.shape[1])
-    _check_finite("sh", sh)
-    sh = sh.to(**f32).contiguous()
-    viewmats = _check_shape("viewmats", viewmats, (None, 4, 4), "[C, 4, 4]").to(**f32).contiguous()
-    C = viewmats.shape[0]
-    Ks = _check_shape("Ks", Ks, (C, 3, 3), f"[C, 3, 3] with C={C}").to(**f32).contiguous()
-    if (Ks[:, 0, 0] <= 0).any() or (Ks[:, 1, 1] <= 0).any():
-        raise ConfigError("Ks: focal lengths fx, fy must be positive")
-    if covars is not None:
-        if quats is not None or scales is not None:
-            raise ConfigError("pass either covars or quats+scales, not both")
-        if covars.dim() == 3:
-            covars = _check_shape("covars", covars, (n, 3, 3), "[N, 3, 3] or [N, 6]")
-            i, j = (0, 0, 0, 1, 1, 2), (0, 1, 2, 1, 2, 2)
-            cov6 = covars[:, i, j]
-        else:
-            cov6 = _check_shape("covars", covars, (n, 6), "[N, 3, 3] or [N, 6]")
-    else:
-        if quats is None or scales is None:
-            raise ConfigError("quats and scales are required unless covars is given")
-        quats = _check_shape("quats", quats, (n, 4), "[N, 4]")
-        scales = _check_shape("scales", scales, (n, 3), "[N, 3]")
-        if n and (quats.abs().amax(dim=-1) == 0).any():
-            raise ConfigError("quats contains a zero quaternion")
-        quats, scales = quats.to(**f32).contiguous(), scales.to(**f32).contiguous()
-        cov6 = None
-    if cov6 is not None:
-        cov6 = cov6.to(**f32).contiguous()
-        quats = scales = torch.zeros(1, 4, **f32)
-    has_cov = int(cov6 is not None)
-    if cov6 is None:
-        cov6 = torch.zeros(1, 6, **f32)
-    if sh_rotations is not None:
-        sh_rot = _check_shape("sh_rotations", sh_rotations, (n, 3, 3), "[N, 3, 3]")
-        sh_rot = sh_rot.to(**f32).contiguous()
-    else:
-        sh_rot = torch.zeros(1, 3, 3, **f32)
-    bg, bg_is_image = _background_tensor(background, C, height, width, dev)
-    if background_depth is not None:
-        if not isinstance(background_depth, torch.Tensor) or \
-                tuple(background_depth.shape) != (C, height, width):
-            raise ConfigError(f"background_depth has shape "
-                              f"{list(getattr(background_depth, 'shape', []))}, expected "
-                              f"[C, H, W] = [{C}, {height}, {width}]")
-        if torch.isnan(background_depth).any():
-            raise ConfigError("background_depth contains NaN (use inf for empty pixels)")
-        bg_depth = background_depth.to(**f32).contiguous()
-    else:
-        bg_depth = torch.zeros(1, 1, 1, **f32)
-    if not (0 < near < far):
-        raise ConfigError(f"need 0 < near < far, got near={near}, far={far}")
-
-    tiles_x = (width + TILE - 1) // TILE
-    tiles_y = (height + TILE - 1) // TILE
-    n_tile_total = C * tiles_x * tiles_y
-    sync = ti.sync if timings else (lambda: None)
-
-    # 1. project -------------------------------------------------------------
-    # only entries of Gaussians with n_tiles > 0 are written and ever read
-    mean2d = torch.empty(C, n, 2, **f32)
-    conic = torch.empty(C, n, 3, **f32)
-    depth = torch.empty(C, n, **f32)
-    color = torch.empty(C, n, 3, **f32)
-    box = torch.empty(C, n, 4, dtype=torch.int32, device=dev)
-    n_tiles = torch.empty(C, n, dtype=torch.int32, device=dev)  # written for every Gaussian
-    if n:
-        _project(means, quats, scales, cov6, has_cov, opacities, sh, sh_rot,
-                 int(sh_rotations is not None), degree,
-                 viewmats, Ks, width, height, float(near), float(far),
-                 mean2d, conic, depth, color, box, n_tiles)
-    sync()
-    t_proj = time.perf_counter()
-
-    # 2. bin: one key per (Gaussian, tile), sort, per-tile ranges ---------------
-    counts = n_tiles.reshape(-1).to(torch.int64)
-    ends = torch.cumsum(counts, 0)
-    n_keys = int(ends[-1]) if n else 0
-    ranges = torch.zeros(n_tile_total, 2, dtype=torch.int32, device=dev)
-    if n_keys:
-        offsets = (ends - counts).reshape(C, n).contiguous()
-        keys = torch.empty(n_keys, dtype=torch.int64, device=dev)
-        ids = torch.empty(n_keys, dtype=torch.int32, device=dev)
-        _emit_keys(offsets, n_tiles, box, depth, tiles_x, tiles_x * tiles_y, keys, ids)
-        keys, order = torch.sort(keys, stable=True)
-        ids = ids[order].contiguous()
-        _tile_ranges(keys, ranges)
-    else:
-        ids = torch.zeros(1, dtype=torch.int32, device=dev)
-    sync()
-    t_bin = time.perf_counter()
-
-    # 3. rasterise ---------------------------------------------------------------
-    out_rgb = torch.empty(C, height, width, 3, **f32)
-    out_depth = torch.empty(C, height, width, **f32)
-    out_alpha = torch.empty(C, height, width, **f32)
-    if n == 0:  # keep the kernels' argument arrays non-empty
-        mean2d, conic, depth = (torch.zeros(C, 1, 2, **f32), torch.zeros(C, 1, 3, **f32),
-                                torch.zeros(C, 1, **f32))
-        color, opacities = torch.zeros(C, 1, 3, **f32), torch.zeros(1, **f32)
-        box = torch.zeros(C, 1, 4, dtype=torch.int32, device=dev)
-    _rasterize_tiles(ranges, ids, mean2d, conic, depth, color, opacities, box, bg, bg_is_image,
-                     bg_depth, int(background_depth is not None), tiles_x,
-                     out_rgb, out_depth, out_alpha)
-    sync()
-    t_end = time.perf_counter()
-    stats = {"n_keys": n_keys}
-    if timings:
-        stats.update(project=1e3 * (t_proj - t_start), bin_sort=1e3 * (t_bin - t_proj),
-                     raster=1e3 * (t_end - t_bin), total=1e3 * (t_end - t_start))
-    return RenderOutput(out_rgb, out_depth, out_alpha, stats)
+    if (frames is None) != (frame_ids is None):
+        raise ConfigError("frames and frame_ids go together")
+    if frame_rotations is not None and frames is None:
+        raise ConfigError("frame_rotations need frames and frame_ids")
+    dev = means.device if isinstance(means, torch.Tensor) else None
+    with one_torch_thread():  # the input checks are torch reductions too
+        n_frames = 0
+        if frames is not None:
+            frames, frame_rotations = _frame_inputs(frames, frame_rotations, None, dev)
+            n_frames = frames.shape[0]
+        g = _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations, frame_ids,
+                             n_frames, frame_rotations is not None)
+        return _rasterize(g, frames, frame_rotations, viewmats, Ks, width, height, background,
+                          background_depth, near, far, timings)
 
 
 def render(gaussians: GaussianSet, viewmats: torch.Tensor, Ks: torch.Tensor, width: int,

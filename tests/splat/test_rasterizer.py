@@ -266,3 +266,105 @@ def test_sapien_pose_conversion_matches_sapien_camera():
     assert torch.allclose(V_gl[:3], expected, atol=1e-5)
     K = torch.as_tensor(cam.get_intrinsic_matrix(), dtype=torch.float32)
     assert torch.allclose(K, intrinsics_from_fov(64, 48, 1.0), atol=1e-3)
+
+
+def test_partial_edge_tiles_match_reference(reference, scene_factory):
+    """An image that is not a whole number of 16×16 tiles (the last tile row and column are
+    cut): the tiles' pixel masks must leave the missing pixels out and draw all others."""
+    g = scene_factory(300, 1, seed=21)
+    w, h = 50, 37
+    V = look_at([0, -0.6, 0.0], [0, 0, 0])[None]
+    K = intrinsics_from_fov(w, h, math.radians(80))[None]
+    out = render(g, V, K, w, h, background=BG)
+    ref = reference(g.means, g.covariances(), g.opacities, g.sh, V, K, w, h, background=BG)
+    assert ref[2][:, 32:, 48:].min() > 0.5, "the scene should cover the cut corner tile"
+    d_rgb, d_depth, d_alpha = compare(out, ref)
+    assert d_rgb <= 1e-3 and d_alpha <= 1e-4 and d_depth <= 1e-3
+
+
+def test_large_gaussians_centred_off_screen_are_kept(reference):
+    """Wide Gaussians whose centres lie outside the view (beyond the 1.3·tan(fov/2) clamp)
+    but whose support reaches into it: the cheap screen-bound cull must not drop them."""
+    gen = torch.Generator().manual_seed(3)
+    n = 40
+    side = torch.where(torch.rand(n, generator=gen) < 0.5, -1.0, 1.0)
+    means = torch.stack([side * (1.2 + 0.6 * torch.rand(n, generator=gen)),  # x/z about 0.6-0.9
+                         torch.randn(n, generator=gen) * 0.3, torch.full((n,), 2.0)], -1)
+    g = GaussianSet.create(means, torch.nn.functional.normalize(torch.randn(n, 4, generator=gen), dim=1),
+                           torch.log(0.25 + 0.2 * torch.rand(n, 3, generator=gen)), torch.full((n,), 1.0),
+                           torch.randn(n, 4, 3, generator=gen) * 0.4)
+    V = torch.eye(4)[None]  # camera at the origin looking along +z
+    K = intrinsics_from_fov(W, H, math.radians(40))[None]
+    out = render(g, V, K, W, H, background=BG)
+    ref = reference(g.means, g.covariances(), g.opacities, g.sh, V, K, W, H, background=BG)
+    assert ref[2].mean() > 0.2, "the off-screen Gaussians should cover part of the view"
+    assert compare(out, ref)[0] <= 1e-3
+
+
+def _frames_of(g, seed):
+    """Split ``g`` into 3 frames: two rigid ones and one shearing affine map (like an MPM
+    particle's F); returns (local means, local covariances [N, 3, 3], frame ids, frames
+    [3, 3, 4]) with M μ⁰ + t = μ and M Σ⁰ Mᵀ = Σ."""
+    from gausstac_maniskill.splat import quat_to_rotmat
+
+    gen = torch.Generator().manual_seed(seed)
+    ids = torch.randint(0, 3, (len(g),), generator=gen)
+    M = torch.stack([quat_to_rotmat(torch.nn.functional.normalize(torch.randn(4, generator=gen), dim=0))
+                     for _ in range(3)])
+    M[2] = M[2] @ torch.tensor([[1.1, 0.2, 0.0], [0.0, 0.9, 0.1], [0.05, 0.0, 1.05]])
+    t = torch.randn(3, 3, generator=gen) * 0.2
+    frames = torch.cat([M, t[:, :, None]], dim=-1)
+    Mi = torch.linalg.inv(M.double())[ids]
+    local_means = (Mi @ (g.means.double() - t[ids].double())[:, :, None])[..., 0].float()
+    local_cov = (Mi @ g.covariances().double() @ Mi.transpose(1, 2)).float()
+    return local_means, local_cov, ids, frames
+
+
+def test_frames_pose_gaussians_like_world_coordinates(reference, scene_factory):
+    """Means and covariances given in frames (rigid and affine) and posed by the kernel
+    render like the same Gaussians given in world coordinates; SH rotations per frame
+    equal the same rotations given per Gaussian."""
+    from gausstac_maniskill.splat import quat_to_rotmat
+
+    g = scene_factory(300, 2, seed=12)
+    V, K = cameras()
+    mu, cov, ids, frames = _frames_of(g, seed=1)
+    R = quat_to_rotmat(torch.nn.functional.normalize(torch.randn(3, 4, generator=torch.Generator()
+                                                                  .manual_seed(5)), dim=1))
+    out = rasterize(mu, None, None, g.opacities, g.sh, V, K, W, H, covars=cov, frames=frames,
+                    frame_ids=ids, frame_rotations=R, background=BG)
+    world = rasterize(g.means, None, None, g.opacities, g.sh, V, K, W, H, covars=g.covariances(),
+                      sh_rotations=R[ids], background=BG)
+    ref = reference(g.means, g.covariances(), g.opacities, g.sh, V, K, W, H, sh_rotations=R[ids],
+                    background=BG)
+    assert compare(out, ref)[0] <= 1e-3
+    for name in ("rgb", "depth", "alpha"):  # same Gaussians, the pose applied elsewhere: rounding only
+        assert (getattr(out, name) - getattr(world, name)).abs().max() < 1e-4, name
+    as44 = torch.cat([frames, torch.tensor([0.0, 0, 0, 1]).expand(3, 1, 4)], dim=1)
+    again = rasterize(mu, None, None, g.opacities, g.sh, V, K, W, H, covars=cov, frames=as44,
+                      frame_ids=ids, frame_rotations=R, background=BG)
+    assert torch.equal(again.rgb, out.rgb)  # [F, 4, 4] frames are read as their top 3 rows
+
+
+def test_frame_arguments_are_checked(scene_factory):
+    g = scene_factory(20, 1)
+    V, K = cameras()
+    mu, cov, ids, frames = _frames_of(g, seed=2)
+    args = (mu, None, None, g.opacities, g.sh, V, K, W, H)
+    with pytest.raises(ConfigError, match="go together"):
+        rasterize(*args, covars=cov, frames=frames)
+    with pytest.raises(ConfigError, match=r"frame_ids must lie in \[0, 3\)"):
+        rasterize(*args, covars=cov, frames=frames, frame_ids=ids + 1)
+    with pytest.raises(ConfigError, match="integer tensor"):
+        rasterize(*args, covars=cov, frames=frames, frame_ids=ids.float())
+    with pytest.raises(ConfigError, match="frames has shape"):
+        rasterize(*args, covars=cov, frames=frames[:, :, :3], frame_ids=ids)
+    bad = frames.clone()
+    bad[1, 0, 3] = float("nan")
+    with pytest.raises(ConfigError, match="frames contains NaN"):
+        rasterize(*args, covars=cov, frames=bad, frame_ids=ids)
+    with pytest.raises(ConfigError, match="not both"):
+        rasterize(*args, covars=cov, frames=frames, frame_ids=ids, frame_rotations=torch.eye(3).expand(3, 3, 3),
+                  sh_rotations=torch.eye(3).expand(20, 3, 3))
+    with pytest.raises(ConfigError, match="frame_rotations need"):
+        rasterize(*args, covars=cov, frame_rotations=torch.eye(3).expand(3, 3, 3))
