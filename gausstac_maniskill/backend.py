@@ -31,6 +31,11 @@ def _taichi_arch_name() -> str:
     return "cuda" if arch == ti.cuda else ("cpu" if arch in (ti.x64, ti.arm64) else str(arch))
 
 
+def _profiler_on() -> bool:
+    """``GAUSSTAC_KERNEL_PROFILER=1`` turns Taichi's kernel profiler on (``bench kernels``)."""
+    return os.environ.get("GAUSSTAC_KERNEL_PROFILER", "") == "1"
+
+
 def _try_cuda(seed: int, debug: bool) -> bool:
     """Initialise Taichi on CUDA; return False (and reset) if CUDA does not work.
 
@@ -39,8 +44,7 @@ def _try_cuda(seed: int, debug: bool) -> bool:
     reset and start again: one start-up line per process."""
     try:
         ti.init(arch=ti.cuda, default_fp=ti.f32, random_seed=seed, debug=debug,
-                log_level=ti.ERROR, offline_cache=True, enable_fallback=False,
-                kernel_profiler=os.environ.get("GAUSSTAC_KERNEL_PROFILER", "") == "1")
+                log_level=ti.ERROR, offline_cache=True, enable_fallback=False, kernel_profiler=_profiler_on())
     except Exception:  # noqa: BLE001 - any CUDA failure means "no CUDA here"
         ti.reset()
         return False
@@ -91,7 +95,7 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
         cpu_threads = int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
         kwargs = dict(arch=ti.cpu, default_fp=ti.f32, random_seed=seed, debug=debug,
                       log_level=ti.WARN, offline_cache=True,
-                      kernel_profiler=os.environ.get("GAUSSTAC_KERNEL_PROFILER", "") == "1")
+                      kernel_profiler=_profiler_on())
         if cpu_threads:
             kwargs["cpu_max_num_threads"] = cpu_threads
         ti.init(**kwargs)

@@ -115,8 +115,7 @@ class RigidLayer:
             if self._static is None:
                 self._static = pose_gaussians(self.gaussians)
             return self._static
-        T = torch.as_tensor(np.asarray(self.poses(), dtype=np.float64), dtype=torch.float32)
-        return pose_gaussians(self.gaussians, T)
+        return pose_gaussians(self.gaussians, self._pose_matrices())
 
     def _pose_matrices(self) -> torch.Tensor:
         T = torch.as_tensor(np.asarray(self.poses(), dtype=np.float64), dtype=torch.float32)

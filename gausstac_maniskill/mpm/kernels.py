@@ -273,11 +273,7 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
     for idx in range(ntot):
         m = grid_m[idx]
         if m > 0.0:
-            cell = idx % ncell
-            k = cell % nz
-            j = (cell // nz) % ny
-            i = cell // (ny * nz)
-            xi = ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
+            xi = node_position(idx, ncell, ox, oy, oz, ny, nz, dx)
             vel = grid_v[idx] / m
             vel *= damping
             if pinned(grid_m, grid_mk, idx):
@@ -318,6 +314,15 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
                                 ti.atomic_add(col_impulse[c, 5], tq[2])
                                 vel = new_vel
             grid_v[idx] = vel
+
+
+@ti.func
+def node_position(idx, ncell: ti.template(), ox: ti.template(), oy: ti.template(), oz: ti.template(),
+        ny: ti.template(), nz: ti.template(), dx: ti.template()):
+    """World position [m] of grid node ``idx`` (of either velocity field: idx modulo ncell)."""
+    cell = idx % ncell
+    i, j, k = cell // (ny * nz), (cell // nz) % ny, cell % nz
+    return ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
 
 
 @ti.func
@@ -653,11 +658,7 @@ def contact_apply(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), 
         m = grid_m[idx]
         dp = grid_dp[idx]
         if m > 0.0 and not pinned(grid_m, grid_mk, idx) and dp.norm_sqr() > 0.0:
-            cell = idx % ncell
-            k = cell % nz
-            j = (cell // nz) % ny
-            i = cell // (ny * nz)
-            xi = ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
+            xi = node_position(idx, ncell, ox, oy, oz, ny, nz, dx)
             dv = dp / m
             for w in range(n_walls):
                 ax = ti.cast(walls[w, 0], ti.i32)

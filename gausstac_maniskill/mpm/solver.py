@@ -149,6 +149,7 @@ class MPMWorld:
         self._link_radius: list[float] = []
         self._pack: dict = {}  # kernel argument packs (kernels.Particles, Grid, Scene, Order)
         self._atomic = atomic_scatter()
+        self._two_fields = False  # set by _push from the awake groups' fields
         _WORLDS.add(self)
 
     # ------------------------------------------------------------------ building
@@ -615,7 +616,7 @@ class MPMWorld:
             # substep's start); with F-bar the stress is then brought up to the final F
             self._prepare(1.0, 1.0 + 1e-6, dt_sub)
             if self.settings.fbar:
-                K.fbar_update(self._world_pack(), self._nh_only(), self._two_field(), self._atomic)
+                K.fbar_update(self._world_pack(), self._nh_only(), self._two_fields, self._atomic)
         if self._n_active and self.contact == "particle":
             K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
                              d["col_pose"], d["col_impulse"])
@@ -641,14 +642,10 @@ class MPMWorld:
         if ncell > s.max_grid_cells or n_slabs < 0:
             raise SimulationError(self._explode_message(np.array([ox, oy, oz]) + s.grid_margin,
                                                         np.array([ox + nx, oy + ny, oz + nz]) - s.grid_margin - 3))
-        need = ncell * (2 if self._two_field() else 1)
+        need = ncell * (2 if self._two_fields else 1)
         if need > self._grid_cap:
             self._alloc_grid(int(min(need * 1.5, 2 * s.max_grid_cells)))
         return box
-
-    def _two_field(self) -> bool:
-        """Groups of both velocity fields are awake (see :meth:`add_group`'s ``field``)."""
-        return len({g.field for g in self.groups if g.awake}) == 2
 
     def _world_pack(self):
         """The kernels' argument pack (kernels.World) over the current device arrays."""
@@ -664,7 +661,7 @@ class MPMWorld:
         s = self.settings
         box = self._prepare(a0, a1, dt)
         mode = 0 if not self.colliders else (1 if self.contact == "particle" else 2)
-        K.advance(self._world_pack(), dt, bool(s.fbar), mode, self._nh_only(), self._two_field(), self._atomic)
+        K.advance(self._world_pack(), dt, bool(s.fbar), mode, self._nh_only(), self._two_fields, self._atomic)
         return int(box[3] * box[4] * box[5])
 
     def _upload_consts(self) -> None:
@@ -768,6 +765,8 @@ class MPMWorld:
         active = np.flatnonzero(awake[: self._n]).astype(np.int32)
         active_kin = active[kind[active] == 1]
         self._n_active, self._n_kin = len(active), len(active_kin)
+        # groups of both velocity fields awake (see add_group's ``field``): two grid copies
+        self._two_fields = len({g.field for g in self.groups if g.awake}) == 2
         upload("active", np.resize(active, max(len(active), 1)), ti.i32)
         upload("active_kin", np.resize(active_kin, max(len(active_kin), 1)), ti.i32)
         for key in ("order", "slab_of"):
