@@ -150,15 +150,22 @@ def _contact_area(sim, pad) -> float:
 
 
 def make_sim(dx: float, indenter: str, thickness: float | None = None, friction: float = FRICTION,
-             mass_scaling: float | None = None, pad_surface: str = "particles"):
+             mass_scaling: float | None = None, pad_surface: str = "particles", patch_radius=False,
+             cfl: float | None = None):
     """The benchmark's scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
     :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
-    factor ``mass_scaling``; ``pad_surface`` as in :class:`GaussTacSim`) and ``indenter``
+    factor ``mass_scaling``, ``patch_radius`` [m] or None (False: the default's) and Courant
+    number ``cfl``;
+    ``pad_surface`` as in :class:`GaussTacSim`) and ``indenter``
     ("plate" | "sphere") 0.2 mm clear of its apex. Returns (sim, W): W the sensor frame's
     world pose (4x4)."""
     from ..cosim import GaussTacSim, default_hand_settings
 
     extra = {} if mass_scaling is None else {"mass_scaling": float(mass_scaling)}
+    if patch_radius is not False:
+        extra["patch_radius"] = patch_radius
+    if cfl is not None:
+        extra["cfl"] = float(cfl)
     sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra),
                       pad_surface=pad_surface)
     W = LINK_POSE @ sim.pads[INDEX].sensor_frame
@@ -168,10 +175,11 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
 
 def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
              friction: float = FRICTION, bar=None, mass_scaling: float | None = None,
-             pad_surface: str = "particles") -> dict:
+             pad_surface: str = "particles", patch_radius=False, cfl: float | None = None) -> dict:
     """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
     (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
-    (default: :func:`default_hand_settings`').
+    (default: :func:`default_hand_settings`'); ``patch_radius`` [m] the active patch (None: off,
+    False: the default's); ``cfl`` the Courant number (default: the settings').
 
     Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
     "phases": [...]}``; each phase (``"press"`` / ``"slide"`` at depth ``d`` [m]) holds
@@ -180,18 +188,19 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
     """
     t0 = time.perf_counter()
-    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling, pad_surface)
+    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling, pad_surface, patch_radius, cfl)
     pad = sim.pads[INDEX]
     spec = pad.spec
     build_s = time.perf_counter() - t0
     lay = spec.layout
     taxel_area = lay.pitch[0] * lay.pitch[1]
-    walls, subs = [], []
+    walls, subs, active = [], [], []
 
     def step(z: float, x: float):
         maps = sim.step({INDEX: LINK_POSE}, DT, {"indenter": indenter_pose(indenter, W, z, x)})[INDEX]
         walls.append(sim.world.last_step.wall_time)
         subs.append(sim.world.last_step.substeps)
+        active.append(sim.world.last_step.active_particles)
         if bar is not None:
             bar.update(1)
         F = W[:3, :3].T @ sim.object_wrench("indenter")[0]  # on the indenter, sensor axes
@@ -218,6 +227,7 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     step(GAP, 0.0)  # at rest: JIT compile and settle, not timed
     walls.clear()
     subs.clear()
+    active.clear()
     phases, z = [], GAP
     for d in depths:
         for k in range(protocol.press):
@@ -232,7 +242,8 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
         phases.append(hold("slide", d, z, SLIDE))
         sim.load_state_dict(pressed)
     return dict(dx=dx, indenter=indenter, mass_scaling=sim.settings.mass_scaling, particles=pad.num_particles,
-                soft=int((~pad.kinematic).sum()),
+                soft=int((~pad.kinematic).sum()), patch_radius=sim.settings.patch_radius, cfl=sim.settings.cfl,
+                active=float(np.mean(active)),
                 substeps=float(np.mean(subs)), step_ms=1e3 * float(np.mean(walls)), build_s=build_s,
                 thickness=spec.thickness, phases=phases)
 
@@ -374,7 +385,8 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
                 pad_surface: str = "particles") -> dict:
     """Speed against force error on the product pad (``bench pad --curve``).
 
-    ``points``: (dx [m], mass_scaling) pairs; each presses ``indenter`` ``depth`` [m] into
+    ``points``: (dx [m], mass_scaling, patch_radius [m] or None[, Courant number]) tuples; each
+    presses ``indenter`` ``depth`` [m] into
     the index pad (:data:`CURVE` protocol) and records the held normal force Fn [N], the
     MPM wall time per 50 ms step [ms], and the normal force read from the pad's stress
     (:meth:`GaussTacSim.pad_stress_force`, virtual work; and the older pressure-map
@@ -388,16 +400,22 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
 
     runs = []
     with tqdm(total=len(points) * (1 + CURVE.press + CURVE.hold), disable=not progress, desc="curve") as bar:
-        for dx, ms in sorted(points, key=lambda t: (-t[0], t[1])):
-            bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}")
-            c = run_case(dx, indenter, [depth], protocol=CURVE, bar=bar, mass_scaling=ms, pad_surface=pad_surface)
-            runs.append(dict(dx=dx, mass_scaling=ms, particles=c["particles"], substeps=c["substeps"],
+        for dx, ms, pr, cfl in sorted(((tuple(p) + (None,))[:4] for p in points),
+                                      key=lambda t: (-t[0], t[1], t[2] or 0.0, t[3] or 0.0)):
+            bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}, patch {pr}, cfl {cfl}")
+            c = run_case(dx, indenter, [depth], protocol=CURVE, bar=bar, mass_scaling=ms, pad_surface=pad_surface,
+                         patch_radius=pr, cfl=cfl)
+            runs.append(dict(dx=dx, mass_scaling=ms, patch_radius=pr, cfl=c.get("cfl", cfl), active=c["active"],
+                             particles=c["particles"],
+                             substeps=c["substeps"],
                              step_ms=c["step_ms"], Fn=c["phases"][0]["Fn"], F_spread=c["phases"][0]["F_spread"],
                              F_stress=c["phases"][0]["F_stress"], F_pressure=c["phases"][0]["F_pressure"]))
     from ..cosim import default_hand_settings
 
     default_ms = default_hand_settings().mass_scaling
-    base = sorted((r for r in runs if r["mass_scaling"] == default_ms), key=lambda r: r["dx"])
+    default_cfl = default_hand_settings().cfl
+    base = sorted((r for r in runs if r["mass_scaling"] == default_ms and r["patch_radius"] is None
+                   and r["cfl"] in (None, default_cfl)), key=lambda r: r["dx"])
     ref, src = base[0]["Fn"], f"finest run (dx = {base[0]['dx'] * 1e3:g} mm)"
     if len(base) >= 3:
         rich = richardson([r["dx"] for r in base[:3]], [r["Fn"] for r in base[:3]])
@@ -414,12 +432,16 @@ def format_curve(curve: dict, indenter: str, depth: float) -> str:
     """Markdown table of :func:`speed_curve`, cheapest first."""
     out = [f"Speed against error: index pad, {indenter} pressed {depth * 1e3:g} mm, held normal force vs "
            f"reference {curve['reference']:.4f} N ({curve['reference_from']})", "",
-           "| dx [mm] | cells in the 4 mm layer | pad mass scaling | particles | substeps / step | "
+           "| dx [mm] | cells in the 4 mm layer | pad mass scaling | Courant number | patch radius [mm] | particles | "
+           "simulated (held) | substeps / step | "
            "MPM wall / 50 ms step [ms] | Fn [N] | Fn spread over hold | error | "
            "Fn from pad stress [N] | stress / contact | pressure map × area / contact |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(curve["runs"], key=lambda r: r["step_ms"]):
-        out.append(f"| {r['dx'] * 1e3:g} | {4e-3 / r['dx']:.1f} | {r['mass_scaling']:g} | {r['particles']} | "
+        patch = "off" if r["patch_radius"] is None else f"{r['patch_radius'] * 1e3:g}"
+        out.append(f"| {r['dx'] * 1e3:g} | {4e-3 / r['dx']:.1f} | {r['mass_scaling']:g} | {r['cfl']:g} | {patch} | "
+                   f"{r['particles']} | "
+                   f"{r['active']:.0f} | "
                    f"{r['substeps']:.0f} | {r['step_ms']:.0f} | {r['Fn']:.4f} | {100 * r['F_spread']:.1f}% | "
                    f"{_pct(r['err'])} | {r['F_stress']:.4f} | {_pct(r['F_stress'] / r['Fn'] - 1)} | "
                    f"{_pct(r['F_pressure'] / r['Fn'] - 1)} |")
@@ -445,13 +467,20 @@ def main(argv: list[str] | None = None) -> int:
                          "--mass-scaling values at the default dx (first --indenters, first --depths)")
     ap.add_argument("--mass-scaling", type=float, nargs="+", default=[250.0, 4000.0, 16000.0],
                     help="pad pseudo-mass factors of the curve at the default dx")
+    ap.add_argument("--patch-radius", type=float, nargs="*", default=[],
+                    help="active patch radii [m] of the curve, at the default dx with the default mass "
+                         "scaling and with x4000")
+    ap.add_argument("--cfl", type=float, nargs="*", default=[],
+                    help="Courant numbers of extra curve points: every --dx grid at the default mass scaling")
     ap.add_argument("--pad-surface", default="particles", choices=["particles", "mesh"],
                     help="where the indenter touches the pad (GaussTacSim's pad_surface; curve only)")
     args = ap.parse_args(argv)
     if args.curve:
         arch = backend.init(args.arch)
         dxs = args.dx or [2e-3, 1.5e-3, default_dx, 0.75e-3, 0.5e-3]
-        points = [(dx, default_ms) for dx in dxs] + [(default_dx, m) for m in args.mass_scaling]
+        points = [(dx, default_ms, None) for dx in dxs] + [(default_dx, m, None) for m in args.mass_scaling]
+        points += [(default_dx, m, r) for r in args.patch_radius for m in sorted({default_ms, 4000.0})]
+        points += [(dx, default_ms, None, c) for c in args.cfl for dx in dxs]
         t0 = time.perf_counter()
         curve = speed_curve(points, args.indenters[0], args.depths[-1], pad_surface=args.pad_surface)
         text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, "

@@ -23,7 +23,8 @@ poses move from the previous pose to the one last set (position lerp, rotation
 slerp per substep); the substep count comes from the CFL bound
 Δt ≤ C·dx / (c + |v|max), c = √((λ + 2μ)/ρ). The grid covers only the bounding
 box of awake particles plus a margin and follows them; sleeping groups are not
-touched at all.
+touched at all. With ``SolverSettings.patch_radius`` only the part of a pad near a contact
+is simulated and the rest rides rigidly with its link (:mod:`.patch`).
 
 Units: metres, kilograms, seconds, pascals, newtons.
 
@@ -57,6 +58,7 @@ from . import kernels as K
 from .colliders import Collider, MeshCollider
 from .kinematics import FRAME
 from .materials import material_table
+from .patch import ActivePatch, bind_in_place, carry_rigidly, groups_in_contact, rest_gap
 
 __all__ = ["MPMWorld", "StepInfo", "Group"]
 
@@ -91,6 +93,7 @@ class Group:
     field: int = 0  # velocity field (0 or 1): groups of different fields are separate bodies in contact
     awake: bool = True
     sleep_pose: np.ndarray | None = None  # link pose when the group fell asleep
+    patch_state: int = 0  # active patch (mpm.patch): 0 at rest, 1 patched in contact, 2 released (whole)
 
     @property
     def stop(self) -> int:
@@ -150,6 +153,9 @@ class MPMWorld:
         self._pack: dict = {}  # kernel argument packs (kernels.Particles, Grid, Scene, Order)
         self._atomic = atomic_scatter()
         self._two_fields = False  # set by _push from the awake groups' fields
+        r = self.settings.patch_radius
+        self._patch = ActivePatch(r, self.settings.dx) if r else None
+        self._patched: list[int] = []  # groups simulated by patch in the current step
         _WORLDS.add(self)
 
     # ------------------------------------------------------------------ building
@@ -526,6 +532,7 @@ class MPMWorld:
         h["F"][sl] = (T[:3, :3] @ bind.T).astype(np.float32)
         h["impulse"][sl] = 0.0
         h["contact_id"][sl] = -1
+        g.patch_state = 0
         self._dirty = True
 
     def plan_substeps(self, dt: float, driver_speed: float | None = None) -> tuple[int, float]:
@@ -588,6 +595,7 @@ class MPMWorld:
         self._reach = 2.0 * (self._vmax + driver) * dt_sub
         self._upload_consts()
         self._upload_poses()
+        frozen = self._choose_patch() if self._patch is not None else None
         d = self._dev
         twists = [_twist(a, b, float(dt)) for a, b in zip(self._link_prev, self._link_next)]
         if self._n_active:
@@ -617,6 +625,11 @@ class MPMWorld:
             self._prepare(1.0, 1.0 + 1e-6, dt_sub)
             if self.settings.fbar:
                 K.fbar_update(self._world_pack(), self._nh_only(), self._two_fields, self._atomic)
+        if frozen is not None and len(frozen):
+            carry_rigidly(d["patch_frozen"], len(frozen), float(dt), d["link_pose"], d["x"], d["v"], d["C"],
+                          d["F"], d["tau"], d["impulse"], d["contact_id"], d["link"])
+        if self._patched and self._n_active:
+            self._note_patch_contact()
         if self._n_active and self.contact == "particle":
             K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
                              d["col_pose"], d["col_impulse"])
@@ -653,6 +666,86 @@ class MPMWorld:
         if pk.get("W") is None:
             pk["W"] = K.World(P=pk["P"], G=pk["G"], S=pk["S"], O=pk["O"])
         return pk["W"]
+
+    def _upload_counts(self) -> None:
+        self._dev["counts"].from_numpy(np.array([len(self.link_names), len(self.groups), len(self.colliders),
+                                                 len(self._walls), self._n_active, self._n_kin], np.int32))
+
+    def _choose_patch(self) -> np.ndarray | None:
+        """The active patch of this step (:mod:`~gausstac_maniskill.mpm.patch`): rewrites the
+        awake lists, the kinematic flags and the shell's rest coordinates on the device.
+        Returns the indices of the frozen particles (carried rigidly after the substeps),
+        or None when every awake particle is simulated."""
+        h, d, n = self._host, self._dev, max(self._n, 1)
+        self._patched = []
+        full = self._awake_list
+        if not len(full):
+            return None
+        kind = h["kind"]
+        gids = [i for i, g in enumerate(self.groups) if g.awake and g.quasi_static and g.link >= 0
+                and g.count > g.n_kinematic and g.patch_state != 2]
+        gaps = {}
+        if gids and self.colliders and not self._two_fields:
+            cand = np.concatenate([np.arange(self.groups[i].start, self.groups[i].stop, dtype=np.int32)
+                                   for i in gids])
+            d["patch_cand"].from_numpy(np.resize(cand, n))
+            rest_gap(d["patch_cand"], len(cand), d["X_rest"], d["link"], d["radius"], d["link_pose"],
+                     len(self.colliders), d["col_pose"], d["col_kind"], d["col_prm"], d["sdf"], d["sdf_info"],
+                     d["patch_gap"])
+            gap = d["patch_gap"].to_numpy()
+            start = 0
+            for i in gids:
+                gaps[i] = gap[start:start + self.groups[i].count]
+                start += self.groups[i].count
+        parts, bind, frozen = [], [], []
+        for i, g in enumerate(self.groups):
+            if not g.awake:
+                continue
+            idx = np.arange(g.start, g.stop, dtype=np.int32)
+            sl = slice(g.start, g.stop)
+            split = self._patch.split(i, h["X0"][sl], kind[sl] == 0, gaps[i]) if i in gaps else None
+            if split is not None and not split[0].any() and g.patch_state == 1:
+                g.patch_state, split = 2, None  # its contact has just ended: relax it whole
+            if split is None:
+                parts.append(idx)
+                continue
+            patch, shell = split  # nothing touches a group at rest: all of it rides with the link
+            self._patched.append(i)
+            parts.append(idx[patch | shell])
+            bind.append(idx[shell & (kind[sl] == 0)])
+            frozen.append(idx[~(patch | shell)])
+        active = np.concatenate(parts)
+        kd = kind.copy()
+        bind = np.concatenate(bind) if bind else np.zeros(0, np.int32)
+        kd[bind] = 1
+        active_kin = active[kd[active] == 1]
+        d["kind"].from_numpy(np.resize(kd, n))
+        d["active"].from_numpy(np.resize(active, n))
+        d["active_kin"].from_numpy(np.resize(active_kin, n))
+        self._n_active, self._n_kin = len(active), len(active_kin)
+        self._upload_counts()
+        if len(bind):
+            d["patch_bind"].from_numpy(np.resize(bind, n))
+            bind_in_place(d["patch_bind"], len(bind), d["link_pose"], d["x"], d["X0"], d["link"])
+        if not frozen:
+            return None
+        frozen = np.concatenate(frozen)
+        d["patch_frozen"].from_numpy(np.resize(frozen, n))
+        return frozen
+
+    def _note_patch_contact(self) -> None:
+        """After a patched step: a patched group in contact holds frozen deformation (state 1);
+        once its contact ends it is simulated whole until put back at rest (state 2)."""
+        d = self._dev
+        d["patch_contact"].from_numpy(np.zeros(max(len(self.groups), 1), np.int32))
+        groups_in_contact(d["active"], self._n_active, d["contact_id"], d["group"], d["patch_contact"])
+        touched = d["patch_contact"].to_numpy()
+        for i in self._patched:
+            g = self.groups[i]
+            if touched[i]:
+                g.patch_state = 1
+            elif g.patch_state == 1:
+                g.patch_state = 2
 
     def _nh_only(self) -> bool:
         return all(m.model == "neo_hookean" for m in self.materials)
@@ -767,8 +860,17 @@ class MPMWorld:
         self._n_active, self._n_kin = len(active), len(active_kin)
         # groups of both velocity fields awake (see add_group's ``field``): two grid copies
         self._two_fields = len({g.field for g in self.groups if g.awake}) == 2
-        upload("active", np.resize(active, max(len(active), 1)), ti.i32)
-        upload("active_kin", np.resize(active_kin, max(len(active_kin), 1)), ti.i32)
+        # with the active patch the lists are rewritten every step: room for every particle
+        room = n if self._patch is not None else 1
+        upload("active", np.resize(active, max(len(active), room)), ti.i32)
+        upload("active_kin", np.resize(active_kin, max(len(active_kin), room)), ti.i32)
+        if self._patch is not None:
+            self._patch.forget()
+            upload("X_rest", h["X0"] if self._n else np.zeros((1, 3), np.float32), ti.f32, (3,))
+            for key in ("patch_gap", "patch_cand", "patch_frozen", "patch_bind"):
+                d[key] = ti.ndarray(ti.f32 if key == "patch_gap" else ti.i32, shape=n)
+            d["patch_contact"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
+            self._awake_list = active
         for key in ("order", "slab_of"):
             d[key] = ti.ndarray(ti.i32, shape=n)
         if "slab_start" not in d:
@@ -813,8 +915,8 @@ class MPMWorld:
         if "group_bind" not in d:
             upload("group_bind", np.tile(np.array([1.0, 0, 0, 0], np.float32), (1, 1)), ti.f32)
         d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
-        upload("counts", np.array([len(self.link_names), len(self.groups), len(self.colliders), len(self._walls),
-                                   self._n_active, self._n_kin], np.int32), ti.i32)
+        d["counts"] = ti.ndarray(ti.i32, shape=6)
+        self._upload_counts()
         d["consts"] = ti.ndarray(ti.f32, shape=9)
         self._upload_consts()
         self._build_packs()
@@ -871,6 +973,7 @@ class MPMWorld:
             "collider_prev": np.array(self._col_prev).copy(),
             "collider_pose": np.array([c.pose for c in self.colliders]).copy(),
             "awake": np.array([g.awake for g in self.groups]),
+            "patch_state": np.array([g.patch_state for g in self.groups], np.int32),
             "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in self.groups],
             "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
             "collider_impulse": self._col_impulse.copy(), "last_dt_ctrl": self._last_dt_ctrl,
@@ -898,6 +1001,8 @@ class MPMWorld:
             c.pose = T.copy()
         for g, a, sp in zip(self.groups, state["awake"], state["sleep_pose"]):
             g.awake, g.sleep_pose = bool(a), (None if sp is None else sp.copy())
+        for g, ps in zip(self.groups, state.get("patch_state", np.zeros(len(self.groups), np.int32))):
+            g.patch_state = int(ps)
         self.time, self.step_count = float(state["time"]), int(state["step_count"])
         self._vmax = float(state["vmax"])
         self._col_impulse = state["collider_impulse"].copy()

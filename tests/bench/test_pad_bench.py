@@ -68,7 +68,7 @@ def test_coarse_press_and_slide(tmp_path):
 def _fake_case(fn):
     """run_case stand-in: Fn = fn(dx, mass_scaling); guards speed_curve's bookkeeping, not physics."""
     def run_case(dx, indenter, depths, protocol=None, bar=None, mass_scaling=None, **_):
-        return dict(particles=int(1e-6 / dx ** 3), substeps=10.0, step_ms=1e-3 / dx,
+        return dict(particles=int(1e-6 / dx ** 3), active=0.5e-6 / dx ** 3, cfl=0.4, substeps=10.0, step_ms=1e-3 / dx,
                     phases=[dict(Fn=fn(dx, mass_scaling), F_spread=0.0, F_stress=0.95 * fn(dx, mass_scaling),
                                  F_pressure=0.9 * fn(dx, mass_scaling))])
     return run_case
@@ -77,12 +77,14 @@ def _fake_case(fn):
 def test_speed_curve_reference_and_errors(monkeypatch):
     # first-order convergence to 2 N: the reference is the Richardson limit, not the finest run
     monkeypatch.setattr(bench, "run_case", _fake_case(lambda dx, ms: 2.0 + 100.0 * dx + (0.1 if ms > 1e3 else 0.0)))
-    pts = [(2e-3, 1e3), (1e-3, 1e3), (0.5e-3, 1e3), (1e-3, 4e3)]
+    pts = [(2e-3, 1e3, None), (1e-3, 1e3, None), (0.5e-3, 1e3, None), (1e-3, 4e3, None), (1e-3, 1e3, 6e-3)]
     curve = bench.speed_curve(pts, progress=False)
     assert curve["reference"] == pytest.approx(2.0, rel=1e-6)
     assert "Richardson" in curve["reference_from"]
     err = {(r["dx"], r["mass_scaling"]): r["err"] for r in curve["runs"]}
     assert err[(1e-3, 1e3)] == pytest.approx(0.05) and err[(1e-3, 4e3)] == pytest.approx(0.1)
+    assert sum(r["patch_radius"] == 6e-3 for r in curve["runs"]) == 1  # a patch run is not the reference
+    assert "| 6 |" in bench.format_curve(curve, "sphere", 1e-3)
     table = bench.format_curve(curve, "sphere", 1e-3)
     assert table.count("\n| ") == 1 + len(pts) and "-5.0%" in table  # header + one row per point
     # no usable order (not monotone): the finest run is the reference
