@@ -14,6 +14,12 @@ actors — join as :class:`RigidLayer` s (:meth:`SceneGaussians.add_layer`): the
 splatted in the same rasterizer pass and sorted by depth with the hand's, so each
 occludes the other correctly. Units: metres.
 
+Lighting: the hand's, objects' and soft Gaussians carry albedo (colours sampled from mesh
+materials, :data:`PAD_RGB`, :data:`SOFT_RGB`) and normals, so that a ``lighting`` passed to
+:meth:`SceneGaussians.render` (the splat camera passes the SAPIEN scene's lights) shades
+them as SAPIEN shades meshes; a layer's Gaussians keep their colours (captured lighting)
+unless it is made with ``lit=True``. See :mod:`gausstac_maniskill.splat.lighting`.
+
 All of them are kept, once, as one :class:`~gausstac_maniskill.splat.FramedGaussians`
 in their frames (links, objects, the particles the soft Gaussians ride on, the layers'
 actors): posing the scene for a picture gathers only the F frames ([F, 3, 4]), and the
@@ -32,8 +38,8 @@ from .splat.deform import particle_frames, rigid_frames
 
 __all__ = ["SceneGaussians", "PosedScene", "RigidLayer", "box_gaussians", "particle_gaussians"]
 
-PAD_RGB = (0.55, 0.62, 0.78)      # translucent-looking blue-grey silicone
-SOFT_RGB = (0.95, 0.80, 0.25)     # foam yellow
+PAD_RGB = (0.55, 0.62, 0.78)      # translucent-looking blue-grey silicone (albedo, linear)
+SOFT_RGB = (0.95, 0.80, 0.25)     # foam yellow (albedo, linear)
 
 
 def box_gaussians(half_extents, spacing: float, link_id: int = 0) -> GaussianSet:
@@ -98,11 +104,14 @@ class RigidLayer:
             ``link_id[g]`` indexes in ``poses()`` (captured objects in their actors' frames).
         poses: ``None`` or a function returning the current ``[L, 4, 4]`` frame -> world
             rigid transforms (metres); called every time the scene is posed.
+        lit: shade the layer's flat Gaussians with the scene lighting (colours are albedo);
+            default False: a capture has its lighting baked into its colours.
     """
 
-    def __init__(self, gaussians: GaussianSet, poses: Callable[[], object] | None = None):
+    def __init__(self, gaussians: GaussianSet, poses: Callable[[], object] | None = None, lit: bool = False):
         self.gaussians = gaussians
         self.poses = poses
+        self.lit = bool(lit)
         self._static: PosedGaussians | None = None
         self._framed: FramedGaussians | None = None
 
@@ -129,7 +138,7 @@ class RigidLayer:
         if self._framed is None:
             n_frames = 1 if self.poses is None else self._pose_matrices().shape[0]
             ids = torch.zeros(len(self.gaussians), dtype=torch.int64) if self.poses is None else None
-            self._framed = FramedGaussians.from_gaussians(self.gaussians, ids, n_frames)
+            self._framed = FramedGaussians.from_gaussians(self.gaussians, ids, n_frames, lit=self.lit)
         return self._framed
 
     def frames(self) -> tuple[torch.Tensor, torch.Tensor]:
@@ -216,11 +225,12 @@ class SceneGaussians:
         if self._framed is None:
             n_rigid_frames = len(self.hand_links) + len(self.object_names)
             rigid = self.gaussians[torch.arange(self.n_rigid)]
-            soft, particles = FramedGaussians.from_binding(self.gaussians, self.binding)
+            soft, particles = FramedGaussians.from_binding(self.gaussians, self.binding, lit=True)
             self._particles = particles.numpy()
             # polar(F) is only needed if a soft Gaussian's colour depends on the view direction
             self._soft_rotations = bool(soft.sh.shape[1] > 1 and soft.sh[:, 1:].abs().max() > 0)
-            self._framed = FramedGaussians.cat([FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames),
+            self._framed = FramedGaussians.cat([FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames,
+                                                                               lit=True),
                                                 soft, *(layer.framed() for layer in self.layers)])
         return self._framed
 
@@ -251,5 +261,7 @@ class SceneGaussians:
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render; ``viewmats`` [C, 4, 4] world-to-camera (OpenCV), ``Ks`` [C, 3, 3].
-        Keyword arguments go to :func:`~gausstac_maniskill.splat.rasterize` (e.g. ``background``)."""
+        Keyword arguments go to :func:`~gausstac_maniskill.splat.rasterize` (e.g. ``background``,
+        ``lighting``: a :class:`~gausstac_maniskill.splat.lighting.Lighting` shading the lit
+        Gaussians; None: every colour as stored)."""
         return self.posed().render(viewmats, Ks, width, height, **kwargs)

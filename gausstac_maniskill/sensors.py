@@ -6,9 +6,10 @@
   ``extrinsic_cv`` / ``cam2world_gl`` / ``intrinsic_cv``). Its picture is the scene's
   Gaussians — hand links, pads and soft objects deformed by the MPM — composited with
   depth over SAPIEN's render of the rest of the scene (the hand hidden there), or over
-  a plain colour. Configure it with :class:`GaussianSplatCameraConfig`, a
-  ``CameraConfig`` with one more field, anywhere a ``CameraConfig`` goes (task sensors,
-  human render cameras).
+  a plain colour. By default the hand's, pads' and objects' Gaussians are shaded with the
+  SAPIEN scene's lights, as SAPIEN shades their meshes. Configure it with
+  :class:`GaussianSplatCameraConfig`, a ``CameraConfig`` with two more fields, anywhere a
+  ``CameraConfig`` goes (task sensors, human render cameras).
 * :class:`TactileSensor` gives the per-pad maps ``{pad: {"depth" [B, H, W] m,
   "shear" [B, H, W, 2] m, "force" [B, H, W] N}}`` that :class:`GaussTacEnv
   <gausstac_maniskill.tasks.base.GaussTacEnv>` puts in the top-level ``obs["tactile"]``.
@@ -46,12 +47,26 @@ class GaussianSplatCameraConfig(CameraConfig):
         background: ``"sapien"`` composites the Gaussians, with depth, over SAPIEN's
             render of the scene without the hand (tables, rigid objects, anything with no
             Gaussians); an RGB triple in [0, 1] composites them over that plain colour.
+        lighting: how the Gaussians' colours relate to the scene's lights.
+            ``"scene"`` (default): the lit Gaussians (hand, pads, objects; colours are
+            albedo) are shaded every frame with the ambient and directional lights of the
+            SAPIEN scene the camera is in, like SAPIEN's diffuse shading of meshes
+            (:mod:`gausstac_maniskill.splat.lighting`); captured layers keep their colours.
+            ``"baked"``: every Gaussian's colour is drawn as stored (unlit). A
+            :class:`~gausstac_maniskill.splat.lighting.Lighting`: these lights instead of
+            the scene's.
     """
 
     background: object = "sapien"
+    lighting: object = "scene"
 
     def __post_init__(self):
         super().__post_init__()
+        from .splat.lighting import Lighting
+
+        if not isinstance(self.lighting, Lighting) and self.lighting not in ("scene", "baked"):
+            raise ConfigError(f"GaussianSplatCameraConfig({self.uid!r}).lighting={self.lighting!r}: use 'scene', "
+                              "'baked' or a gausstac_maniskill.splat.lighting.Lighting")
         bg = self.background
         if isinstance(bg, str):
             if bg != "sapien":
@@ -68,8 +83,10 @@ class GaussianSplatCameraConfig(CameraConfig):
 class SplatSource:
     """What a :class:`GaussianSplatCamera` renders; the environment implements it.
 
-    ``render(viewmats [B,4,4], Ks [B,3,3], width, height, background, background_depth)``
-    returns ``(rgb [B,H,W,3] float in [0,1], depth [B,H,W] m (inf where empty))`` and
+    ``render(viewmats [B,4,4], Ks [B,3,3], width, height, background, background_depth,
+    lighting=None)`` returns ``(rgb [B,H,W,3] float in [0,1], depth [B,H,W] m (inf where
+    empty))``, shading env b's lit Gaussians with ``lighting[b]`` (a
+    :class:`~gausstac_maniskill.splat.lighting.Lighting`; ``lighting=None``: unlit), and
     ``hidden()`` is a context manager during which SAPIEN does not draw what the
     Gaussians replace (the hand). ``background_key()`` returns a numpy array that is
     equal between two calls (``np.array_equal``) only if nothing SAPIEN draws in that
@@ -77,7 +94,8 @@ class SplatSource:
     taken anew).
     """
 
-    def render(self, viewmats, Ks, width, height, background, background_depth):  # pragma: no cover
+    def render(self, viewmats, Ks, width, height, background, background_depth,
+               lighting=None):  # pragma: no cover
         raise NotImplementedError
 
     def hidden(self):  # pragma: no cover
@@ -96,7 +114,8 @@ class GaussianSplatCamera(Camera):
     SAPIEN's background picture is reused while neither this camera (pose, intrinsics)
     nor anything drawn in it moved (the source's ``background_key``); a change that moves
     nothing (a material or light colour) is not seen: call :meth:`invalidate_background`
-    after one (GaussTac environments do so at every reset).
+    after one (GaussTac environments do so at every reset). The scene's lights (with
+    ``lighting="scene"``) are read again at the same moments.
     Output keys and dtypes follow SAPIEN's minimal shader: ``rgb`` uint8 [B, H, W, 3],
     ``depth`` int16 [B, H, W, 1] in millimetres (0 where nothing is seen).
     ``position``/``segmentation`` (if asked for) are SAPIEN's, of the whole scene (a second
@@ -115,6 +134,7 @@ class GaussianSplatCamera(Camera):
         #: SAPIEN's background as (rgb [B,H,W,3] in [0,1], depth [B,H,W] m, inf where empty)
         self._background: tuple[torch.Tensor, torch.Tensor] | None = None
         self._background_key: np.ndarray | None = None  # what it was taken of
+        self._lighting: list | None = None  # per env, read from SAPIEN (lighting="scene")
         #: number of SAPIEN background pictures taken (a reused one does not count)
         self.background_renders = 0
 
@@ -134,8 +154,25 @@ class GaussianSplatCamera(Camera):
         self.invalidate_background()
 
     def invalidate_background(self) -> None:
-        """Take SAPIEN's background picture anew at the next capture."""
+        """Take SAPIEN's background picture anew, and read the scene's lights again, at the
+        next capture."""
         self._background = self._background_key = None
+        self._lighting = None
+
+    def lighting(self) -> list | None:
+        """The :class:`~gausstac_maniskill.splat.lighting.Lighting` of each env's SAPIEN scene
+        (``config.lighting="scene"``), the configured one repeated, or None (``"baked"``)."""
+        from .splat.lighting import Lighting
+
+        cfg = self.config.lighting
+        if cfg == "baked":
+            return None
+        cams = self.camera._render_cameras
+        if isinstance(cfg, Lighting):
+            return [cfg] * len(cams)
+        if self._lighting is None:
+            self._lighting = [Lighting.from_sapien(cam.entity.scene) for cam in cams]
+        return self._lighting
 
     def _background_state(self) -> np.ndarray | None:
         """The source's background key plus this camera's poses and intrinsics (None: unknown)."""
@@ -198,7 +235,7 @@ class GaussianSplatCamera(Camera):
             bg, bg_depth = self._background
         else:
             bg, bg_depth = cfg.background, None
-        rgb, depth = self.source.render(view, K, cfg.width, cfg.height, bg, bg_depth)
+        rgb, depth = self.source.render(view, K, cfg.width, cfg.height, bg, bg_depth, lighting=self.lighting())
         device = ext.device  # the camera's (as_tensor keeps a tensor's device)
         mm = torch.where(torch.isfinite(depth), depth * 1000.0, torch.zeros_like(depth))
         return {

@@ -132,6 +132,12 @@ class GaussTacEnv(BaseEnv):
             ManiSkill's recorder stores) or a 4x4 ``[[s R, t], [0, 1]]``. ``None``: identity,
             or ``EXAMPLE_PLACEMENT`` for ``scene_ply="example"``. A placed scene wider than
             100 m or narrower than 1 mm gets an ``AssetWarning`` suggesting a scale.
+        splat_lighting: ``"scene"`` (default: the hand's, pads' and objects' Gaussians are
+            shaded with the SAPIEN scene's ambient and directional lights, as SAPIEN shades
+            their meshes), ``"baked"`` (their colours drawn as stored, unlit) or a
+            :class:`~gausstac_maniskill.splat.lighting.Lighting`; see
+            :class:`~gausstac_maniskill.sensors.GaussianSplatCameraConfig`. A captured
+            scene's Gaussians are never shaded (their lighting is in their colours).
         camera: ``"splat"`` (default cameras are :class:`GaussianSplatCamera`) or ``"sapien"``
             (plain SAPIEN cameras at the same poses: rigid meshes only, no pad deformation).
         record_mpm_state: put the MPM state in ``get_state_dict`` (exact replay; ~150 B per
@@ -144,7 +150,7 @@ class GaussTacEnv(BaseEnv):
     def __init__(self, *args, robot_uids="allegro_hand_right_gausstac", mpm_dx: float = 1.0e-3,
                  mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
                  splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
-                 scene_ply: str | os.PathLike | None = None, scene_pose=None, **kwargs):
+                 scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene", **kwargs):
         backend.ensure_init()
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
@@ -162,6 +168,7 @@ class GaussTacEnv(BaseEnv):
         if splat_background is None:
             splat_background = "sapien" if self.scene_gaussians is None else SCENE_BACKGROUND
         self.splat_background = splat_background
+        self.splat_lighting = splat_lighting
         self._captured: dict[str, CapturedObject] = {}
         self.cosims: list[GaussTacSim] = []
         self._rigid: dict[str, RigidObject] = {}
@@ -337,7 +344,8 @@ class GaussTacEnv(BaseEnv):
                            far=10.0)
         if self.camera_kind == "sapien":
             return CameraConfig(**common_args)
-        return GaussianSplatCameraConfig(**common_args, background=self.splat_background)
+        return GaussianSplatCameraConfig(**common_args, background=self.splat_background,
+                                         lighting=self.splat_lighting)
 
     @property
     def _default_sensor_configs(self):
@@ -640,7 +648,7 @@ class _EnvSplatSource(SplatSource):
     def __init__(self, env: GaussTacEnv):
         self.env = env
 
-    def render(self, viewmats, Ks, width, height, background, background_depth):
+    def render(self, viewmats, Ks, width, height, background, background_depth, lighting=None):
         env = self.env
         env._ensure_cosims()
         rgbs, depths = [], []
@@ -652,6 +660,8 @@ class _EnvSplatSource(SplatSource):
                 kw["background"] = background
             if background_depth is not None:
                 kw["background_depth"] = background_depth[b:b + 1]
+            if lighting is not None:
+                kw["lighting"] = lighting[b]
             if not sim.has_gaussians:  # nothing to splat: the background as is
                 bg = kw["background"]
                 rgb = bg.clone() if isinstance(bg, torch.Tensor) else \

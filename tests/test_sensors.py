@@ -134,6 +134,24 @@ def test_plain_background_and_bad_background():
         GaussianSplatCameraConfig(uid="c", pose=sapien.Pose(), width=8, height=8, fov=1.0, background="blue")
 
 
+def test_splat_camera_is_lit_by_the_scene_lights_by_default(env):
+    """``lighting="scene"``: each env's SAPIEN lights (here ManiSkill's default set-up), read
+    again after a reset; ``"baked"`` gives no lighting; anything else is a clear error."""
+    from gausstac_maniskill.splat import MANISKILL_DEFAULT
+
+    cam = env._sensors["splat_camera"]
+    assert cam.config.lighting == "scene"
+    (lighting,) = cam.lighting()
+    for field in ("ambient", "directions", "colors"):
+        assert np.allclose(getattr(lighting, field), getattr(MANISKILL_DEFAULT, field), atol=1e-6), field
+    cam.invalidate_background()
+    assert cam._lighting is None
+    cfg = GaussianSplatCameraConfig(uid="c", pose=sapien.Pose(), width=8, height=8, fov=1.0, lighting="baked")
+    assert cfg.lighting == "baked"
+    with pytest.raises(ConfigError, match="lighting"):
+        GaussianSplatCameraConfig(uid="c", pose=sapien.Pose(), width=8, height=8, fov=1.0, lighting="sun")
+
+
 def test_capture_without_scene_is_a_clear_error(env):
     cam = GaussianSplatCamera.adopt(env._sensors["sapien_camera"])
     with pytest.raises(ConfigError, match="no scene attached"):

@@ -1,18 +1,19 @@
 """Consistent look: the hand's Gaussians against SAPIEN's lit render of the same hand.
 
-``python -m gausstac_maniskill.bench look [--sizes 128x128 320x240] [--out DIR]`` (about 3 min on 2 cores)
+``python -m gausstac_maniskill.bench look [--sizes 128x128 320x240] [--out DIR]`` (about 35 s on 2 cores)
 
 For each of the six gestures of ``GaussTac-Gesture-v1`` the gesture expert drives the hand to
-its gesture (same seed) in two envs that differ only in the camera: ``camera="sapien"`` (SAPIEN's
+its gesture (same seed) in envs that differ only in the camera: ``camera="sapien"`` (SAPIEN's
 rasterizer, the task's lighting) and ``camera="splat"`` (our Gaussians over SAPIEN's render of
-the rest of the scene). Both images come from the task's default camera at the same pose and
-intrinsics. The hand's pixels are those SAPIEN's segmentation gives to the robot's links;
-PSNR [dB] is over those pixels, MS-SSIM (pytorch-msssim, window 7 at 128 px) over the
-hand's bounding box with the background made equal in both images. Writes a side-by-side
-PNG per size (SAPIEN | splat | |difference| × 4) to ``--out``.
-
-This measures the issue's point 3 as it stands: the hand's Gaussians carry colours baked from
-its meshes, unlit, while SAPIEN shades the meshes with the scene's lights.
+the rest of the scene), once per ``splat_lighting`` mode: ``"baked"`` (the Gaussians' colours
+as stored, unlit) and ``"scene"`` (shaded with the scene's lights,
+:mod:`gausstac_maniskill.splat.lighting`). All images come from the task's default camera at
+the same pose and intrinsics. The hand's pixels are those SAPIEN's segmentation gives to the
+robot's links; PSNR [dB] is over those pixels, MS-SSIM (pytorch-msssim, window 7 at 128 px)
+over the hand's bounding box with the background made equal in both images. The splat
+camera's time per frame (capture + render, SAPIEN's background reused as in the task, median
+of 7 with the modes taking turns, :func:`_frame_ms`) is measured at each gesture. Writes a side-by-side PNG per size (SAPIEN | splat per
+mode | |difference| × 4 per mode) to ``--out``.
 """
 from __future__ import annotations
 
@@ -52,41 +53,75 @@ def _reach(env, gesture: str, seed: int):
     return obs
 
 
-def compare(size: tuple[int, int], seed: int = 0, gestures=None) -> tuple[list[dict], np.ndarray]:
-    """Per gesture (default: all six): PSNR and MS-SSIM of the splat image against SAPIEN's,
-    on hand pixels. Returns (rows, strip image [H', W', 3] uint8)."""
-    import gymnasium as gym
+MODES = ("baked", "scene")  #: the splat camera's ``lighting`` settings compared
+
+
+def _frame_ms(envs: dict, repeats: int = 7) -> dict:
+    """Median wall time [ms] of one splat camera frame (capture + rgb/depth) of each env at its
+    current state, the envs taking turns (so that load from other processes falls on all).
+    SAPIEN's background is reused (nothing in it moved) and the co-simulator's posed scene too
+    (posed once per step), so this is the splat render with its camera bookkeeping."""
+    times = {name: [] for name in envs}
+    for _ in range(repeats):
+        for name, env in envs.items():
+            cam = env.unwrapped._sensors[CAMERA]
+            t0 = time.perf_counter()
+            cam.capture()
+            cam.get_obs(rgb=True, depth=True, position=False, segmentation=False)
+            times[name].append(time.perf_counter() - t0)
+    return {name: 1e3 * float(np.median(t)) for name, t in times.items()}
+
+
+def _scores(img: torch.Tensor, ref: torch.Tensor, mask: torch.Tensor) -> dict:
+    """PSNR [dB] on the ``mask`` pixels and MS-SSIM over their bounding box (background equal)."""
     from pytorch_msssim import ms_ssim
+
+    mse = float(((img - ref) ** 2)[mask].mean()) if mask.any() else float("nan")
+    ys, xs = torch.nonzero(mask, as_tuple=True)
+    y0, y1, x0, x1 = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1
+    a = torch.where(mask[..., None], img, ref)[y0:y1, x0:x1].permute(2, 0, 1)[None]
+    b = ref[y0:y1, x0:x1].permute(2, 0, 1)[None]
+    side = min(a.shape[-2:])
+    win = 7 if side >= 7 * 16 else (5 if side >= 5 * 16 else 3)
+    pad = max(0, win * 16 + 1 - side)  # MS-SSIM's 4 downsamplings need a minimum size
+    if pad:
+        a, b = (torch.nn.functional.pad(t, (0, pad, 0, pad), mode="replicate") for t in (a, b))
+    return dict(psnr=10 * math.log10(1.0 / max(mse, 1e-12)),
+                msssim=float(ms_ssim(a, b, data_range=1.0, win_size=win)))
+
+
+def compare(size: tuple[int, int], seed: int = 0, gestures=None, modes=MODES, timing: bool = True
+            ) -> tuple[list[dict], np.ndarray]:
+    """Per gesture (default: all six): PSNR and MS-SSIM of the splat image against SAPIEN's on
+    hand pixels, and the splat camera's ms per frame, for each lighting mode in ``modes``.
+    Returns (rows ``{gesture, size, pixels, <mode>: {psnr, msssim, ms}}``, strip image
+    [H', W', 3] uint8: SAPIEN | one splat image per mode | 4×|difference| per mode)."""
+    import gymnasium as gym
 
     from .. import register
     from ..tasks.gesture import GESTURES
 
     register()
     kw = dict(sim_backend="physx_cpu", control_mode="pd_joint_delta_pos", splat_size=size)
-    envs = {cam: gym.make("GaussTac-Gesture-v1", camera=cam, obs_mode=mode, **kw)
-            for cam, mode in (("sapien", "rgb+segmentation"), ("splat", "rgb"))}
+    envs = {"sapien": gym.make("GaussTac-Gesture-v1", camera="sapien", obs_mode="rgb+segmentation", **kw)}
+    for mode in modes:
+        envs[mode] = gym.make("GaussTac-Gesture-v1", camera="splat", obs_mode="rgb", splat_lighting=mode, **kw)
     rows, tiles = [], []
     try:
         for g in gestures or sorted(GESTURES):
-            obs = {cam: _reach(env, g, seed) for cam, env in envs.items()}
+            obs = {name: _reach(env, g, seed) for name, env in envs.items()}
             mask = _hand_mask(envs["sapien"], obs["sapien"])
-            ref = obs["sapien"]["sensor_data"][CAMERA]["rgb"][0, ..., :3].cpu().float() / 255.0
-            img = obs["splat"]["sensor_data"][CAMERA]["rgb"][0, ..., :3].cpu().float() / 255.0
-            mse = float(((img - ref) ** 2)[mask].mean()) if mask.any() else float("nan")
-            ys, xs = torch.nonzero(mask, as_tuple=True)
-            y0, y1, x0, x1 = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1
-            a = torch.where(mask[..., None], img, ref)[y0:y1, x0:x1].permute(2, 0, 1)[None]
-            b = ref[y0:y1, x0:x1].permute(2, 0, 1)[None]
-            side = min(a.shape[-2:])
-            win = 7 if side >= 7 * 16 else (5 if side >= 5 * 16 else 3)
-            pad = max(0, win * 16 + 1 - side)  # MS-SSIM's 4 downsamplings need a minimum size
-            if pad:
-                a, b = (torch.nn.functional.pad(t, (0, pad, 0, pad), mode="replicate") for t in (a, b))
-            rows.append(dict(gesture=g, size=size, pixels=int(mask.sum()),
-                             psnr=10 * math.log10(1.0 / max(mse, 1e-12)),
-                             msssim=float(ms_ssim(a, b, data_range=1.0, win_size=win))))
-            diff = ((img - ref).abs() * 4).clamp(0, 1) * mask[..., None]
-            tiles.append(torch.cat([ref, img, diff], dim=1))
+            images = {name: o["sensor_data"][CAMERA]["rgb"][0, ..., :3].cpu().float() / 255.0
+                      for name, o in obs.items()}
+            ref = images["sapien"]
+            row = dict(gesture=g, size=size, pixels=int(mask.sum()))
+            ms = _frame_ms({m: envs[m] for m in modes}) if timing else {}
+            for mode in modes:
+                row[mode] = _scores(images[mode], ref, mask)
+                row[mode]["ms"] = ms.get(mode, float("nan"))
+            rows.append(row)
+            diffs = [((images[m] - ref).abs() * 4).clamp(0, 1) * mask[..., None] for m in modes]
+            tiles.append(torch.cat([ref, *(images[m] for m in modes), *diffs], dim=1))
     finally:
         for env in envs.values():
             env.close()
@@ -95,14 +130,26 @@ def compare(size: tuple[int, int], seed: int = 0, gestures=None) -> tuple[list[d
 
 
 def format_table(rows: list[dict]) -> str:
-    out = ["| size | gesture | hand pixels | PSNR on hand pixels [dB] | MS-SSIM (hand box) |", "|---|---|---|---|---|"]
+    """Markdown table: per gesture and size, each mode's PSNR, MS-SSIM and ms per frame side by
+    side, then the means per size."""
+    modes = [k for k, v in rows[0].items() if isinstance(v, dict)]
+    head = ["size", "gesture", "hand pixels"]
+    for key, label in (("psnr", "PSNR [dB]"), ("msssim", "MS-SSIM"), ("ms", "splat ms/frame")):
+        head += [f"{label} {m}" for m in modes]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def cells(vals: dict, bold: bool = False) -> list[str]:
+        fmt = {"psnr": "{:.1f}", "msssim": "{:.3f}", "ms": "{:.1f}"}
+        b = "**" if bold else ""
+        return [f"{b}{fmt[k].format(vals[m][k])}{b}" for k in ("psnr", "msssim", "ms") for m in modes]
+
     for r in rows:
-        out.append(f"| {r['size'][0]}x{r['size'][1]} | {r['gesture']} | {r['pixels']} | {r['psnr']:.1f} | "
-                   f"{r['msssim']:.3f} |")
+        out.append("| " + " | ".join([f"{r['size'][0]}x{r['size'][1]}", r["gesture"], str(r["pixels"])]
+                                     + cells(r)) + " |")
     for size in sorted({r["size"] for r in rows}):
         sel = [r for r in rows if r["size"] == size]
-        out.append(f"| {size[0]}x{size[1]} | **mean** | | **{np.mean([r['psnr'] for r in sel]):.1f}** | "
-                   f"**{np.mean([r['msssim'] for r in sel]):.3f}** |")
+        mean = {m: {k: float(np.mean([r[m][k] for r in sel])) for k in ("psnr", "msssim", "ms")} for m in modes}
+        out.append("| " + " | ".join([f"{size[0]}x{size[1]}", "**mean**", ""] + cells(mean, bold=True)) + " |")
     return "\n".join(out)
 
 

@@ -1,11 +1,13 @@
 """3D Gaussian Splatting: Gaussian sets and their .ply files, a Taichi rasterizer
-(CPU and CUDA), and deformation of Gaussians by rigid links and MPM particles."""
+(CPU and CUDA), deformation of Gaussians by rigid links and MPM particles, and their
+shading with a scene's lights."""
 from .gaussians import (SH_C0, GaussianSet, covariance_from_scale_rotation, load_ply,
                         num_sh_coeffs, quat_multiply, quat_to_rotmat, rgb_to_sh_dc,
                         rotmat_to_quat, save_ply, sh_dc_to_rgb)
 from .deform import (FramedGaussians, PosedGaussians, SoftBinding, particle_frames,
                      polar_rotation, pose_gaussians, rigid_frames, rigid_transform, soft_deform)
 from .capture import Similarity, load_capture, transform_gaussians
+from .lighting import MANISKILL_DEFAULT, Lighting, surface_normals
 from .rasterizer import (RenderOutput, intrinsics_from_fov, look_at, rasterize, render,
                          sapien_pose_to_opencv_extrinsic)
 
@@ -18,4 +20,5 @@ __all__ = [
     "rigid_transform", "polar_rotation", "SoftBinding", "soft_deform", "PosedGaussians",
     "pose_gaussians", "FramedGaussians", "rigid_frames", "particle_frames",
     "Similarity", "load_capture", "transform_gaussians",
+    "Lighting", "MANISKILL_DEFAULT", "surface_normals",
 ]

@@ -25,6 +25,8 @@ with an SH rotation R: a link is (M = R_l, t = t_l, R = R_l), a particle is
 as the local covariance. :class:`FramedGaussians` keeps a scene's Gaussians in their
 frames once and for all and lets the rasterizer's projection kernel pose them: per
 picture only the [F, 3, 4] frames change, nothing per Gaussian is rebuilt or copied.
+Lit Gaussians also keep a normal in their frame, moved by cof(M) in the kernel
+(:mod:`.lighting`).
 """
 from __future__ import annotations
 
@@ -314,6 +316,9 @@ class FramedGaussians:
         opacities: [N] in [0, 1].
         sh: [N, K, 3] SH coefficients (in each Gaussian's own frame).
         n_frames: F.
+        normals: [N, 3] normals in their frames, the zero vector for a Gaussian that scene
+            lighting leaves as it is, or None (no Gaussian is lit); see
+            :mod:`~gausstac_maniskill.splat.lighting`.
     """
 
     means: torch.Tensor
@@ -322,45 +327,56 @@ class FramedGaussians:
     opacities: torch.Tensor
     sh: torch.Tensor
     n_frames: int
+    normals: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         from .rasterizer import _gaussian_inputs
 
         self.n_frames = int(self.n_frames)
         self._inputs = _gaussian_inputs(self.means, None, None, self.opacities, self.sh, self.covars, None,
-                                        self.frame_ids, self.n_frames, frame_rotations=True)
+                                        self.frame_ids, self.n_frames, frame_rotations=True,
+                                        normals=self.normals)
 
     def __len__(self) -> int:
         return self.means.shape[0]
 
     @classmethod
-    def from_gaussians(cls, gaussians: GaussianSet, frame_ids=None, n_frames: int | None = None
-                       ) -> "FramedGaussians":
-        """A :class:`GaussianSet` in frames ``frame_ids`` (default: its ``link_id``)."""
+    def from_gaussians(cls, gaussians: GaussianSet, frame_ids=None, n_frames: int | None = None,
+                       lit: bool = False) -> "FramedGaussians":
+        """A :class:`GaussianSet` in frames ``frame_ids`` (default: its ``link_id``); ``lit``:
+        its flat Gaussians get normals (:func:`~gausstac_maniskill.splat.lighting.surface_normals`),
+        i.e. scene lighting shades them (their colours are albedo)."""
+        from .lighting import surface_normals
         from .rasterizer import _cov6
 
         ids = gaussians.link_id if frame_ids is None else torch.as_tensor(frame_ids)
         if n_frames is None:
             n_frames = int(ids.max()) + 1 if len(ids) else 1
+        normals = surface_normals(gaussians.quats, gaussians.scales) if lit else None
         return cls(gaussians.means, _cov6(gaussians.covariances()), ids, gaussians.opacities, gaussians.sh,
-                   n_frames)
+                   n_frames, normals)
 
     @classmethod
-    def from_binding(cls, gaussians: GaussianSet, binding: SoftBinding) -> tuple["FramedGaussians", torch.Tensor]:
+    def from_binding(cls, gaussians: GaussianSet, binding: SoftBinding, lit: bool = False
+                     ) -> tuple["FramedGaussians", torch.Tensor]:
         """The soft Gaussians of ``binding`` in the frames of their particles: local mean o_g,
-        local covariance Σ⁰_g. Returns them and the particle index of each frame ([F] int64,
-        ascending; pose the frames with :func:`particle_frames` of those particles)."""
+        local covariance Σ⁰_g (and, with ``lit``, the rest normals of the flat ones). Returns
+        them and the particle index of each frame ([F] int64, ascending; pose the frames with
+        :func:`particle_frames` of those particles)."""
+        from .lighting import surface_normals
         from .rasterizer import _cov6
 
         particles, frame = torch.unique(binding.particle_index, return_inverse=True)
         soft = gaussians[binding.gaussian_index]
+        normals = surface_normals(soft.quats, soft.scales) if lit else None
         return cls(binding.rest_offset, _cov6(binding.rest_covariance), frame, soft.opacities, soft.sh,
-                   len(particles)), particles
+                   len(particles), normals), particles
 
     @classmethod
     def cat(cls, parts) -> "FramedGaussians":
         """One set from several, frames numbered on (part 0's frames first, then part 1's, ...);
-        lower SH degrees are zero-padded to the highest."""
+        lower SH degrees are zero-padded to the highest; a part without normals contributes
+        zero normals (not lit) when another has some."""
         parts = list(parts)
         if not parts:
             raise ConfigError("FramedGaussians.cat needs at least one set")
@@ -368,25 +384,30 @@ class FramedGaussians:
         offsets = [0]
         for p in parts:
             offsets.append(offsets[-1] + p.n_frames)
+        normals = None
+        if any(p.normals is not None for p in parts):
+            normals = torch.cat([p.normals.to(torch.float32) if p.normals is not None else
+                                 torch.zeros(len(p), 3, device=p.means.device) for p in parts])
         return cls(torch.cat([p.means for p in parts]), torch.cat([p.covars for p in parts]),
                    torch.cat([p.frame_ids.to(torch.int64) + o for p, o in zip(parts, offsets)]),
                    torch.cat([p.opacities for p in parts]),
                    torch.cat([torch.nn.functional.pad(p.sh, (0, 0, 0, k - p.sh.shape[1])) for p in parts]),
-                   offsets[-1])
+                   offsets[-1], normals)
 
     def render(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None, viewmats, Ks,
                width: int, height: int, *, background=None, background_depth=None, near: float = 0.01,
-               far: float = 1e4, timings: bool = False):
+               far: float = 1e4, timings: bool = False, lighting=None):
         """Render with the frames posed at ``frames`` [F, 3, 4] (or [F, 4, 4]) and SH frames
-        rotated by ``frame_rotations`` [F, 3, 3] (``None``: not rotated); the other arguments
-        as in :func:`~gausstac_maniskill.splat.rasterizer.rasterize`. Returns its
-        ``RenderOutput``."""
+        rotated by ``frame_rotations`` [F, 3, 3] (``None``: not rotated); ``lighting`` (a
+        :class:`~gausstac_maniskill.splat.lighting.Lighting` or None) shades the Gaussians
+        that have normals; the other arguments as in
+        :func:`~gausstac_maniskill.splat.rasterizer.rasterize`. Returns its ``RenderOutput``."""
         from .rasterizer import _frame_inputs, _rasterize, one_torch_thread
 
         with one_torch_thread():
             frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames, self.means.device)
             return _rasterize(self._inputs, frames, frame_rotations, viewmats, Ks, width, height, background,
-                              background_depth, near, far, timings)
+                              background_depth, near, far, timings, lighting)
 
     def posed(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None = None) -> PosedGaussians:
         """The same Gaussians in world space (full covariances), e.g. to check a render or

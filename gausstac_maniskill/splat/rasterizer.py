@@ -67,6 +67,16 @@ Unlike a fixed 3σ cut-off this box drops only pixels that the α ≥ 1/255 rule
 drops anyway, so the image does not depend on the tiling and equals a dense
 "every Gaussian at every pixel" evaluation (up to float rounding).
 
+Lighting
+--------
+With ``lighting`` (a :class:`~gausstac_maniskill.splat.lighting.Lighting`: ambient plus
+directional lights) every Gaussian with a non-zero normal (``normals`` [N, 3], in its
+frame) is shaded in the projection kernel, per camera: n = cof(M)·n⁰ normalised and
+turned towards the camera, colour c = (A + Σᵢ Eᵢ/π · max(0, n·lᵢ)) · c_SH written as
+c^(1/γ) — the diffuse part of SAPIEN's shaders, with the SH colour as linear albedo. A
+Gaussian with the zero normal keeps its SH colour (a captured scene's baked lighting). See
+:mod:`gausstac_maniskill.splat.lighting`.
+
 Depth-aware compositing
 -----------------------
 With ``background_depth`` [C, H, W] (e.g. a mesh render's depth), a pixel is
@@ -156,6 +166,32 @@ def _sh_to_rgb(sh: ti.template(), g: ti.i32, degree: ti.i32, d: ti.math.vec3) ->
 
 
 @ti.func
+def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.math.vec3,
+           lights: ti.template()) -> ti.math.vec3:
+    """Diffuse shading of a Gaussian of linear albedo ``albedo`` and normal ``n0`` in the
+    frame whose linear map is M, seen along ``view`` (camera -> Gaussian, world):
+    (A + Σᵢ Eᵢ/π · max(0, n·lᵢ))·albedo, written as c^(1/gamma). ``lights`` rows: (A, 1/gamma,
+    0, 0), then (lᵢ toward the light, Eᵢ/π)."""
+    # n = cof(M) n0, cof(M) = det(M) M⁻ᵀ with columns m1×m2, m2×m0, m0×m1 (normals move with it)
+    m0 = ti.math.vec3(M[0, 0], M[1, 0], M[2, 0])
+    m1 = ti.math.vec3(M[0, 1], M[1, 1], M[2, 1])
+    m2 = ti.math.vec3(M[0, 2], M[1, 2], M[2, 2])
+    n = n0[0] * m1.cross(m2) + n0[1] * m2.cross(m0) + n0[2] * m0.cross(m1)
+    rgb = albedo
+    len2 = n.norm_sqr()
+    if len2 > 0.0:  # (a singular frame has no normal: the colour is left as it is)
+        n *= ti.rsqrt(len2)
+        if n.dot(view) > 0.0:
+            n = -n  # two-sided: the side facing the camera
+        light = ti.math.vec3(lights[0, 0], lights[0, 1], lights[0, 2])  # ambient
+        for i in range(1, lights.shape[0]):
+            l_dir = ti.math.vec3(lights[i, 0], lights[i, 1], lights[i, 2])
+            light += ti.math.vec3(lights[i, 3], lights[i, 4], lights[i, 5]) * ti.max(n.dot(l_dir), 0.0)
+        rgb = (albedo * light) ** lights[0, 3]
+    return rgb
+
+
+@ti.func
 def _quat_scale_to_cov(q: ti.math.vec4, s: ti.math.vec3) -> ti.math.mat3:
     """Σ = R S Sᵀ Rᵀ from a quaternion (w, x, y, z) and standard deviations s."""
     q = q.normalized()
@@ -178,16 +214,19 @@ def _box_1d(centre: ti.f32, radius: ti.f32, size: ti.i32):
 @ti.kernel
 def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _f32_1,
              sh: _f32_3, degree: ti.i32, sh_rot: _f32_3, frame_id: _i32_1, frames: _f32_3,
+             normals: _f32_2, lights: _f32_2,
              viewmats: _f32_3, Ks: _f32_3, width: ti.i32, height: ti.i32,
              near: ti.f32, far: ti.f32,
              use_cov: ti.template(), framed: ti.template(), rot_mode: ti.template(),
-             rec: _f32_3, bins: _i32_3):
+             lit: ti.template(), rec: _f32_3, bins: _i32_3):
     """EWA projection of every Gaussian into every camera; bins[c, g, B_TILES] = 0 if culled.
 
     ``use_cov``: covariances from ``cov6`` (else from ``quats``/``scales``); ``framed``:
     means and covariances lie in ``frames[frame_id[g]]``; ``rot_mode``: SH frames not
     rotated (0), rotated per Gaussian by ``sh_rot[g]`` (1) or per frame by
-    ``sh_rot[frame_id[g]]`` (2). Only entries of Gaussians that touch a tile are written.
+    ``sh_rot[frame_id[g]]`` (2); ``lit``: Gaussians with a non-zero ``normals[g]`` (in
+    their frame) are shaded with ``lights`` (see *Lighting*). Only entries of Gaussians
+    that touch a tile are written.
     """
     for c, g in ti.ndrange(viewmats.shape[0], means.shape[0]):
         bins[c, g, B_TILES] = 0
@@ -269,7 +308,8 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                         # view direction (camera centre -> Gaussian), world frame; a rotated
                         # SH frame (link, polar(F)) R is evaluated at Rᵀ dir
                         cam = -(W.transpose() @ t)
-                        dirn = (mu - cam).normalized()
+                        view = mu - cam
+                        dirn = view.normalized()
                         if ti.static(rot_mode > 0):
                             r = f
                             if ti.static(rot_mode == 1):
@@ -278,6 +318,10 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                                             for i in ti.static(range(3))])
                             dirn = Rs.transpose() @ dirn
                         rgb = _sh_to_rgb(sh, g, degree, dirn)
+                        if ti.static(lit):
+                            n0 = ti.math.vec3(normals[g, 0], normals[g, 1], normals[g, 2])
+                            if n0.norm_sqr() > 0.0:
+                                rgb = _shade(rgb, n0, M, view, lights)
                         rec[c, g, R_R], rec[c, g, R_G], rec[c, g, R_BL] = rgb[0], rgb[1], rgb[2]
 
 
@@ -528,7 +572,8 @@ class _Inputs:
 
     ``use_cov``: covariances in ``cov6`` [N, 6] (else ``quats``/``scales``); ``frame_id``
     [N] int32 or None (world coordinates); ``rot_mode``: 0 no SH rotation, 1 per Gaussian
-    (``sh_rot`` [N, 3, 3]); per-frame rotations come with the frames (:func:`_rasterize`).
+    (``sh_rot`` [N, 3, 3]); per-frame rotations come with the frames (:func:`_rasterize`);
+    ``normals`` [N, 3] (in the Gaussians' frames, zero rows: not lit) or None (none lit).
     """
 
     means: torch.Tensor
@@ -543,13 +588,15 @@ class _Inputs:
     rot_mode: int
     frame_id: torch.Tensor | None
     n_frames: int
+    normals: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return self.means.shape[0]
 
 
 def _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations,
-                     frame_ids=None, n_frames: int = 0, frame_rotations: bool = False) -> _Inputs:
+                     frame_ids=None, n_frames: int = 0, frame_rotations: bool = False,
+                     normals=None) -> _Inputs:
     """Check and convert the per-Gaussian arguments of :func:`rasterize` (ConfigError if bad);
     ``frame_rotations``: whether per-frame SH rotations will come with the frames."""
     if not isinstance(means, torch.Tensor) or means.dim() != 2 or means.shape[1] != 3:
@@ -602,8 +649,10 @@ def _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations,
             raise ConfigError(f"frame_ids must lie in [0, {n_frames}) for {n_frames} frames, got "
                               f"[{int(frame_ids.min())}, {int(frame_ids.max())}]")
         frame_ids = frame_ids.to(device=dev, dtype=torch.int32).contiguous()
+    if normals is not None:
+        normals = _check_shape("normals", normals, (n, 3), "[N, 3]").to(**f32).contiguous()
     return _Inputs(means, quats, scales, cov6, covars is not None, opacities, sh, degree, sh_rot,
-                   rot_mode, frame_ids, n_frames)
+                   rot_mode, frame_ids, n_frames, normals)
 
 
 def _frame_inputs(frames, frame_rotations, n_frames: int | None, device) -> tuple:
@@ -642,15 +691,15 @@ def _background_tensor(background, C: int, H: int, W: int, device) -> tuple[torc
 
 def _rasterize(g: _Inputs, frames: torch.Tensor | None, frame_rotations: torch.Tensor | None,
                viewmats, Ks, width, height, background, background_depth, near, far,
-               timings: bool) -> RenderOutput:
+               timings: bool, lighting=None) -> RenderOutput:
     """Camera checks and the three stages; ``g`` (and ``frames``) are already checked."""
     with one_torch_thread():
         return _rasterize_stages(g, frames, frame_rotations, viewmats, Ks, width, height, background,
-                                 background_depth, near, far, timings)
+                                 background_depth, near, far, timings, lighting)
 
 
 def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, height, background,
-                      background_depth, near, far, timings: bool) -> RenderOutput:
+                      background_depth, near, far, timings: bool, lighting=None) -> RenderOutput:
     backend.ensure_init()
     t_start = time.perf_counter()
     if int(width) != width or int(height) != height or not (0 < width < 32768 and 0 < height < 32768):
@@ -688,6 +737,14 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
         rot_mode = 0  # a constant colour does not depend on the view direction
     frame_id = g.frame_id if framed else _dummy((1,), torch.int32, dev)
     frames = frames if framed else _dummy((1, 3, 4), torch.float32, dev)
+    if lighting is not None:
+        from .lighting import Lighting
+
+        if not isinstance(lighting, Lighting):
+            raise ConfigError(f"lighting must be a splat.lighting.Lighting or None, got {type(lighting).__name__}")
+    lit = lighting is not None and g.normals is not None
+    normals = g.normals if lit else _dummy((1, 3), torch.float32, dev)
+    lights = lighting.kernel_array(dev) if lit else _dummy((1, 6), torch.float32, dev)
 
     tiles_x = (width + TILE - 1) // TILE
     tiles_y = (height + TILE - 1) // TILE
@@ -700,8 +757,8 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     bins = torch.empty(C, n, 4, dtype=torch.int32, device=dev)
     if n:
         _project(g.means, g.quats, g.scales, g.cov6, g.opacities, g.sh, g.degree, sh_rot,
-                 frame_id, frames, viewmats, Ks, width, height, float(near), float(far),
-                 g.use_cov, framed, rot_mode, rec, bins)
+                 frame_id, frames, normals, lights, viewmats, Ks, width, height, float(near), float(far),
+                 g.use_cov, framed, rot_mode, lit, rec, bins)
     sync()
     t_proj = time.perf_counter()
 
@@ -746,6 +803,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
               sh_rotations: torch.Tensor | None = None,
               frames: torch.Tensor | None = None, frame_ids: torch.Tensor | None = None,
               frame_rotations: torch.Tensor | None = None,
+              normals: torch.Tensor | None = None, lighting=None,
               background=None, background_depth: torch.Tensor | None = None,
               near: float = 0.01, far: float = 1e4,
               timings: bool = False) -> RenderOutput:
@@ -773,6 +831,11 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
         frame_ids: [N] integer frame of each Gaussian (with ``frames``).
         frame_rotations: optional [F, 3, 3] rotation of the SH frames of each
             frame's Gaussians (instead of ``sh_rotations``).
+        normals: optional [N, 3] normals (world, or in the Gaussians' frames with
+            ``frames``; any length, sign free), the zero vector for a Gaussian that is
+            not to be lit; see :func:`~gausstac_maniskill.splat.lighting.surface_normals`.
+        lighting: optional :class:`~gausstac_maniskill.splat.lighting.Lighting`; shades
+            the Gaussians with a normal (needs ``normals``), see *Lighting* above.
         background: colour behind the Gaussians: scalar, [3], [C, 3] or an
             image [C, H, W, 3]. Default black.
         background_depth: optional [C, H, W] camera-z depth (metres) of the
@@ -793,6 +856,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
         raise ConfigError("frames and frame_ids go together")
     if frame_rotations is not None and frames is None:
         raise ConfigError("frame_rotations need frames and frame_ids")
+    if lighting is not None and normals is None:
+        raise ConfigError("lighting needs normals (splat.lighting.surface_normals(quats, scales))")
     dev = means.device if isinstance(means, torch.Tensor) else None
     with one_torch_thread():  # the input checks are torch reductions too
         n_frames = 0
@@ -800,14 +865,20 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
             frames, frame_rotations = _frame_inputs(frames, frame_rotations, None, dev)
             n_frames = frames.shape[0]
         g = _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations, frame_ids,
-                             n_frames, frame_rotations is not None)
+                             n_frames, frame_rotations is not None, normals)
         return _rasterize(g, frames, frame_rotations, viewmats, Ks, width, height, background,
-                          background_depth, near, far, timings)
+                          background_depth, near, far, timings, lighting)
 
 
 def render(gaussians: GaussianSet, viewmats: torch.Tensor, Ks: torch.Tensor, width: int,
            height: int, **kwargs) -> RenderOutput:
-    """Render a :class:`GaussianSet` (activates scales/opacities); kwargs as :func:`rasterize`."""
+    """Render a :class:`GaussianSet` (activates scales/opacities); kwargs as :func:`rasterize`.
+    With ``lighting`` and no ``normals``, its flat Gaussians are lit (:func:`surface_normals
+    <gausstac_maniskill.splat.lighting.surface_normals>`)."""
+    if kwargs.get("lighting") is not None and kwargs.get("normals") is None:
+        from .lighting import surface_normals
+
+        kwargs["normals"] = surface_normals(gaussians.quats, gaussians.scales)
     return rasterize(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities,
                      gaussians.sh, viewmats, Ks, width, height, **kwargs)
 

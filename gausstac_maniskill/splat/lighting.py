@@ -1,0 +1,147 @@
+"""Scene lighting for Gaussians: the diffuse part of SAPIEN's shading, per Gaussian.
+
+SAPIEN's rasterizing shaders (``minimal``, ManiSkill's default for cameras, and
+``default``) light a mesh point of albedo a (the material's ``base_color``, linear) and
+unit normal n with an ambient colour A and directional lights of colour Eᵢ travelling
+along dᵢ as
+
+    c_lin = A·a + Σᵢ Eᵢ · a · max(0, n·lᵢ) / π  (+ a GGX specular term),   lᵢ = -dᵢ / |dᵢ|
+    pixel = clamp(c_lin^(1/2.2), 0, 1)          (display encoding)
+
+(``vulkan_shader/minimal/gbuffer.frag``, ``common/lights.glsl``: Lambert's BRDF a/π).
+A *lit* Gaussian is shaded the same way every frame, with its colour (SH evaluated for
+the view direction, as without lighting) taken as the linear albedo a and its normal n
+the shortest axis of its ellipsoid moved by its frame. The specular term is left out:
+the Gaussians carry no roughness or metalness, and without it a metal's highlights are
+missing (see BENCHMARKS.md, issue 13 point 3). Shadows, point and spot lights and
+SAPIEN's environment map are not modelled either (:meth:`Lighting.from_sapien` warns
+about the lights and the map it leaves out).
+
+Which Gaussians are lit is a per-Gaussian choice: a Gaussian with a normal is lit, one
+with the zero normal keeps its colour as is. Surfaces sampled from meshes (the hand, pads,
+soft objects, box objects) carry albedo and get normals; captured 3DGS scenes and objects
+have their lighting baked into their colours and get none. Only flat Gaussians get a
+normal (:func:`surface_normals`): the normal of a round blob is undefined.
+
+Normals are two-sided: the normal is turned to face the camera before shading, so its sign
+(which a captured or point-cloud Gaussian does not know) does not matter. Under a frame
+``x -> M x + t`` a normal moves with the cofactor matrix cof(M) = det(M)·M⁻ᵀ (the normal
+of a plane pushed forward by M): for a rigid link cof(R) = R, for an MPM particle
+cof(F) keeps it perpendicular to the deformed disc.
+
+Conventions: world frame, unit-free colours (RGB, linear, >= 0), directions as SAPIEN's
+``add_directional_light`` (the direction the light travels, any length > 0).
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..errors import ConfigError
+from .gaussians import quat_to_rotmat
+
+__all__ = ["Lighting", "MANISKILL_DEFAULT", "FLATNESS", "surface_normals"]
+
+#: a Gaussian is flat (gets a normal) when its shortest axis is at most this fraction of
+#: the middle one (surface Gaussians built by :mod:`.surface` have 1/18)
+FLATNESS = 0.5
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Ambient light plus directional lights, as SAPIEN's scene holds them.
+
+    Attributes:
+        ambient: (3,) RGB ambient colour A (``scene.set_ambient_light``), >= 0.
+        directions: (L, 3) world directions the lights travel (``add_directional_light``'s
+            first argument; normalised here), L >= 0.
+        colors: (L, 3) RGB colours Eᵢ of the lights, >= 0.
+        gamma: the shaded linear colour is written as c^(1/gamma) (SAPIEN: 2.2; 1: linear).
+    """
+
+    ambient: tuple = (0.0, 0.0, 0.0)
+    directions: tuple = ()
+    colors: tuple = ()
+    gamma: float = 2.2
+
+    def __post_init__(self) -> None:
+        amb = np.asarray(self.ambient, dtype=np.float64).reshape(-1)
+        d = np.asarray(self.directions, dtype=np.float64).reshape(-1, 3)
+        e = np.asarray(self.colors, dtype=np.float64).reshape(-1, 3)
+        if amb.shape != (3,) or not np.all(np.isfinite(amb)) or amb.min() < 0:
+            raise ConfigError(f"Lighting.ambient={self.ambient!r} must be an RGB triple >= 0")
+        if len(d) != len(e):
+            raise ConfigError(f"Lighting: {len(d)} directions but {len(e)} colours")
+        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(e))) or (len(e) and e.min() < 0):
+            raise ConfigError("Lighting: light directions must be finite and colours finite and >= 0")
+        norm = np.linalg.norm(d, axis=1)
+        if np.any(norm < 1e-12):
+            raise ConfigError("Lighting: a light direction is the zero vector")
+        if not (np.isfinite(self.gamma) and self.gamma > 0):
+            raise ConfigError(f"Lighting.gamma={self.gamma!r} must be > 0")
+        object.__setattr__(self, "ambient", tuple(float(v) for v in amb))
+        object.__setattr__(self, "directions", tuple(tuple(float(v) for v in r) for r in d / norm[:, None]))
+        object.__setattr__(self, "colors", tuple(tuple(float(v) for v in r) for r in e))
+        object.__setattr__(self, "gamma", float(self.gamma))
+
+    @classmethod
+    def from_sapien(cls, scene) -> "Lighting":
+        """The ambient and enabled directional lights of a ``sapien.Scene`` (a ManiSkill
+        scene's ``sub_scenes[i]``). Warns about what it leaves out: point and spot lights,
+        shadows and an environment map."""
+        rs = scene.render_system
+        directions, colors, skipped = [], [], []
+        for light in rs.lights:
+            if not light.is_enabled:
+                continue
+            kind = type(light).__name__
+            if kind == "RenderDirectionalLightComponent":
+                # a directional light travels along its entity's x axis
+                directions.append(light.global_pose.to_transformation_matrix()[:3, 0])
+                colors.append(np.asarray(light.color, dtype=np.float64)[:3])
+                if light.shadow:
+                    skipped.append(f"{kind} shadow")
+            else:
+                skipped.append(kind)
+        if rs.cubemap is not None:
+            skipped.append("environment map")
+        if skipped:
+            warnings.warn(f"Lighting.from_sapien: Gaussians are shaded with the ambient and directional "
+                          f"lights only; not modelled: {', '.join(sorted(set(skipped)))}", stacklevel=2)
+        return cls(tuple(np.asarray(scene.ambient_light, dtype=np.float64)[:3]),
+                   tuple(map(tuple, directions)), tuple(map(tuple, colors)))
+
+    def kernel_array(self, device=None) -> torch.Tensor:
+        """[1 + L, 6] float32 as the rasterizer's projection kernel reads it: row 0 =
+        (A, 1/gamma, 0, 0); row 1 + i = (lᵢ = -dᵢ toward the light, Eᵢ / π)."""
+        rows = [list(self.ambient) + [1.0 / self.gamma, 0.0, 0.0]]
+        for d, e in zip(self.directions, self.colors):
+            rows.append([-d[0], -d[1], -d[2]] + [v / math.pi for v in e])
+        return torch.tensor(rows, dtype=torch.float32, device=device)
+
+
+#: ManiSkill's default ``_load_lighting`` (used by every GaussTac task): ambient 0.3,
+#: white lights travelling along (1, 1, -1) and (0, 0, -1), no shadows.
+MANISKILL_DEFAULT = Lighting((0.3, 0.3, 0.3), ((1.0, 1.0, -1.0), (0.0, 0.0, -1.0)),
+                             ((1.0, 1.0, 1.0), (1.0, 1.0, 1.0)))
+
+
+def surface_normals(quats: torch.Tensor, scales: torch.Tensor, flatness: float = FLATNESS) -> torch.Tensor:
+    """[N, 3] unit normals of flat Gaussians (their shortest axis; sign as the axis),
+    the zero vector for Gaussians that are not flat (shortest σ > ``flatness`` × middle σ).
+
+    Args:
+        quats: [N, 4] rotations (w, x, y, z).
+        scales: [N, 3] standard deviations (not log), any unit.
+    """
+    if quats.shape[0] == 0:
+        return torch.zeros(0, 3, dtype=torch.float32, device=quats.device)
+    R = quat_to_rotmat(quats.to(torch.float32))
+    s, order = torch.sort(scales.to(torch.float32), dim=-1)
+    axis = R.gather(-1, order[:, None, :1].expand(-1, 3, 1)).squeeze(-1)  # column of the shortest σ
+    flat = s[:, 0] <= flatness * s[:, 1]
+    return torch.where(flat[:, None], axis, torch.zeros_like(axis)).contiguous()
