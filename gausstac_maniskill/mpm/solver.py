@@ -678,8 +678,7 @@ class MPMWorld:
         or None when every awake particle is simulated."""
         h, d, n = self._host, self._dev, max(self._n, 1)
         self._patched = []
-        full = self._awake_list
-        if not len(full):
+        if not any(g.awake for g in self.groups):
             return None
         kind = h["kind"]
         gids = [i for i, g in enumerate(self.groups) if g.awake and g.quasi_static and g.link >= 0
@@ -870,7 +869,6 @@ class MPMWorld:
             for key in ("patch_gap", "patch_cand", "patch_frozen", "patch_bind"):
                 d[key] = ti.ndarray(ti.f32 if key == "patch_gap" else ti.i32, shape=n)
             d["patch_contact"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
-            self._awake_list = active
         for key in ("order", "slab_of"):
             d[key] = ti.ndarray(ti.i32, shape=n)
         if "slab_start" not in d:
