@@ -90,9 +90,11 @@ class GaussTacSim:
             if spec.link not in self.world.link_names:
                 self.world.add_link(spec.link, T)
             world_pts = pad.rest @ T[:3, :3].T + T[:3, 3]
+            # the bond surface lies ``thickness`` below the link surface, parallel to it
             self.world.add_group(spec.name, world_pts, spec.material, link=spec.link,
                                  kinematic=pad.kinematic, spacing=h,
-                                 contact_radius=pad.contact_radius if pad_surface == "mesh" else None)
+                                 contact_radius=pad.contact_radius if pad_surface == "mesh" else None,
+                                 bond_distance=spec.thickness - pad.depth, bond_normal=pad.normal @ T[:3, :3].T)
             self.pads[spec.name] = pad
             self._binning[spec.name] = TaxelBinning.for_pad(pad)
         self._link_pose = {k: as_pose_matrix(v, f"link_poses[{k!r}]") for k, v in link_poses.items()}

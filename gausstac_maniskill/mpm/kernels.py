@@ -39,9 +39,12 @@ NDF = ti.types.ndarray(dtype=ti.f32, ndim=1)
 NDF2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 NDV = ti.types.ndarray(dtype=vec3, ndim=1)
 NDM = ti.types.ndarray(dtype=mat3, ndim=1)
+NDV4 = ti.types.ndarray(dtype=ti.math.vec4, ndim=1)
+NDV5 = ti.types.ndarray(dtype=ti.types.vector(5, ti.f32), ndim=1)
 
 DYNAMIC, KINEMATIC = 0, 1
 PIN_FRACTION = 0.25  # kinematic share of a node's mass that pins it to its link (see pinned)
+BOND_REACH = 2.0  # cells from the bond surface to where a ghost node reads the layer's motion (bond_ghosts)
 FILL = 0.9  # two fields touch at a node once their volumes fill this share of its cell (field_contact) ...
 SHARE = 0.1  # ... and each brings at least this share (the node lies at both surfaces)
 SOFT_CONTACT = -2  # contact_id of a particle touched by the other field (colliders are >= 0)
@@ -173,9 +176,10 @@ def field_offset(two_field: ti.template(), group_field: ti.template(), group: ti
 @ti.func
 def clear_grid(ntot: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
         grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template(),
-        grid_vc: ti.template(), grid_ds: ti.template(), two_field: ti.template()):
+        grid_vc: ti.template(), grid_ds: ti.template(), grid_bond: ti.template(), two_field: ti.template()):
     for i in range(ntot):
         grid_v[i] = vec3(0.0)
+        grid_bond[i] = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0])
         grid_dp[i] = vec3(0.0)
         grid_vol[i] = ti.Vector([0.0, 0.0])
         grid_m[i] = 0.0
@@ -196,7 +200,7 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
         grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(),
         grid_vol: ti.template(), fbar: ti.template(), nh_only: ti.template(),
         group_field: ti.template(), ncell: ti.template(), two_field: ti.template(), grid_vc: ti.template(),
-        atomic: ti.template()):
+        bond: ti.template(), link_frames: ti.template(), grid_bond: ti.template(), atomic: ti.template()):
     """Scatter mass and APIC momentum (with the stress impulse) to the grid (to the
     particle's own velocity field; with two fields also its deformed volume V0 J to
     ``grid_vc``, for :func:`field_contact`).
@@ -204,6 +208,9 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
     Momentum to node i: w_ip [m_p v_p + (m_p C_p - Δt V0_p (4/dx²) τ_p)(x_i - x_p)].
     Kinematic particles also scatter their mass to ``grid_mk`` and their link id;
     dynamic particles of quasi-static groups scatter theirs to ``grid_mq`` (and the link id).
+    Kinematic particles that know the bond surface (``bond``: its normal n in the link frame
+    and their signed distance s from it) scatter the linear extrapolation of that distance,
+    w m (n, s + n·(x_i - x_p), 1), to ``grid_bond`` (:func:`bond_ghosts`).
     With ``fbar`` the stress τ_p is first evaluated here, on the same stencil, from the
     nodal volume change that :func:`volume_scatter` left in ``grid_vol``.
     """
@@ -230,6 +237,11 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                 is_kin = kind[p] == KINEMATIC
                 is_qs = (not is_kin) and group_qs[group[p]] > 0
                 lk = link[p]
+                bn = ti.Vector([bond[p][0], bond[p][1], bond[p][2]])
+                has_bond = is_kin and bn.norm_sqr() > 0.0
+                if has_bond:
+                    R0, _t0, _R1, _t1 = frame_at(link_frames, lk)  # the pose kinematic_update placed it at
+                    bn = R0 @ bn
                 for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                     dpos = (ti.Vector([i, j, k]) - fx) / inv_dx
                     weight = w[i][0] * w[j][1] * w[k][2]
@@ -241,6 +253,10 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                     if is_kin:
                         add_to(grid_mk, idx, weight * m, atomic)
                         grid_link[idx] = lk
+                        if has_bond:
+                            wm = weight * m
+                            add_to(grid_bond, idx, ti.Vector([wm * bn[0], wm * bn[1], wm * bn[2],
+                                                              wm * (bond[p][3] + bn.dot(dpos)), wm]), atomic)
                     elif is_qs:
                         add_to(grid_mq, idx, weight * m, atomic)
                         grid_link[idx] = lk
@@ -667,6 +683,64 @@ def contact_apply(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), 
             grid_v[idx] = grid_v[idx] + dv
 
 
+@ti.func
+def bond_ghosts(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy: ti.template(),
+        oz: ti.template(), nx: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
+        dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
+        grid_bond: ti.template(), grid_link: ti.template(), link_frames: ti.template()):
+    """The bond of a layer to its link's rigid core, placed where the bond surface is, not on a
+    node plane (a ghost-node Dirichlet condition, as in ghost-fluid methods).
+
+    A pinned node (:func:`pinned`) whose kinematic mass all knows the bond surface lies at a
+    signed distance d from it (positive in the layer; from ``grid_bond``, the mass-weighted
+    linear extrapolation of the bound particles' distances) along the surface normal n. Pinned
+    to the link's rigid velocity, it would hold the layer at the node plane, up to a cell from
+    the bond: the layer's stiffness then depends on how the grid lies (±11 % at 4 cells).
+    Instead the node takes the velocity that vanishes, relative to the link, at the bond and
+    grows linearly into the layer:
+
+        v_i = v_link(x_i) + (d / D) [v(x_m) - v_link(x_m)],   x_m = x_i + (D - d) n,
+
+    with v(x_m) the trilinear mean of the free (unpinned) nodes around the point x_m a
+    distance D = BOND_REACH cells inside the layer. A uniform strain of the layer is then
+    exactly an equilibrium whatever the offset of the bond from the nodes (B-splines reproduce
+    linear fields). |d/D| is clamped to 1. Nodes with kinematic mass that does not know the
+    bond (the active patch's shell, bound where it is) stay pinned to the rigid motion.
+    """
+    for idx in range(ntot):
+        m = grid_m[idx]
+        b = grid_bond[idx]
+        if m > 0.0 and b[4] > 0.0 and pinned(grid_m, grid_mk, idx) and b[4] >= 0.999 * grid_mk[idx]:
+            nrm = ti.Vector([b[0], b[1], b[2]])
+            if nrm.norm() > 1e-3 * b[4]:
+                nrm = nrm.normalized()
+                d = b[3] / b[4]
+                reach = BOND_REACH * dx
+                xi = node_position(idx, ncell, ox, oy, oz, ny, nz, dx)
+                xm = xi + (reach - d) * nrm
+                off = idx - idx % ncell
+                # trilinear mean of the free nodes of the cell around xm
+                g = xm / dx - ti.Vector([ox, oy, oz], ti.f32)
+                base = ti.cast(ti.floor(g), ti.i32)
+                f = g - base
+                vsum = vec3(0.0)
+                wsum = 0.0
+                for a, c, e in ti.static(ti.ndrange(2, 2, 2)):
+                    q = base + ti.Vector([a, c, e])
+                    if 0 <= q[0] < nx and 0 <= q[1] < ny and 0 <= q[2] < nz:
+                        j = off + (q[0] * ny + q[1]) * nz + q[2]
+                        if grid_m[j] > 0.0 and not pinned(grid_m, grid_mk, j):
+                            wt = (f[0] if a else 1.0 - f[0]) * (f[1] if c else 1.0 - f[1]) * (f[2] if e else 1.0 - f[2])
+                            vsum += wt * grid_v[j]
+                            wsum += wt
+                if wsum > 0.25:
+                    lk = grid_link[idx]
+                    v_i, _w0, _t0 = link_motion_at(link_frames, lk, xi, dt)
+                    v_m, _w1, _t1 = link_motion_at(link_frames, lk, xm, dt)
+                    ratio = ti.max(-1.0, ti.min(1.0, d / reach))
+                    grid_v[idx] = v_i + ratio * (vsum / wsum - v_m)
+
+
 @ti.kernel
 def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI,
                    col_pose: NDF2, col_impulse: NDF2):
@@ -769,18 +843,20 @@ BOX = 8  # active box layout: origin xyz, dims xyz (nodes), number of slabs, sla
 SLAB_CAP = 1 << 16  # slabs are 2 cells: the active box may span 131072 cells along one axis
 # rows of Scene.counts and Scene.consts
 N_LINKS, N_GROUPS, N_COL, N_WALLS, N_ACTIVE, N_KIN = range(6)
-DX, GX, GY, GZ, DAMPING, RELAXATION, REACH, MARGIN, FIELD_MU = range(9)
+DX, GX, GY, GZ, DAMPING, RELAXATION, REACH, MARGIN, FIELD_MU, BOND = range(10)
 
 Particles = ti.types.argpack(  # member names are unique over the packs (Taichi flattens them)
     x=NDV, v=NDV, C=NDM, F=NDM, tau=NDM, Jp=NDF,  # state: position [m], velocity, APIC C, F, τ [Pa], plastic J
     impulse=NDV, contact_id=NDI,  # contact impulse [N s] of this control step, collider touched
     mass=NDF, vol=NDF, radius=NDF,  # mass [kg], rest volume [m³], contact radius [m]
-    kind=NDI, link=NDI, matid=NDI, group=NDI)  # DYNAMIC | KINEMATIC, link, material row, group
+    kind=NDI, link=NDI, matid=NDI, group=NDI,  # DYNAMIC | KINEMATIC, link, material row, group
+    bond=NDV4)  # bound particles: normal of the bond surface (link frame), signed distance [m] (0: none)
 Grid = ti.types.argpack(
     grid_v=NDV, grid_m=NDF,  # momentum then velocity [m/s], mass [kg]
     grid_mk=NDF, grid_mq=NDF, grid_link=NDI,  # kinematic mass, quasi-static mass, link of those
     grid_dp=NDV, grid_vol=NDV2,  # contact momentum [N s]; (Σ w V0, Σ w V0 J) for F-bar
-    grid_vc=NDF, grid_ds=NDV)  # two fields: deformed volume Σ w V0 J [m³]; field 0's contact Δv [m/s]
+    grid_vc=NDF, grid_ds=NDV,  # two fields: deformed volume Σ w V0 J [m³]; field 0's contact Δv [m/s]
+    grid_bond=NDV5)  # Σ w m (n, d, 1) of bound particles that know the bond surface (bond_ghosts)
 Scene = ti.types.argpack(
     counts=NDI, consts=NDF,  # rows N_LINKS.., and DX.. [m, m/s², 1/s, 1/s, m, cells, -]
     mat_table=NDF2,  # materials.material_table rows
@@ -885,18 +961,23 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     ncell = O.active_box[3] * ny * nz
     ntot = ncell * (2 if ti.static(two_field) else 1)
     clear_grid(ntot, G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_dp, G.grid_vol, G.grid_vc, G.grid_ds,
-               two_field)
+               G.grid_bond, two_field)
     if ti.static(fbar):
         volume_scatter(O.order, O.slab_start, n_slabs, P.x, P.F, P.vol, P.kind, ox, oy, oz, ny, nz, inv_dx,
                        G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
     p2g(gravity, O.order, O.slab_start, n_slabs, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.mass, P.vol, P.kind,
         P.link, P.matid, S.mat_table, P.group, S.group_qs, ox, oy, oz, ny, nz, inv_dx, dt,
         G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only,
-        S.group_field, ncell, two_field, G.grid_vc, atomic)
+        S.group_field, ncell, two_field, G.grid_vc, P.bond, S.link_frames, G.grid_bond, atomic)
     grid_update(ntot, ncell, ox, oy, oz, ny, nz, dx, dt, damping, relax,
                 G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
                 1 if ti.static(contact_mode == 2) else 0, n_col, S.col_kind, S.col_prm, S.col_frames,
                 S.col_mu, S.col_sticky, S.sdf, S.sdf_info, S.col_impulse)
+    nx = O.active_box[3]
+    bond_on = S.consts[BOND] > 0.0
+    if bond_on:
+        bond_ghosts(ntot, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
+                    G.grid_link, S.link_frames)
     if ti.static(two_field):
         field_contact(ncell, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_mk, G.grid_vc, G.grid_ds)
     if ti.static(contact_mode == 1):
@@ -906,6 +987,9 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
                         max_push, reach, P.group, S.group_field, ncell, two_field, atomic)
         contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls,
                       n_walls)
+        if bond_on:  # the contact moved free nodes near the bond: the ghosts follow
+            bond_ghosts(ntot, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
+                        G.grid_link, S.link_frames)
     g2p(nh_only, O.order, n, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.kind, P.matid, S.mat_table, P.group,
         S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, fbar,
         S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id)

@@ -184,7 +184,8 @@ class MPMWorld:
     def add_group(self, name: str, positions, material: Material, *, link=None, kinematic=None,
                   velocity=None, particle_volume: float | None = None,
                   spacing: float | None = None, quasi_static: bool | None = None,
-                  relaxation: float | None = None, field: int = 0, contact_radius=None) -> Group:
+                  relaxation: float | None = None, field: int = 0, contact_radius=None,
+                  bond_distance=None, bond_normal=None) -> Group:
         """Add a group of particles.
 
         Args:
@@ -200,6 +201,14 @@ class MPMWorld:
                 ``settings.particle_spacing``.
             contact_radius: [N] or scalar distance [m] from a particle's centre to the
                 surface it stands for (colliders touch that surface); default ``spacing / 2``.
+            bond_distance, bond_normal: where the dynamic particles are bonded to the
+                kinematic ones: [N] signed distance [m] of each particle from the bond surface
+                (negative in the kinematic core) and [N, 3] that surface's normal pointing into
+                the soft layer (world frame, current configuration); only the kinematic
+                particles' values are used. The grid then holds the layer at that surface, not
+                at the nearest node plane (``kernels.bond_ghosts``). Default: estimated from
+                the kinematic mask, from each kinematic particle's nearest dynamic particle
+                (exact for a flat bond on the particle lattice). Pads pass their geometry.
             quasi_static: solve the group by dynamic relaxation (pseudo-mass
                 ``settings.mass_scaling``, damping relative to its link). Default: True
                 when the group has kinematic particles. A free group (no kinematic
@@ -250,6 +259,7 @@ class MPMWorld:
             radius = np.broadcast_to(np.asarray(contact_radius, np.float64), (n,)).copy()
             if not (np.all(np.isfinite(radius)) and np.all(radius > 0)):
                 raise ConfigError(f"add_group({name!r}): contact_radius must be > 0 and finite")
+        bond = _bond_table(name, pts, kin, h, bond_distance, bond_normal)
         vel = np.zeros((n, 3))
         if velocity is not None:
             vel = np.broadcast_to(np.asarray(velocity, np.float64), (n, 3)).copy()
@@ -291,6 +301,8 @@ class MPMWorld:
             T = self._link_next[lidx]
             new["X0"] = ((pts - T[:3, 3]) @ T[:3, :3]).astype(np.float32)
             new["v"][kin] = 0.0
+            bond[:, :3] = bond[:, :3] @ T[:3, :3]  # normals to the link frame
+        new["bond"] = bond.astype(np.float32)
         for key, arr in new.items():
             self._host[key] = arr if key not in self._host else np.concatenate([self._host[key], arr])
         bind = matrix_to_quat(self._link_next[lidx][:3, :3]) if lidx >= 0 else np.array([1.0, 0, 0, 0])
@@ -763,7 +775,7 @@ class MPMWorld:
         s = self.settings
         rate = max((g.relaxation for g in self.groups if g.awake and g.quasi_static), default=0.0)
         self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, rate, self._reach, s.grid_margin,
-                                                 s.soft_friction], np.float32))
+                                                 s.soft_friction, float(s.bond == "surface")], np.float32))
 
     def _alloc_grid(self, cap: int) -> None:
         d = self._dev
@@ -776,10 +788,12 @@ class MPMWorld:
         d["grid_vol"] = ti.Vector.ndarray(2, ti.f32, shape=cap)
         d["grid_vc"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_ds"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
+        d["grid_bond"] = ti.Vector.ndarray(5, ti.f32, shape=cap)
         self._grid_cap = cap
         self._pack["W"] = None
         self._pack["G"] = K.Grid(**{k: d[k] for k in ("grid_v", "grid_m", "grid_mk", "grid_mq", "grid_link",
-                                                       "grid_dp", "grid_vol", "grid_vc", "grid_ds")})
+                                                       "grid_dp", "grid_vol", "grid_vc", "grid_ds",
+                                                       "grid_bond")})
 
     def _explode_message(self, lo, hi) -> str:
         x = self._dev["x"].to_numpy()
@@ -842,6 +856,7 @@ class MPMWorld:
         if self._n:
             for key in ("x", "v", "impulse", "X0"):
                 upload(key, h[key], ti.f32, (3,))
+            upload("bond", h["bond"], ti.f32, (4,))
             for key in ("C", "F", "tau"):
                 upload(key, h[key], ti.f32, (3, 3))
             for key in ("Jp", "mass", "vol", "radius"):
@@ -915,7 +930,7 @@ class MPMWorld:
         d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
         d["counts"] = ti.ndarray(ti.i32, shape=6)
         self._upload_counts()
-        d["consts"] = ti.ndarray(ti.f32, shape=9)
+        d["consts"] = ti.ndarray(ti.f32, shape=10)
         self._upload_consts()
         self._build_packs()
         if self._grid_cap == 0:
@@ -935,7 +950,7 @@ class MPMWorld:
         if self._n:
             pk["P"] = K.Particles(**{k: d[k] for k in (
                 "x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "mass", "vol", "radius",
-                "kind", "link", "matid", "group")})
+                "kind", "link", "matid", "group", "bond")})
             pk["placement"] = K.Placement(
                 **{k: d[k] for k in ("x", "v", "C", "X0", "link", "counts", "consts", "link_frames", "col_frames",
                                      "group_bind", "group_link", "group_frames", "active", "bounds", "slab_of",
@@ -1025,6 +1040,35 @@ def _twist(a: np.ndarray, b: np.ndarray, dt: float) -> np.ndarray:
 
     w = Rotation.from_matrix(b[:3, :3] @ a[:3, :3].T).as_rotvec() / dt
     return np.concatenate([(b[:3, 3] - a[:3, 3]) / dt, w])
+
+
+def _bond_table(name: str, pts: np.ndarray, kin: np.ndarray, spacing: float, distance, normal) -> np.ndarray:
+    """[N, 4] bond rows of add_group (world-frame normal, signed distance [m]); zero rows for
+    dynamic particles and where the group has no kinematic or no dynamic particle."""
+    n = len(pts)
+    out = np.zeros((n, 4))
+    if not kin.any() or kin.all():
+        return out
+    if (distance is None) != (normal is None):
+        raise ConfigError(f"add_group({name!r}): give bond_distance and bond_normal together")
+    if distance is None:
+        from scipy.spatial import cKDTree
+
+        # nearest dynamic particle of each kinematic one: the bond is half a spacing short of it
+        r, j = cKDTree(pts[~kin]).query(pts[kin])
+        out[kin, :3] = (pts[~kin][j] - pts[kin]) / np.maximum(r, 1e-12)[:, None]
+        out[kin, 3] = 0.5 * spacing - r
+        return out
+    dist = np.broadcast_to(np.asarray(distance, np.float64), (n,))
+    nrm = np.broadcast_to(np.asarray(normal, np.float64), (n, 3))
+    if not (np.all(np.isfinite(dist[kin])) and np.all(np.isfinite(nrm[kin]))):
+        raise ConfigError(f"add_group({name!r}): bond_distance / bond_normal contain NaN or inf")
+    length = np.linalg.norm(nrm[kin], axis=1)
+    if np.any(np.abs(length - 1.0) > 1e-3):
+        raise ConfigError(f"add_group({name!r}): bond_normal must be unit vectors (lengths "
+                          f"{length.min():.3g}..{length.max():.3g})")
+    out[kin, :3], out[kin, 3] = nrm[kin], dist[kin]
+    return out
 
 
 def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale: float) -> float:

@@ -81,3 +81,37 @@ def test_pad_mesh_not_watertight():
 def test_mesh_too_small_for_spacing():
     with pytest.raises(AssetError, match="no particle fits"):
         mesh_particles(trimesh.creation.icosphere(2, radius=1e-4), 1e-3, name="grain")
+
+
+def test_bad_bond_surface_is_named():
+    world = MPMWorld(SolverSettings())
+    world.add_link("base", np.eye(4))
+    pts = box_particles([0, 0, 0], [0.004] * 3, 5e-4)
+    kin = pts[:, 2] < 1e-3
+    with pytest.raises(ConfigError, match=r"add_group\('pad'\): give bond_distance and bond_normal together"):
+        world.add_group("pad", pts, Material(), link="base", kinematic=kin, bond_distance=pts[:, 2] - 1e-3)
+    with pytest.raises(ConfigError, match=r"add_group\('pad'\): bond_normal must be unit vectors"):
+        world.add_group("pad", pts, Material(), link="base", kinematic=kin, bond_distance=pts[:, 2] - 1e-3,
+                        bond_normal=[0.0, 0.0, 2.0])
+    with pytest.raises(ConfigError, match=r"add_group\('pad'\): bond_distance / bond_normal contain NaN"):
+        world.add_group("pad", pts, Material(), link="base", kinematic=kin, bond_distance=np.nan,
+                        bond_normal=[0.0, 0.0, 1.0])
+    with pytest.raises(ConfigError, match=r"SolverSettings.bond='glue' must be 'surface' or 'nodes'"):
+        SolverSettings(bond="glue")
+    world.add_group("pad", pts, Material(), link="base", kinematic=kin)  # nothing was lost: the name is free
+
+
+def test_default_bond_of_a_flat_layer_is_exact():
+    """Without bond_distance/bond_normal the bond is estimated from the kinematic mask: for a
+    flat bond on the particle lattice, the plane between the last bound and first free layer."""
+    world = MPMWorld(SolverSettings())
+    world.add_link("base", np.eye(4))
+    h = 5e-4
+    pts = box_particles([0, 0, 0], [0.004] * 3, h)
+    z_bond = 1e-3
+    world.add_group("pad", pts, Material(), link="base", kinematic=pts[:, 2] < z_bond)
+    bond = world._host["bond"]
+    kin = pts[:, 2] < z_bond
+    np.testing.assert_allclose(bond[kin, 3], pts[kin, 2] - z_bond, atol=1e-7)
+    np.testing.assert_allclose(bond[kin, :3], np.tile([0.0, 0.0, 1.0], (kin.sum(), 1)), atol=1e-6)
+    assert not bond[~kin].any()
