@@ -55,18 +55,20 @@ class GaussTacSim:
         urdf: URDF the pad links' collision meshes come from (default: ManiSkill's Allegro).
         settings: solver settings (default :func:`default_hand_settings`).
         sleep_margin: distance [m] between a pad and the nearest object below which it wakes.
-        pad_surface: where colliders touch a pad: ``"particles"`` (default) half a particle
-            spacing beyond its outermost particles; ``"mesh"`` on the link mesh itself, each
-            surface particle's contact radius its distance below the mesh
-            (:attr:`Pad.contact_radius`), the same surface at every resolution. Measured
-            against dx = 0.5 mm at the default dx = 1 mm (``bench pad --curve``): particles
-            +10.9 % (5 mm sphere) / +3.7 % (plate); mesh +5.8 % / −5.6 %, with the plate's
-            stress reading 5.3 % below its contact force (BENCHMARKS.md).
+        pad_surface: where colliders touch a pad: ``"mesh"`` (default) on the link mesh
+            itself, each surface particle's contact radius its distance below the mesh
+            (:attr:`Pad.contact_radius`), the same surface at every resolution;
+            ``"particles"`` half a particle spacing beyond its outermost particles, a
+            staircase that on a curved pad stands up to half a spacing off the mesh,
+            differently at each resolution. Held force at the default dx = 1 mm against
+            dx = 0.5 mm of the same mode (``bench pad --curve``, 2026-11-23): mesh +5.5 %
+            (5 mm sphere) / −3.6 % (plate); particles +10.9 % / +6.3 %, and at dx = 0.5 mm the
+            particle staircase still reads 12 % (sphere) / 4 % (plate) above the mesh surface.
     """
 
     def __init__(self, pads: Sequence[PadSpec], link_poses: Mapping[str, np.ndarray], *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
-                 sleep_margin: float = 5e-3, pad_surface: str = "particles"):
+                 sleep_margin: float = 5e-3, pad_surface: str = "mesh"):
         self.settings = settings or default_hand_settings()
         self.urdf = urdf or default_hand_urdf()
         self.world = MPMWorld(self.settings)

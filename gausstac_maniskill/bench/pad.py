@@ -150,7 +150,7 @@ def _contact_area(sim, pad) -> float:
 
 
 def make_sim(dx: float, indenter: str, thickness: float | None = None, friction: float = FRICTION,
-             mass_scaling: float | None = None, pad_surface: str = "particles", patch_radius=False,
+             mass_scaling: float | None = None, pad_surface: str = "mesh", patch_radius=False,
              cfl: float | None = None):
     """The benchmark's scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
     :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
@@ -175,7 +175,7 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
 
 def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
              friction: float = FRICTION, bar=None, mass_scaling: float | None = None,
-             pad_surface: str = "particles", patch_radius=False, cfl: float | None = None) -> dict:
+             pad_surface: str = "mesh", patch_radius=False, cfl: float | None = None) -> dict:
     """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
     (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
     (default: :func:`default_hand_settings`'); ``patch_radius`` [m] the active patch (None: off,
@@ -382,7 +382,7 @@ def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=N
 
 
 def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress: bool = True,
-                pad_surface: str = "particles") -> dict:
+                pad_surface: str = "mesh") -> dict:
     """Speed against force error on the product pad (``bench pad --curve``).
 
     ``points``: (dx [m], mass_scaling, patch_radius [m] or None[, Courant number]) tuples; each
@@ -472,7 +472,7 @@ def main(argv: list[str] | None = None) -> int:
                          "scaling and with x4000")
     ap.add_argument("--cfl", type=float, nargs="*", default=[],
                     help="Courant numbers of extra curve points: every --dx grid at the default mass scaling")
-    ap.add_argument("--pad-surface", default="particles", choices=["particles", "mesh"],
+    ap.add_argument("--pad-surface", default="mesh", choices=["particles", "mesh"],
                     help="where the indenter touches the pad (GaussTacSim's pad_surface; curve only)")
     args = ap.parse_args(argv)
     if args.curve:
