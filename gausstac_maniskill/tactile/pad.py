@@ -67,9 +67,9 @@ class Pad:
         """[N] contact radius [m] of each particle: for the outermost layer (depth < spacing)
         its distance below the link mesh (at least 5 % of a spacing), so the contact surface
         is the mesh's own, whatever the lattice's alignment with it; half a spacing inside
-        (``GaussTacSim(pad_surface="mesh")``; the default puts every particle's surface half
-        a spacing out, which on a curved pad lies up to half a spacing off the mesh,
-        differently at each resolution)."""
+        (``GaussTacSim(pad_surface="mesh")``, the default; ``"particles"`` puts every
+        particle's surface half a spacing out, which on a curved pad lies up to half a spacing
+        off the mesh, differently at each resolution)."""
         h = self.spacing
         return np.where(self.depth < h, np.clip(self.depth, 0.05 * h, h), 0.5 * h)
 
