@@ -275,7 +275,9 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
     """Momentum -> velocity, damping, then boundary conditions per node (gravity is in P2G).
 
     * Nodes where kinematic mass is at least PIN_FRACTION of the node mass move exactly with
-      their link (Dirichlet), so a kinematic layer is rigid, not a viscous drag.
+      their link (Dirichlet), so a kinematic layer is rigid, not a viscous drag (with
+      ``SolverSettings.bond = "surface"``, :func:`bond_ghosts` then moves those next to a bond
+      surface so that the layer is held at that surface).
     * Nodes where most mass belongs to quasi-static groups (pads) relax towards
       equilibrium: their velocity *relative to the link's rigid motion* is scaled by
       ``relax`` = exp(-ζ Δt) (dynamic relaxation; a pad carried by a moving hand is
@@ -343,8 +345,9 @@ def node_position(idx, ncell: ti.template(), ox: ti.template(), oy: ti.template(
 
 @ti.func
 def pinned(grid_m: ti.template(), grid_mk: ti.template(), idx):
-    """A node moves rigidly with its link when kinematic particles bring at least
-    PIN_FRACTION of its mass (Dirichlet; see :func:`grid_update`)."""
+    """A node is held by its link when kinematic particles bring at least PIN_FRACTION of
+    its mass (Dirichlet): it moves rigidly with the link (:func:`grid_update`), or, where its
+    bound particles know the bond surface, as :func:`bond_ghosts` sets it."""
     return grid_mk[idx] >= PIN_FRACTION * grid_m[idx]
 
 
