@@ -17,7 +17,7 @@ that it runs well on a CPU:
    emit one 64-bit key ``(camera·tiles + tile) << 32 | float_bits(depth)`` per
    (Gaussian, tile) with a value (the Gaussian and the part of its box inside
    the tile), a single stable ``torch.sort``, then each tile's [start, end)
-   range in the sorted list.
+   range in the sorted list (``torch.searchsorted`` of the tile numbers).
 3. **Rasterise** (one thread per camera × tile): the tile walks its Gaussians
    front to back. A Gaussian whose box part covers no unfinished pixel (a 16-bit
    mask per row) is passed over without reading its record; otherwise the rows
@@ -109,7 +109,8 @@ __all__ = [
     "sapien_pose_to_opencv_extrinsic",
 ]
 
-TILE = 16  #: tile edge in pixels
+TILE_BITS = 4  #: log2 of the tile edge
+TILE = 1 << TILE_BITS  #: tile edge in pixels (16); tile of pixel x >= 0: x >> TILE_BITS
 ALPHA_MIN = 1.0 / 255.0  #: contributions below this α are skipped
 ALPHA_MAX = 0.99  #: α clamp (keeps T > 0)
 T_MIN = 1e-4  #: a pixel is finished when T would fall below this
@@ -296,8 +297,9 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                     x0, x1 = _box_1d(u, k * ti.sqrt(a), width)
                     y0, y1 = _box_1d(v, k * ti.sqrt(d), height)
                     if x0 < x1 and y0 < y1:
-                        bins[c, g, B_TILES] = (((x1 - 1) // TILE - x0 // TILE + 1)
-                                               * ((y1 - 1) // TILE - y0 // TILE + 1))
+                        # (shifts, not //: Taichi's floor division of ints costs a branch each)
+                        bins[c, g, B_TILES] = (((x1 - 1) >> TILE_BITS) - (x0 >> TILE_BITS) + 1) \
+                            * (((y1 - 1) >> TILE_BITS) - (y0 >> TILE_BITS) + 1)
                         bins[c, g, B_X], bins[c, g, B_Y] = x0 | (x1 << 16), y0 | (y1 << 16)
                         bins[c, g, B_Z] = ti.bit_cast(p.z, ti.i32)
                         rec[c, g, R_U], rec[c, g, R_V] = u, v
@@ -341,10 +343,10 @@ def _emit_keys(offsets: ti.types.ndarray(dtype=ti.i64, ndim=2), bins: _i32_3,
             x0, x1 = bins[c, g, B_X] & 0xFFFF, bins[c, g, B_X] >> 16
             y0, y1 = bins[c, g, B_Y] & 0xFFFF, bins[c, g, B_Y] >> 16
             zbits = ti.cast(bins[c, g, B_Z], ti.i64)
-            for ty in range(y0 // TILE, (y1 - 1) // TILE + 1):
+            for ty in range(y0 >> TILE_BITS, ((y1 - 1) >> TILE_BITS) + 1):  # pixel boxes are >= 0
                 ry0 = ti.max(y0 - ty * TILE, 0)
                 ry1 = ti.min(y1 - ty * TILE, TILE) - 1
-                for tx in range(x0 // TILE, (x1 - 1) // TILE + 1):
+                for tx in range(x0 >> TILE_BITS, ((x1 - 1) >> TILE_BITS) + 1):
                     rx0 = ti.max(x0 - tx * TILE, 0)
                     rx1 = ti.min(x1 - tx * TILE, TILE) - 1
                     tile = ti.cast(c * tiles_per_cam + ty * tiles_x + tx, ti.i64)
@@ -355,19 +357,7 @@ def _emit_keys(offsets: ti.types.ndarray(dtype=ti.i64, ndim=2), bins: _i32_3,
 
 
 @ti.kernel
-def _tile_ranges(keys: _i64_1, ranges: _i32_2):
-    """ranges[tile] = [start, end) of the tile's entries in the sorted key list."""
-    n = keys.shape[0]
-    for j in range(n):
-        tile = ti.cast(keys[j] >> 32, ti.i32)
-        if j == 0 or ti.cast(keys[j - 1] >> 32, ti.i32) != tile:
-            ranges[tile, 0] = j
-        if j == n - 1 or ti.cast(keys[j + 1] >> 32, ti.i32) != tile:
-            ranges[tile, 1] = j + 1
-
-
-@ti.kernel
-def _rasterize_tiles(ranges: _i32_2, vals: _i64_1, rec: _f32_3,
+def _rasterize_tiles(starts: _i64_1, vals: _i64_1, rec: _f32_3,
                      background: _f32_4, bg_is_image: ti.i32, bg_depth: _f32_3,
                      use_bg_depth: ti.template(), tiles_x: ti.i32, spread: ti.template(),
                      out_rgb: _f32_4, out_depth: _f32_3, out_alpha: _f32_3):
@@ -405,8 +395,8 @@ def _rasterize_tiles(ranges: _i32_2, vals: _i64_1, rec: _f32_3,
         for r in range(py1 - py0):
             live[r] = ti.u32((1 << (px1 - px0)) - 1)
         alive = (px1 - px0) * (py1 - py0)
-        j = ranges[c * tiles_x * tiles_y + tile, 0]
-        end = ranges[c * tiles_x * tiles_y + tile, 1]
+        j = ti.cast(starts[c * tiles_x * tiles_y + tile], ti.i32)  # the tile's [j, end) in vals
+        end = ti.cast(starts[c * tiles_x * tiles_y + tile + 1], ti.i32)
         # the next Gaussian's record is read one step ahead: its cache line is then on
         # its way while this one is drawn (records are visited in depth order, i.e.
         # at random addresses)
@@ -766,7 +756,6 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     counts = bins[:, :, B_TILES].reshape(-1).to(torch.int64)
     ends = torch.cumsum(counts, 0)
     n_keys = int(ends[-1]) if n else 0
-    ranges = torch.zeros(n_tile_total, 2, dtype=torch.int32, device=dev)
     if n_keys:
         offsets = (ends - counts).reshape(C, n)
         keys = torch.empty(n_keys, dtype=torch.int64, device=dev)
@@ -774,9 +763,11 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
         _emit_keys(offsets, bins, tiles_x, tiles_x * tiles_y, keys, vals)
         keys, order = torch.sort(keys, stable=True)
         vals = vals[order]
-        _tile_ranges(keys, ranges)
+        # tile t's entries are [starts[t], starts[t + 1]) of the sorted list
+        starts = torch.searchsorted(keys >> 32, torch.arange(n_tile_total + 1, device=dev))
     else:
         vals = _dummy((1,), torch.int64, dev)
+        starts = torch.zeros(n_tile_total + 1, dtype=torch.int64, device=dev)
     sync()
     t_bin = time.perf_counter()
 
@@ -785,7 +776,7 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     out_depth = torch.empty(C, height, width, **f32)
     out_alpha = torch.empty(C, height, width, **f32)
     spread = 256 if backend.current_arch() == "cpu" else 1
-    _rasterize_tiles(ranges, vals, rec, bg, bg_is_image, bg_depth, background_depth is not None,
+    _rasterize_tiles(starts, vals, rec, bg, bg_is_image, bg_depth, background_depth is not None,
                      tiles_x, spread, out_rgb, out_depth, out_alpha)
     sync()
     t_end = time.perf_counter()
