@@ -321,13 +321,21 @@ class GaussTacSim:
         name = self._pad(pad).name
         return self._carried(name, self.world.positions(name), self.world.deformation_gradients(name))
 
-    def particles(self) -> tuple[np.ndarray, np.ndarray]:
+    def particles(self, index: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """World positions [P, 3] and F [P, 3, 3] of every particle of the world (pads, soft
-        objects), in group order, sleeping pads carried by their links (for rendering)."""
+        objects), in group order, sleeping pads carried by their links (for rendering).
+        With ``index`` ([P'] ascending world particle indices) only those particles, [P', 3]
+        and [P', 3, 3]: a camera needs only the particles its Gaussians ride on."""
         x, F = self.world.positions(), self.world.deformation_gradients()
+        if index is not None:
+            index = np.asarray(index)
+            x, F = x[index], F[index]
         for name in self.pads:
             g = self.world.group(name)
-            x[g.start:g.stop], F[g.start:g.stop] = self._carried(name, x[g.start:g.stop], F[g.start:g.stop])
+            # the group's rows: all of [start, stop), or those of ``index`` in it (ascending)
+            lo, hi = (g.start, g.stop) if index is None else np.searchsorted(index, (g.start, g.stop))
+            if hi > lo:
+                x[lo:hi], F[lo:hi] = self._carried(name, x[lo:hi], F[lo:hi])
         return x, F
 
     def _carried(self, name: str, x: np.ndarray, F: np.ndarray):

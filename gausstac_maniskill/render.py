@@ -247,9 +247,9 @@ class SceneGaussians:
         for name in self.object_names:
             poses.append(sim.world.colliders[sim._objects[name]].pose)
         rigid, rigid_rot = rigid_frames(np.array(poses) if poses else np.zeros((0, 4, 4)))
-        x, F = sim.particles()
         p = self._particles
-        soft, soft_rot = particle_frames(x[p], F[p], rotations=self._soft_rotations)
+        x, F = sim.particles(p)  # only the particles the soft Gaussians ride on
+        soft, soft_rot = particle_frames(x, F, rotations=self._soft_rotations)
         layers = [layer.frames() for layer in self.layers]
         frames = torch.cat([rigid, soft, *(f for f, _ in layers)])
         rotations = None  # SH degree 0 everywhere: colours do not depend on the view direction

@@ -182,3 +182,26 @@ def test_soft_gaussians_with_view_dependent_colour_turn_with_polar_F(pressed_sce
         scene._framed = None
     scene.posed()
     assert not scene._soft_rotations  # the scene's own (DC-only) soft colours: no polar(F) needed
+
+
+def test_particles_of_an_index_are_those_rows_of_all_particles(pressed_scene):
+    """GaussTacSim.particles(index) (what the splat camera reads) gives the rows ``index`` of
+    particles(), sleeping pads carried by their links as there."""
+    sim, _, _ = pressed_scene
+    sleeping = [p for p in sim.pads if not sim.is_awake(p)]
+    assert sleeping and len(sleeping) < len(sim.pads), "the scene should have awake and sleeping pads"
+    link = sim.pads[sleeping[0]].spec.link
+    saved = sim._link_pose[link]
+    turn = make_pose([0.01, 0.0, 0.0], np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]))
+    sim._link_pose[link] = turn @ saved  # a sleeping pad's link turned 90° and moved 1 cm
+    try:
+        x, F = sim.particles()
+        g = sim.world.group(sleeping[0])
+        assert np.abs(x[g.start:g.stop] - sim.world.positions(sleeping[0])).max() > 5e-3, "carried"
+        idx = np.sort(np.random.default_rng(0).choice(len(x), len(x) // 3, replace=False))
+        xi, Fi = sim.particles(idx)
+    finally:
+        sim._link_pose[link] = saved
+    assert xi.shape == (len(idx), 3) and Fi.shape == (len(idx), 3, 3)
+    np.testing.assert_allclose(xi, x[idx], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(Fi, F[idx], rtol=0, atol=1e-7)
