@@ -88,6 +88,13 @@ class Lighting:
         object.__setattr__(self, "colors", tuple(tuple(float(v) for v in r) for r in e))
         object.__setattr__(self, "gamma", float(self.gamma))
 
+    @property
+    def is_grey(self) -> bool:
+        """Whether the ambient light and every light colour have equal R, G and B (then the
+        light falling on a surface is one number, and the rasterizer shades with one power
+        per Gaussian instead of three)."""
+        return all(c[0] == c[1] == c[2] for c in (self.ambient, *self.colors))
+
     @classmethod
     def from_sapien(cls, scene) -> "Lighting":
         """The ambient and enabled directional lights of a ``sapien.Scene`` (a ManiSkill
@@ -118,10 +125,14 @@ class Lighting:
     def kernel_array(self, device=None) -> torch.Tensor:
         """[1 + L, 6] float32 as the rasterizer's projection kernel reads it: row 0 =
         (A, 1/gamma, 0, 0); row 1 + i = (lᵢ = -dᵢ toward the light, Eᵢ / π)."""
-        rows = [list(self.ambient) + [1.0 / self.gamma, 0.0, 0.0]]
-        for d, e in zip(self.directions, self.colors):
-            rows.append([-d[0], -d[1], -d[2]] + [v / math.pi for v in e])
-        return torch.tensor(rows, dtype=torch.float32, device=device)
+        key = str(device)
+        arrays = self.__dict__.setdefault("_arrays", {})  # built once per device (the Lighting is frozen)
+        if key not in arrays:
+            rows = [list(self.ambient) + [1.0 / self.gamma, 0.0, 0.0]]
+            for d, e in zip(self.directions, self.colors):
+                rows.append([-d[0], -d[1], -d[2]] + [v / math.pi for v in e])
+            arrays[key] = torch.tensor(rows, dtype=torch.float32, device=device)
+        return arrays[key]
 
 
 #: ManiSkill's default ``_load_lighting`` (used by every GaussTac task): ambient 0.3,

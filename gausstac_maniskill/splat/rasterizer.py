@@ -91,6 +91,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
 import taichi as ti
 import torch
 
@@ -168,11 +169,13 @@ def _sh_to_rgb(sh: ti.template(), g: ti.i32, degree: ti.i32, d: ti.math.vec3) ->
 
 @ti.func
 def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.math.vec3,
-           lights: ti.template()) -> ti.math.vec3:
+           lights: ti.template(), albedo_pow: ti.template(), g: ti.i32, grey: ti.template()) -> ti.math.vec3:
     """Diffuse shading of a Gaussian of linear albedo ``albedo`` and normal ``n0`` in the
     frame whose linear map is M, seen along ``view`` (camera -> Gaussian, world):
     (A + Σᵢ Eᵢ/π · max(0, n·lᵢ))·albedo, written as c^(1/gamma). ``lights`` rows: (A, 1/gamma,
-    0, 0), then (lᵢ toward the light, Eᵢ/π)."""
+    0, 0), then (lᵢ toward the light, Eᵢ/π). ``grey``: the ambient and every light are grey,
+    so the light is one number L and c^(1/gamma) = albedo^(1/gamma) · L^(1/gamma), with
+    albedo^(1/gamma) of Gaussian g read from ``albedo_pow`` (one power instead of three)."""
     # n = cof(M) n0, cof(M) = det(M) M⁻ᵀ with columns m1×m2, m2×m0, m0×m1 (normals move with it)
     m0 = ti.math.vec3(M[0, 0], M[1, 0], M[2, 0])
     m1 = ti.math.vec3(M[0, 1], M[1, 1], M[2, 1])
@@ -188,7 +191,10 @@ def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.mat
         for i in range(1, lights.shape[0]):
             l_dir = ti.math.vec3(lights[i, 0], lights[i, 1], lights[i, 2])
             light += ti.math.vec3(lights[i, 3], lights[i, 4], lights[i, 5]) * ti.max(n.dot(l_dir), 0.0)
-        rgb = (albedo * light) ** lights[0, 3]
+        if ti.static(grey):
+            rgb = ti.math.vec3(albedo_pow[g, 0], albedo_pow[g, 1], albedo_pow[g, 2]) * light[0] ** lights[0, 3]
+        else:
+            rgb = (albedo * light) ** lights[0, 3]
     return rgb
 
 
@@ -215,19 +221,21 @@ def _box_1d(centre: ti.f32, radius: ti.f32, size: ti.i32):
 @ti.kernel
 def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _f32_1,
              sh: _f32_3, degree: ti.i32, sh_rot: _f32_3, frame_id: _i32_1, frames: _f32_3,
-             normals: _f32_2, lights: _f32_2,
-             viewmats: _f32_3, Ks: _f32_3, width: ti.i32, height: ti.i32,
+             normals: _f32_2, lights: _f32_2, albedo_pow: _f32_2,
+             viewmats: _f32_3, cams: _f32_2, width: ti.i32, height: ti.i32,
              near: ti.f32, far: ti.f32,
              use_cov: ti.template(), framed: ti.template(), rot_mode: ti.template(),
-             lit: ti.template(), rec: _f32_3, bins: _i32_3):
+             lit: ti.template(), grey: ti.template(), rec: _f32_3, bins: _i32_3):
     """EWA projection of every Gaussian into every camera; bins[c, g, B_TILES] = 0 if culled.
 
     ``use_cov``: covariances from ``cov6`` (else from ``quats``/``scales``); ``framed``:
     means and covariances lie in ``frames[frame_id[g]]``; ``rot_mode``: SH frames not
     rotated (0), rotated per Gaussian by ``sh_rot[g]`` (1) or per frame by
     ``sh_rot[frame_id[g]]`` (2); ``lit``: Gaussians with a non-zero ``normals[g]`` (in
-    their frame) are shaded with ``lights`` (see *Lighting*). Only entries of Gaussians
-    that touch a tile are written.
+    their frame) are shaded with ``lights`` (see *Lighting*); ``grey``: grey lights and
+    ``albedo_pow`` [N, 3] holds each Gaussian's albedo^(1/gamma) (see :func:`_shade`).
+    ``cams`` [C, 12]: the per-camera constants of :func:`_camera_constants`. Only entries
+    of Gaussians that touch a tile are written.
     """
     for c, g in ti.ndrange(viewmats.shape[0], means.shape[0]):
         bins[c, g, B_TILES] = 0
@@ -245,14 +253,10 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
         p = W @ mu + t  # camera-space centre
         o = opac[g]
         if p.z > near and p.z < far and o >= ALPHA_MIN:
-            fx, fy, cx, cy = Ks[c, 0, 0], Ks[c, 1, 1], Ks[c, 0, 2], Ks[c, 1, 2]
+            fx, fy, cx, cy = cams[c, 0], cams[c, 1], cams[c, 2], cams[c, 3]
             # perspective Jacobian at the centre, with x/z, y/z clamped to 1.3 tan(fov/2)
             # (the half-fov measured from the principal point on each side)
-            tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
-            lim_xp = (width - cx) / fx + (FOV_CLAMP - 1.0) * tan_x
-            lim_xn = cx / fx + (FOV_CLAMP - 1.0) * tan_x
-            lim_yp = (height - cy) / fy + (FOV_CLAMP - 1.0) * tan_y
-            lim_yn = cy / fy + (FOV_CLAMP - 1.0) * tan_y
+            lim_xn, lim_xp, lim_yn, lim_yp = cams[c, 4], cams[c, 5], cams[c, 6], cams[c, 7]
             iz = 1.0 / p.z
             tx = ti.math.clamp(p.x * iz, -lim_xn, lim_xp) * p.z
             ty = ti.math.clamp(p.y * iz, -lim_yn, lim_yp) * p.z
@@ -309,9 +313,10 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                         rec[c, g, R_THR] = -ln255o - 1e-4
                         # view direction (camera centre -> Gaussian), world frame; a rotated
                         # SH frame (link, polar(F)) R is evaluated at Rᵀ dir
-                        cam = -(W.transpose() @ t)
-                        view = mu - cam
-                        dirn = view.normalized()
+                        view = mu - ti.math.vec3(cams[c, 8], cams[c, 9], cams[c, 10])
+                        dirn = view
+                        if degree > 0:  # (a constant colour needs no direction)
+                            dirn = view.normalized()
                         if ti.static(rot_mode > 0):
                             r = f
                             if ti.static(rot_mode == 1):
@@ -323,7 +328,7 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                         if ti.static(lit):
                             n0 = ti.math.vec3(normals[g, 0], normals[g, 1], normals[g, 2])
                             if n0.norm_sqr() > 0.0:
-                                rgb = _shade(rgb, n0, M, view, lights)
+                                rgb = _shade(rgb, n0, M, view, lights, albedo_pow, g, grey)
                         rec[c, g, R_R], rec[c, g, R_G], rec[c, g, R_BL] = rgb[0], rgb[1], rgb[2]
 
 
@@ -579,9 +584,18 @@ class _Inputs:
     frame_id: torch.Tensor | None
     n_frames: int
     normals: torch.Tensor | None = None
+    _albedo_pow: dict = field(default_factory=dict, repr=False)
 
     def __len__(self) -> int:
         return self.means.shape[0]
+
+    def albedo_pow(self, exponent: float) -> torch.Tensor:
+        """[N, 3] float32 SH degree-0 colours (linear albedo, clamped at 0) to the power
+        ``exponent`` (1/gamma), kept per exponent (the arrays must not change)."""
+        if exponent not in self._albedo_pow:
+            albedo = torch.clamp(SH_C0 * self.sh[:, 0] + 0.5, min=0.0)
+            self._albedo_pow[exponent] = (albedo ** exponent).contiguous()
+        return self._albedo_pow[exponent]
 
 
 def _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations,
@@ -688,6 +702,22 @@ def _rasterize(g: _Inputs, frames: torch.Tensor | None, frame_rotations: torch.T
                                  background_depth, near, far, timings, lighting)
 
 
+def _camera_constants(viewmats: torch.Tensor, Ks: torch.Tensor, width: int, height: int) -> torch.Tensor:
+    """[C, 12] float32 per-camera constants of the projection kernel: fx, fy, cx, cy (px); the
+    limits of x/z on the negative and positive side, then of y/z, at which the EWA Jacobian is
+    evaluated (1.3 × the half field of view measured from the principal point on each side);
+    the camera centre in the world (m); 0. (numpy: a dozen tiny torch ops cost ~0.15 ms.)"""
+    V = viewmats.detach().cpu().numpy().astype(np.float64)
+    K = Ks.detach().cpu().numpy().astype(np.float64)
+    fx, fy, cx, cy = K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2]
+    tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
+    lims = [cx / fx + (FOV_CLAMP - 1.0) * tan_x, (width - cx) / fx + (FOV_CLAMP - 1.0) * tan_x,
+            cy / fy + (FOV_CLAMP - 1.0) * tan_y, (height - cy) / fy + (FOV_CLAMP - 1.0) * tan_y]
+    centre = -np.einsum("cji,cj->ci", V[:, :3, :3], V[:, :3, 3])  # x_cam = R x + t = 0
+    out = np.concatenate([np.stack([fx, fy, cx, cy, *lims], 1), centre, np.zeros((len(fx), 1))], 1)
+    return torch.from_numpy(out.astype(np.float32)).to(viewmats.device)
+
+
 def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, height, background,
                       background_depth, near, far, timings: bool, lighting=None) -> RenderOutput:
     backend.ensure_init()
@@ -735,6 +765,9 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     lit = lighting is not None and g.normals is not None
     normals = g.normals if lit else _dummy((1, 3), torch.float32, dev)
     lights = lighting.kernel_array(dev) if lit else _dummy((1, 6), torch.float32, dev)
+    # grey lights on constant colours: the kernel takes one power per Gaussian (see _shade)
+    grey = lit and g.degree == 0 and lighting.is_grey
+    albedo_pow = g.albedo_pow(1.0 / lighting.gamma) if grey else _dummy((1, 3), torch.float32, dev)
 
     tiles_x = (width + TILE - 1) // TILE
     tiles_y = (height + TILE - 1) // TILE
@@ -746,9 +779,10 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     rec = torch.empty(C, max(n, 1), REC, **f32)
     bins = torch.empty(C, n, 4, dtype=torch.int32, device=dev)
     if n:
-        _project(g.means, g.quats, g.scales, g.cov6, g.opacities, g.sh, g.degree, sh_rot,
-                 frame_id, frames, normals, lights, viewmats, Ks, width, height, float(near), float(far),
-                 g.use_cov, framed, rot_mode, lit, rec, bins)
+        cams = _camera_constants(viewmats, Ks, width, height)
+        _project(g.means, g.quats, g.scales, g.cov6, g.opacities, g.sh, g.degree, sh_rot, frame_id, frames,
+                 normals, lights, albedo_pow, viewmats, cams, width, height, float(near), float(far),
+                 g.use_cov, framed, rot_mode, lit, grey, rec, bins)
     sync()
     t_proj = time.perf_counter()
 

@@ -64,6 +64,29 @@ def test_flat_gaussian_gets_lambert_shading(direction, gamma):
     assert torch.allclose(centre(out), lambert(out, (0, 0, 1), direction, gamma), atol=2e-4), centre(out)
 
 
+@pytest.mark.parametrize("gamma", [1.0, 2.2])
+def test_grey_lights_take_the_one_power_path_with_the_same_picture(gamma):
+    """A grey ambient and grey lights make the kernel take one power per Gaussian (with the
+    set's albedo^(1/gamma), kept per exponent): Lambert's colour all the same, and the
+    picture of a light grey to within 1e-6 (three powers per Gaussian)."""
+    direction = (1.0, 1.0, -1.0)
+    grey = Lighting((0.25,) * 3, (direction,), ((0.9,) * 3,), gamma=gamma)
+    almost = Lighting((0.25,) * 3, (direction,), ((0.9, 0.9, 0.9 + 1e-6),), gamma=gamma)
+    assert grey.is_grey and not almost.is_grey and not Lighting(AMBIENT, (direction,), (E,)).is_grey
+    V, K = camera()
+    g = disc()
+    framed = FramedGaussians.from_gaussians(g, torch.zeros(len(g), dtype=torch.int64), 1, lit=True)
+    frames = torch.eye(4)[None, :3]
+    for other in (2.0, gamma):  # a second exponent on the same set does not reuse the first's powers
+        out = framed.render(frames, None, V, K, W, H, lighting=Lighting((0.25,) * 3, (direction,), ((0.9,) * 3,),
+                                                                         gamma=other))
+    light = 0.25 + 0.9 * max(0.0, float(np.array([0.0, 0.0, 1.0]) @ -np.array(direction)) / math.sqrt(3)) / math.pi
+    expected = float(out.alpha[0, H // 2, W // 2]) * (light * ALBEDO) ** (1.0 / gamma)
+    assert torch.allclose(centre(out), expected, atol=2e-4), centre(out)
+    three = framed.render(frames, None, V, K, W, H, lighting=almost)
+    assert (out.rgb - three.rgb).abs().max() < 1e-5
+
+
 def test_normal_sign_does_not_matter_the_side_facing_the_camera_is_lit():
     """Normals are two-sided: a disc whose stored normal points away from the camera is lit
     like one facing it; seen from behind, the other side is the one lit (ambient only here)."""
