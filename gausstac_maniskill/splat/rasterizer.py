@@ -333,17 +333,19 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
 
 
 @ti.kernel
-def _emit_keys(offsets: ti.types.ndarray(dtype=ti.i64, ndim=2), bins: _i32_3,
-               tiles_x: ti.i32, tiles_per_cam: ti.i32, keys: _i64_1, vals: _i64_1):
+def _emit_keys(ends: _i64_1, bins: _i32_3, tiles_x: ti.i32, tiles_per_cam: ti.i32, keys: _i64_1,
+               vals: _i64_1):
     """One key per (Gaussian, touched tile): (camera·tiles + tile) << 32 | depth bits, and
     its value: the part of the Gaussian's box inside the tile (4 bits each: first column,
-    last column, first row, last row, tile-local) << 32 | Gaussian index.
+    last column, first row, last row, tile-local) << 32 | Gaussian index. ``ends`` [C·N]:
+    the inclusive prefix sum of the tile counts, so (camera c, Gaussian g) writes from
+    ends[c·N + g] - its count on.
 
     Positive float32 depths compare like their bit patterns read as integers,
     so sorting the keys sorts by tile, then front to back.
     """
-    for c, g in ti.ndrange(offsets.shape[0], offsets.shape[1]):
-        off = offsets[c, g]
+    for c, g in ti.ndrange(bins.shape[0], bins.shape[1]):
+        off = ends[c * bins.shape[1] + g] - bins[c, g, B_TILES]
         if bins[c, g, B_TILES] > 0:
             x0, x1 = bins[c, g, B_X] & 0xFFFF, bins[c, g, B_X] >> 16
             y0, y1 = bins[c, g, B_Y] & 0xFFFF, bins[c, g, B_Y] >> 16
@@ -787,14 +789,12 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     t_proj = time.perf_counter()
 
     # 2. bin: one key per (Gaussian, tile), sort, per-tile ranges ---------------------
-    counts = bins[:, :, B_TILES].reshape(-1).to(torch.int64)
-    ends = torch.cumsum(counts, 0)
+    ends = torch.cumsum(bins[:, :, B_TILES].reshape(-1), 0, dtype=torch.int64)
     n_keys = int(ends[-1]) if n else 0
     if n_keys:
-        offsets = (ends - counts).reshape(C, n)
         keys = torch.empty(n_keys, dtype=torch.int64, device=dev)
         vals = torch.empty(n_keys, dtype=torch.int64, device=dev)
-        _emit_keys(offsets, bins, tiles_x, tiles_x * tiles_y, keys, vals)
+        _emit_keys(ends, bins, tiles_x, tiles_x * tiles_y, keys, vals)
         keys, order = torch.sort(keys, stable=True)
         vals = vals[order]
         # tile t's entries are [starts[t], starts[t + 1]) of the sorted list
