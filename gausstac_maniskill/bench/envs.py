@@ -11,7 +11,9 @@ Rows:
   its scripted expert; PressCube also at finer MPM grids (``--dx``), where the
   "outcome" column is the force error at the end (speed vs accuracy);
 * the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
-  CPU machine: rigid meshes only, no pad deformation);
+  CPU machine: rigid meshes only, no pad deformation), made in the same process and stepped
+  in turn with the splat run, so that both see the same machine load (the "camera side by
+  side" table: median render time per step and the ratio);
 * ``RotateSingleObjectInHandLevel0-v1`` with ``allegro_hand_right_touch`` (ManiSkill's
   FSR tactile: 16 contact impulses), random actions, the same obs mode and image size.
 
@@ -46,39 +48,67 @@ def _outcome(env_id, info) -> str:
     return "-"
 
 
+class _Run:
+    """One GaussTac env driven by its scripted expert, with the step timings it recorded."""
+
+    def __init__(self, env_id: str, camera: str = "splat", dx: float = 2e-3, resets: int = 3):
+        import gymnasium as gym
+
+        from ..experts import make_expert
+
+        self.env_id = env_id
+        self.env = gym.make(env_id, obs_mode="rgb", sim_backend="physx_cpu", control_mode="pd_joint_delta_pos",
+                            camera=camera, mpm_dx=dx, splat_size=(128, 128))
+        self.base = self.env.unwrapped
+        reset_s = []
+        for k in range(resets):
+            t0 = time.perf_counter()
+            self.env.reset(seed=k)
+            reset_s.append(time.perf_counter() - t0)
+        self.reset_ms = 1e3 * float(np.mean(reset_s[1:] or reset_s))
+        self.obs, _ = self.env.reset(seed=0)
+        self.expert = make_expert(self.env)
+        self.expert.reset()
+        self.cam = self.base._sensors.get("splat_camera")
+        self.rows, self.info, self.particles, self.k, self.pictures = [], {}, 0, 0, None
+
+    def step(self) -> None:
+        """One control step; from the second on (the first compiles Taichi kernels) it is timed."""
+        if self.k == 1 and hasattr(self.cam, "background_renders"):
+            self.pictures = self.cam.background_renders
+        self.obs, _, _, _, self.info = self.env.step(self.expert.act(self.obs))
+        self.particles = max(self.particles, sum(g.count for s in self.base.cosims for g in s.world.groups
+                                                 if g.awake))
+        if self.k > 0:
+            self.rows.append({p: self.base.step_timing[p] for p in PARTS + ("total",)})
+        self.k += 1
+
+    def close(self) -> dict:
+        """Close the env; means of the timed steps (ms), the median render time, the outcome."""
+        pictures = None if self.pictures is None else self.cam.background_renders - self.pictures
+        self.env.close()
+        out = {p: 1e3 * float(np.mean([r[p] for r in self.rows])) for p in PARTS + ("total",)}
+        out.update(reset=self.reset_ms, outcome=_outcome(self.env_id, self.info), particles=self.particles,
+                   bg_pictures=pictures, render_median=1e3 * float(np.median([r["render"] for r in self.rows])))
+        return out
+
+
 def run_gausstac(env_id: str, steps: int, camera: str = "splat", dx: float = 2e-3, resets: int = 3) -> dict:
-    import gymnasium as gym
+    run = _Run(env_id, camera, dx, resets)
+    for _ in range(steps + 1):
+        run.step()
+    return run.close()
 
-    from ..experts import make_expert
 
-    env = gym.make(env_id, obs_mode="rgb", sim_backend="physx_cpu", control_mode="pd_joint_delta_pos",
-                   camera=camera, mpm_dx=dx, splat_size=(128, 128))
-    base = env.unwrapped
-    reset_s = []
-    for k in range(resets):
-        t0 = time.perf_counter()
-        obs, _ = env.reset(seed=k)
-        reset_s.append(time.perf_counter() - t0)
-    obs, _ = env.reset(seed=0)
-    expert = make_expert(env)
-    expert.reset()
-    rows, info, particles = [], {}, 0
-    cam = base._sensors.get("splat_camera")
-    pictures = None
+def run_side_by_side(env_id: str, steps: int, dx: float = 2e-3) -> tuple[dict, dict]:
+    """The task with the splat camera and with SAPIEN's camera in one process, stepped in
+    turn (which one goes first alternates), so that both see the same machine load; returns
+    (splat, sapien) results as :func:`run_gausstac`."""
+    runs = {"splat": _Run(env_id, "splat", dx), "sapien": _Run(env_id, "sapien", dx)}
     for k in range(steps + 1):
-        if k == 1 and hasattr(cam, "background_renders"):
-            pictures = cam.background_renders
-        obs, _, _, _, info = env.step(expert.act(obs))
-        particles = max(particles, sum(g.count for s in base.cosims for g in s.world.groups if g.awake))
-        if k > 0:
-            rows.append({p: base.step_timing[p] for p in PARTS + ("total",)})
-    if pictures is not None:
-        pictures = cam.background_renders - pictures
-    env.close()
-    out = {p: 1e3 * float(np.mean([r[p] for r in rows])) for p in PARTS + ("total",)}
-    out.update(reset=1e3 * float(np.mean(reset_s[1:] or reset_s)), outcome=_outcome(env_id, info),
-               particles=particles, bg_pictures=pictures)
-    return out
+        for cam in (("splat", "sapien") if k % 2 else ("sapien", "splat")):
+            runs[cam].step()
+    return runs["splat"].close(), runs["sapien"].close()
 
 
 def run_fsr(steps: int) -> dict:
@@ -112,7 +142,7 @@ def run_fsr(steps: int) -> dict:
     total, rend = 1e3 * float(np.mean(times)), 1e3 * float(np.mean(render[1:]))
     return dict(physics=total - rend, mpm=0.0, tactile=0.0, render=rend, total=total,
                 reset=1e3 * float(np.mean(reset_s[1:])), outcome="FSR impulses (16 links)", particles=0,
-                bg_pictures=None)
+                bg_pictures=None, render_median=1e3 * float(np.median(render[1:])))
 
 
 def main(argv=None) -> int:
@@ -132,8 +162,9 @@ def main(argv=None) -> int:
           f"machine: {platform.machine()}, {os.cpu_count()} cores")
     runs = []
     for env_id in args.tasks:
-        runs.append((env_id, "splat", 2e-3, run_gausstac(env_id, args.steps, "splat")))
-        runs.append((env_id, "sapien", 2e-3, run_gausstac(env_id, args.steps, "sapien")))
+        splat, sapien = run_side_by_side(env_id, args.steps)
+        runs.append((env_id, "splat", 2e-3, splat))
+        runs.append((env_id, "sapien", 2e-3, sapien))
     for dx in args.dx:
         if dx != 2e-3:
             runs.append(("GaussTac-PressCube-v1", "splat", dx, run_gausstac("GaussTac-PressCube-v1", args.steps,
@@ -149,6 +180,13 @@ def main(argv=None) -> int:
         print(f"| {env_id} | {cam} | {'-' if dx is None else f'{1e3 * dx:g}'} | {r['particles']} | "
               f"{r['reset']:.0f} | {r['total']:.0f} | {r['physics']:.0f} | {r['mpm']:.0f} | {r['tactile']:.1f} | "
               f"{r['render']:.1f} | {bg} | {r['outcome']} |")
+    print("\nCamera side by side (same process, steps in turn; median render time per step, ms: SAPIEN's "
+          "scene update, the camera's picture and its observation)")
+    print("\n| task | splat [ms] | SAPIEN [ms] | splat / SAPIEN |")
+    print("|---|---|---|---|")
+    for (env_id, _, _, a), (_, _, _, b) in zip(runs[0:2 * len(args.tasks):2], runs[1:2 * len(args.tasks):2]):
+        print(f"| {env_id} | {a['render_median']:.2f} | {b['render_median']:.2f} | "
+              f"{a['render_median'] / b['render_median']:.2f} |")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "envs.json"), "w") as f:
         json.dump([dict(env=e, camera=c, dx=d, **r) for e, c, d, r in runs], f, indent=1)
