@@ -1,6 +1,7 @@
 """Hertz contact benchmark: a rigid sphere pressed into a thick elastic pad.
 
 ``python -m gausstac_maniskill.bench hertz [--quick] [--dx 1e-3 7.5e-4 ...] [--out DIR]``
+``python -m gausstac_maniskill.bench hertz --nu 0.3 0.4 0.45 0.48 0.49 0.499 [--plain]``
 
 Set-up (SI units): sphere radius R = 5 mm, pad E = 0.3 MPa, ν = 0.45, block
 10·a_max wide and thick (a_max = √(R·d_max)), the bottom two cells kinematic
@@ -19,6 +20,16 @@ hold we average
 and compare them with Hertz: F = 4/3·E*·√R·d^1.5, a = √(R·d),
 p(r) = p0·√(1 − r²/a²), p0 = 3F/(2πa²). Sneddon's exact linear-elastic solution
 for a sphere (valid for a/R not small) is printed alongside.
+
+``--nu``: the Poisson-ratio sweep (volumetric locking). The same sphere is pressed to
+d = 1 mm into a block 10·a thick and 5·a wide (a = √(R·d)) at each ν, with F-bar (the
+default) and, with ``--plain``, with plain MLS-MPM (``SolverSettings.fbar=False``). The
+loading is :func:`~gausstac_maniskill.bench.thinlayer.run_point`'s quasi-static press
+(ramp and hold counted in the block's shear relaxation time, which ν → 0.5 does not
+shorten, unlike the P-wave's). Two references: Sneddon's half-space, and the bonded
+layer solution of the block's thickness (laterally infinite). The block lies between
+them: its base is bonded (stiffer than a half-space, more so as ν → 0.5) and its sides
+are free (softer than an infinite layer).
 """
 from __future__ import annotations
 
@@ -133,6 +144,54 @@ def run_case(dx: float, depths=DEPTHS, contact: str = "particle", ramp_transits:
                 pad=dict(half_width=half_w, thickness=thick, R=R_SPHERE, E=E_PAD, nu=NU_PAD))
 
 
+NU_SWEEP = (0.3, 0.4, 0.45, 0.48, 0.49, 0.499)
+
+
+def nu_sweep(nus=NU_SWEEP, dx: float = 1e-3, d: float = 1e-3, fbar_modes=(True,), progress: bool = True,
+             ramp: float = 6.0, hold: float = 8.0) -> list[dict]:
+    """Press the sphere to ``d`` [m] into the thick block at each Poisson ratio in ``nus``,
+    for each F-bar mode in ``fbar_modes``; rows of :func:`thinlayer.run_point` (forces in N,
+    times in s) with ``fbar`` added. ``ramp``/``hold`` are in shear relaxation times 1/ζ."""
+    from .thinlayer import run_point
+
+    a = math.sqrt(R_SPHERE * d)
+    thick = math.ceil(10.0 * a / dx - 1e-9) * dx
+    half_w = math.ceil(5.0 * a / dx - 1e-9) * dx
+    rows = []
+    bar = _progress(len(nus) * len(fbar_modes), f"nu sweep dx={dx * 1e3:.2f} mm", progress)
+    for fbar in fbar_modes:
+        for nu in nus:
+            row = run_point(R_SPHERE, d, h=thick, dx=dx, nu=nu, half_width=half_w, fbar=fbar, ramp=ramp, hold=hold)
+            row["fbar"] = fbar
+            rows.append(row)
+            bar.update(1)
+    bar.close()
+    return rows
+
+
+def format_nu_sweep(rows: list[dict]) -> str:
+    """Markdown table of :func:`nu_sweep`, with the largest |error| against Sneddon per mode."""
+    r0 = rows[0]
+    lines = [f"Sphere R = {r0['R'] * 1e3:g} mm pressed d = {r0['d'] * 1e3:g} mm (a = {r0['a'] * 1e3:.2f} mm) into a "
+             f"bonded block {r0['h'] * 1e3:g} mm thick, {2 * r0['half_width'] * 1e3:g} mm wide, dx = "
+             f"{r0['dx'] * 1e3:g} mm; forces in N, errors of F_sim in %", "",
+             "| ν | stress | particles | substeps | MPM wall [s] | F_sim | F_Sneddon | err | F_layer(h) | err | "
+             "settle |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(
+            f"| {r['nu']:g} | {'F-bar' if r['fbar'] else 'plain'} | {r['particles']} | {r['substeps']} | "
+            f"{r['solver_wall']:.1f} | {r['F_sim']:.4f} | {r['F_sneddon']:.4f} | "
+            f"{100 * (r['F_sim'] / r['F_sneddon'] - 1):+.1f} | {r['F_layer']:.4f} | "
+            f"{100 * (r['F_sim'] / r['F_layer'] - 1):+.1f} | {r['settle']:.0e} |")
+    lines.append("")
+    for fbar in sorted({r["fbar"] for r in rows}, reverse=True):
+        sel = [r for r in rows if r["fbar"] == fbar]
+        worst = max(sel, key=lambda r: abs(r["F_sim"] / r["F_sneddon"] - 1))
+        lines.append(f"{'F-bar' if fbar else 'plain'}: max |err| against Sneddon "
+                     f"{100 * abs(worst['F_sim'] / worst['F_sneddon'] - 1):.1f} % (at ν = {worst['nu']:g}; target 5 %)")
+    return "\n".join(lines)
+
+
 def warmup(contact: str = "particle") -> None:
     """Compile the solver's kernels on a tiny world so timings exclude Taichi's JIT."""
     from ..config import Material, SolverSettings
@@ -241,8 +300,20 @@ def main(argv: list[str] | None = None) -> int:
                     help="also run the coarsest dx with grid-node contact, for comparison")
     ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
     ap.add_argument("--out", default="out/hertz", help="folder for hertz.png, hertz.md, hertz.json")
+    ap.add_argument("--nu", type=float, nargs="+", metavar="NU",
+                    help="Poisson-ratio sweep (volumetric locking) at the first --dx (default 1 mm) instead")
+    ap.add_argument("--plain", action="store_true", help="with --nu: also run plain MLS-MPM (no F-bar)")
     args = ap.parse_args(argv)
     arch = backend.init(args.arch)
+    if args.nu:
+        t0 = time.time()
+        rows = nu_sweep(args.nu, dx=(args.dx or [1e-3])[0], fbar_modes=(True, False) if args.plain else (True,))
+        table = format_nu_sweep(rows)
+        print(f"Poisson-ratio sweep on {arch} ({os.cpu_count()} cores), {time.time() - t0:.0f} s\n\n{table}")
+        os.makedirs(args.out, exist_ok=True)
+        with open(os.path.join(args.out, "nu_sweep.md"), "w") as f:
+            f.write(table + "\n")
+        return 0
     dxs = args.dx or ([1.0e-3] if args.quick else [1.0e-3, 0.75e-3, 0.5e-3])
     os.makedirs(args.out, exist_ok=True)
     print(f"Hertz benchmark on {arch} ({os.cpu_count()} cores): R={R_SPHERE * 1e3} mm, E={E_PAD:g} Pa, "
