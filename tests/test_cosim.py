@@ -259,3 +259,29 @@ def test_pad_reads_the_force_of_a_soft_object():
     for _ in range(3):  # pull the sponge back past its start: contact ends, nothing sticks
         maps = press(-1e-3)
     assert float(maps[INDEX]["force"].sum()) == 0.0
+
+
+def test_maps_return_to_rest_while_the_object_stays_near(hand_poses):
+    """Issue 10's bound on the product defaults (dx = 1 mm): after a 1 mm press and a 1 mm
+    slide with friction 0.5, the ball backs off to 0.3 mm clear of the pad, which stays awake;
+    within 3 control steps of 50 ms every taxel's |depth| and |shear| is under 0.01 mm.
+    Measured: 23 / 7.7 / 4.6 µm depth and 13.5 / 5.7 / 4.7 µm shear after 1 / 2 / 3 steps. (Single
+    particles plateau at 12-19 µm: tests/mpm/test_integration.py's strict xfail; a taxel
+    averages the sub-cell noise of the particles under it.)"""
+    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings())
+    R = 6e-3
+    W = apex_frame(sim, hand_poses)
+
+    def centre(d, s=0.0):  # pressed d into the pad, slid s along the sensor's x axis
+        return make_pose(W[:3, 3] + W[:3, 2] * (R - d) + W[:3, 0] * s)
+
+    sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3), friction=0.5))
+    for k in range(8):
+        maps = sim.step(hand_poses, 0.05, {"ball": centre(1e-3 * min(1, (k + 1) / 4), 1e-3 * max(0, k - 4) / 3)})
+    assert float(maps[INDEX]["depth"].max()) > 0.5e-3 and float(maps[INDEX]["shear"].abs().max()) > 0.1e-3
+    for _ in range(3):
+        maps = sim.step(hand_poses, 0.05, {"ball": centre(-0.3e-3, 1e-3)})
+    assert sim.is_awake(INDEX), "the pad should stay awake next to the object"
+    assert float(maps[INDEX]["force"].sum()) == 0.0
+    depth, shear = float(maps[INDEX]["depth"].abs().max()), float(maps[INDEX]["shear"].abs().max())
+    assert depth < 1e-5 and shear < 1e-5, (depth, shear)
