@@ -184,6 +184,7 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
     "phases": [...]}``; each phase (``"press"`` / ``"slide"`` at depth ``d`` [m]) holds
     hold-step means of ``Fn``, ``Ft``, ``Fy``, ``F_map`` [N], ``F_spread`` (max−min)/mean
+    of Fn, ``Fn_end`` and ``F_stress_end`` (means over the second half of the hold: the settled end)
     of Fn, ``area_taxel``, ``area_particle`` [m²], ``peak_depth`` [m] and ``maps``
     (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
     """
@@ -217,7 +218,9 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
         Fs = np.array(Fs)
         maps = {k: np.mean([m[k] for m in ms], axis=0) for k in MAPS}
         Fn = float(Fs[:, 2].mean())
-        return dict(phase=phase, d=d, Fn=Fn, Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
+        end = len(Fs) // 2
+        return dict(phase=phase, d=d, Fn=Fn, Fn_end=float(Fs[end:, 2].mean()),
+                    F_stress_end=float(np.mean([f[0] for f in Fstress[end:]])), Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
                     F_map=float(maps["force"].sum()), F_stress=float(np.mean([f[0] for f in Fstress])),
                     F_pressure=float(np.mean([f[1] for f in Fstress])),
                     F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
@@ -382,12 +385,13 @@ def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=N
 
 
 def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress: bool = True,
-                pad_surface: str = "mesh") -> dict:
+                pad_surface: str = "mesh", hold: int = CURVE.hold) -> dict:
     """Speed against force error on the product pad (``bench pad --curve``).
 
     ``points``: (dx [m], mass_scaling, patch_radius [m] or None[, Courant number]) tuples; each
     presses ``indenter`` ``depth`` [m] into
-    the index pad (:data:`CURVE` protocol) and records the held normal force Fn [N], the
+    the index pad (:data:`CURVE` protocol, with ``hold`` held steps) and records the held normal
+    force Fn [N] (mean over the second half of the hold, and its spread over the whole hold), the
     MPM wall time per 50 ms step [ms], and the normal force read from the pad's stress
     (:meth:`GaussTacSim.pad_stress_force`, virtual work; and the older pressure-map
     estimate :meth:`GaussTacSim.pad_pressure_force`), for the consistency of the readings.
@@ -399,17 +403,18 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
     from tqdm import tqdm
 
     runs = []
-    with tqdm(total=len(points) * (1 + CURVE.press + CURVE.hold), disable=not progress, desc="curve") as bar:
+    protocol = Protocol(press=CURVE.press, slide=0, hold=hold)
+    with tqdm(total=len(points) * (1 + protocol.press + protocol.hold), disable=not progress, desc="curve") as bar:
         for dx, ms, pr, cfl in sorted(((tuple(p) + (None,))[:4] for p in points),
                                       key=lambda t: (-t[0], t[1], t[2] or 0.0, t[3] or 0.0)):
             bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}, patch {pr}, cfl {cfl}")
-            c = run_case(dx, indenter, [depth], protocol=CURVE, bar=bar, mass_scaling=ms, pad_surface=pad_surface,
+            c = run_case(dx, indenter, [depth], protocol=protocol, bar=bar, mass_scaling=ms, pad_surface=pad_surface,
                          patch_radius=pr, cfl=cfl)
             runs.append(dict(dx=dx, mass_scaling=ms, patch_radius=pr, cfl=c.get("cfl", cfl), active=c["active"],
                              particles=c["particles"],
                              substeps=c["substeps"],
-                             step_ms=c["step_ms"], Fn=c["phases"][0]["Fn"], F_spread=c["phases"][0]["F_spread"],
-                             F_stress=c["phases"][0]["F_stress"], F_pressure=c["phases"][0]["F_pressure"]))
+                             step_ms=c["step_ms"], Fn=c["phases"][0]["Fn_end"], F_spread=c["phases"][0]["F_spread"],
+                             F_stress=c["phases"][0]["F_stress_end"], F_pressure=c["phases"][0]["F_pressure"]))
     from ..cosim import default_hand_settings
 
     default_ms = default_hand_settings().mass_scaling
@@ -472,6 +477,8 @@ def main(argv: list[str] | None = None) -> int:
                          "scaling and with x4000")
     ap.add_argument("--cfl", type=float, nargs="*", default=[],
                     help="Courant numbers of extra curve points: every --dx grid at the default mass scaling")
+    ap.add_argument("--hold", type=int, default=CURVE.hold,
+                    help="held control steps of each curve point (the force is read over the second half)")
     ap.add_argument("--pad-surface", default="mesh", choices=["particles", "mesh"],
                     help="where the indenter touches the pad (GaussTacSim's pad_surface; curve only)")
     args = ap.parse_args(argv)
@@ -482,7 +489,8 @@ def main(argv: list[str] | None = None) -> int:
         points += [(default_dx, m, r) for r in args.patch_radius for m in sorted({default_ms, 4000.0})]
         points += [(dx, default_ms, None, c) for c in args.cfl for dx in dxs]
         t0 = time.perf_counter()
-        curve = speed_curve(points, args.indenters[0], args.depths[-1], pad_surface=args.pad_surface)
+        curve = speed_curve(points, args.indenters[0], args.depths[-1], pad_surface=args.pad_surface,
+                            hold=args.hold)
         text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, "
                 f"total {time.perf_counter() - t0:.0f} s\n\n"
                 + format_curve(curve, args.indenters[0], args.depths[-1]))
