@@ -368,3 +368,42 @@ def test_frame_arguments_are_checked(scene_factory):
                   sh_rotations=torch.eye(3).expand(20, 3, 3))
     with pytest.raises(ConfigError, match="frame_rotations need"):
         rasterize(*args, covars=cov, frame_rotations=torch.eye(3).expand(3, 3, 3))
+
+
+def test_camera_constants_follow_the_camera(scene_factory):
+    """The per-camera constants are kept by the values of the camera matrices: a camera moved
+    (in place, same tensor) or zoomed after a picture renders like a fresh one."""
+    from gausstac_maniskill.splat import rasterizer as R
+
+    g = scene_factory(120, 0, seed=8)
+    V, K = cameras()
+    render(g, V, K, W, H, background=BG)  # constants of V, K kept
+    V2, K2 = V.clone(), K.clone()
+    V[:, :3, 3] += torch.tensor([0.05, -0.02, 0.1])  # moved in place
+    K[:, 0, 0] *= 1.2
+    moved = render(g, V, K, W, H, background=BG)
+    R._CAMERA_CACHE.clear()
+    fresh = render(g, V.clone(), K.clone(), W, H, background=BG)
+    assert not torch.equal(moved.rgb, render(g, V2, K2, W, H, background=BG).rgb)
+    for name in ("rgb", "depth", "alpha"):
+        assert torch.equal(getattr(moved, name), getattr(fresh, name)), name
+    K[0, 1, 1] = -1.0
+    with pytest.raises(ConfigError, match="focal lengths"):
+        render(g, V, K, W, H)
+
+
+def test_support_terms_kept_per_gaussian(scene_factory):
+    """The opacity-aware support (ln(255 o), k = sqrt(2 ln(255 o)) + 0.1 %) is computed once per
+    set; a Gaussian under 1/255 gets k = 0 (it is culled) instead of NaN."""
+    from gausstac_maniskill.splat.rasterizer import SUPPORT_SLACK, _gaussian_inputs
+
+    g = scene_factory(50, 0, seed=9)
+    o = g.opacities.clone()
+    o[0] = 0.5 / 255.0
+    inp = _gaussian_inputs(g.means, g.quats, g.scales, o, g.sh, None, None)
+    ln255o = torch.log(o.double() * 255.0)
+    assert torch.equal(inp.opacity[:, 0], o)
+    assert torch.allclose(inp.opacity[:, 1].double(), ln255o, rtol=0, atol=1e-6)
+    k = torch.sqrt(2.0 * ln255o.clamp_min(0.0)) * SUPPORT_SLACK
+    assert torch.allclose(inp.opacity[:, 2].double(), k, rtol=1e-6, atol=0)
+    assert inp.opacity[0, 2] == 0.0
