@@ -145,6 +145,18 @@ class SolverSettings:
             ``kernels.bond_ghosts``); ``"nodes"``: at the pinned node planes nearest to
             it (the layer's stiffness then varies by up to ±11 % at 4 cells with how
             the grid lies; kept for comparison, ``bench thinlayer --bond nodes``).
+        pressure: how the volume term λ ln J of Neo-Hookean materials is integrated.
+            ``"explicit"`` (default): with the rest of the stress, F-bar against locking; the
+            substep follows the P-wave speed √((λ+2μ)/ρ), which has no bound as ν → 0.5.
+            ``"implicit"``: one value per grid cell, solved backward Euler in every substep
+            (``kernels.pressure_solve``), so the substep follows √(2μ/ρ) whatever ν (3.6×
+            fewer substeps at ν = 0.48, 16× at ν = 0.499). Other models stay explicit.
+            Measured on the 4 mm bonded layer at dx = 1 mm (BENCHMARKS.md, issue 10 seventh
+            step): at ν = 0.499 −0.9 % against theory in 360 substeps where F-bar is +10.9 % in
+            4320; at ν ≤ 0.48 it is softer than F-bar (−9.6 % at 0.48) and, its CG iterations
+            costing ~4 explicit substeps, not faster: the choice for ν ≥ 0.49.
+        pressure_iterations: the most conjugate-gradient iterations of that solve per
+            substep (it stops earlier once the residual fell by 10⁴).
     """
 
     dx: float = 1.0e-3
@@ -160,6 +172,8 @@ class SolverSettings:
     max_grid_cells: int = 8_000_000
     patch_radius: float | None = None
     bond: str = "surface"
+    pressure: str = "explicit"
+    pressure_iterations: int = 8
 
     def __post_init__(self) -> None:
         if _finite("SolverSettings.dx", self.dx) <= 0:
@@ -189,6 +203,11 @@ class SolverSettings:
             raise ConfigError(f"SolverSettings.max_grid_cells={self.max_grid_cells!r} must be an integer >= 1000")
         if self.bond not in ("surface", "nodes"):
             raise ConfigError(f"SolverSettings.bond={self.bond!r} must be 'surface' or 'nodes'")
+        if self.pressure not in ("explicit", "implicit"):
+            raise ConfigError(f"SolverSettings.pressure={self.pressure!r} must be 'explicit' or 'implicit'")
+        if int(self.pressure_iterations) != self.pressure_iterations or not (1 <= self.pressure_iterations <= 200):
+            raise ConfigError(f"SolverSettings.pressure_iterations={self.pressure_iterations!r} must be an integer "
+                              "in 1..200")
         if self.patch_radius is not None and _finite("SolverSettings.patch_radius", self.patch_radius) <= 0.0:
             raise ConfigError(f"SolverSettings.patch_radius={self.patch_radius!r} m must be > 0 (or None: off)")
 

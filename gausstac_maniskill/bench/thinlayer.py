@@ -156,14 +156,15 @@ def layer_force(E: float, nu: float, R: float, d: float, h: float) -> tuple[floa
 
 # ---------------------------------------------------------------------------- simulation
 def _layer_world(h: float, dx: float, nu: float, half_width: float, offset: float = 0.5, fbar: bool = True,
-                 bond: str = "surface"):
+                 bond: str = "surface", pressure: str = "explicit"):
     """World with a quarter layer [0, W]² × [z_top − h, z_top] on a 2-cell kinematic base.
     z_top is chosen so that the bond plane z_top − h lies ``offset`` cells above a node
-    plane (default half a cell between node planes); ``fbar``, ``bond``: SolverSettings."""
+    plane (default half a cell between node planes); ``fbar``, ``bond``, ``pressure``: SolverSettings."""
     from ..config import Material, SolverSettings
     from ..mpm import MPMWorld, box_particles
 
-    settings = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), max_substeps=1_000_000, fbar=fbar, bond=bond)
+    settings = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), max_substeps=1_000_000, fbar=fbar, bond=bond,
+                              pressure=pressure)
     hp = settings.particle_spacing
     if abs(h / hp - round(h / hp)) > 1e-6:
         raise ValueError(f"layer thickness h={h} m must be a multiple of the particle spacing {hp} m")
@@ -209,7 +210,8 @@ def uniaxial_stress(strain: float, E: float = E_LAYER, nu: float = NU_LAYER) -> 
 
 
 def effective_thickness(h: float, dx: float, nu: float = NU_LAYER, strain: float = 0.05,
-                        ramp: float = 20.0, hold: float = 40.0, offset: float = 0.5, bond: str = "surface") -> float:
+                        ramp: float = 20.0, hold: float = 40.0, offset: float = 0.5, bond: str = "surface",
+                        pressure: str = "explicit") -> float:
     """Effective thickness [m] of the simulated bonded layer: a 2×2-cell column of the
     same lattice (bond plane ``offset`` cells above a node plane; ``bond``:
     SolverSettings.bond), slip walls on all four sides, compressed by a frictionless plate
@@ -221,7 +223,7 @@ def effective_thickness(h: float, dx: float, nu: float = NU_LAYER, strain: float
     from ..mpm import HalfSpace
 
     W = 2 * dx
-    world, group, z_top = _layer_world(h, dx, nu, W, offset=offset, bond=bond)
+    world, group, z_top = _layer_world(h, dx, nu, W, offset=offset, bond=bond, pressure=pressure)
     world.add_slip_wall(0, W, "-")
     world.add_slip_wall(1, W, "-")
     flip = np.diag([1.0, -1.0, -1.0])  # solid side of the half-space up
@@ -240,7 +242,7 @@ def effective_thickness(h: float, dx: float, nu: float = NU_LAYER, strain: float
 
 def run_point(R: float, d: float, h: float = H_LAYER, dx: float = 1e-3, nu: float = NU_LAYER,
               half_width: float | None = None, ramp: float = 10.0, hold: float = 20.0,
-              bond: str = "surface", fbar: bool = True) -> dict:
+              bond: str = "surface", fbar: bool = True, pressure: str = "explicit") -> dict:
     """Press a sphere of radius R [m] to depth d [m] into the bonded layer; return the
     measured force with the reference solutions (forces in N, lengths in m)."""
     from ..mpm import Sphere
@@ -250,7 +252,7 @@ def run_point(R: float, d: float, h: float = H_LAYER, dx: float = 1e-3, nu: floa
     a = math.sqrt(R * d)
     W = half_width or max(3 * a, a + 4 * h)
     W = math.ceil(W / dx - 1e-9) * dx
-    world, group, z_top = _layer_world(h, dx, nu, W, bond=bond, fbar=fbar)
+    world, group, z_top = _layer_world(h, dx, nu, W, bond=bond, fbar=fbar, pressure=pressure)
 
     def pose_at(depth):
         return make_pose([0.0, 0.0, z_top + R - depth])

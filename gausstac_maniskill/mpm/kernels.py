@@ -176,8 +176,11 @@ def field_offset(two_field: ti.template(), group_field: ti.template(), group: ti
 @ti.func
 def clear_grid(ntot: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
         grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template(),
-        grid_vc: ti.template(), grid_ds: ti.template(), grid_bond: ti.template(), two_field: ti.template()):
+        grid_vc: ti.template(), grid_ds: ti.template(), grid_bond: ti.template(), two_field: ti.template(),
+        cellp: ti.template(), cell_slot: ti.template()):
     for i in range(ntot):
+        if ti.static(cellp):
+            cell_slot[i] = 0
         grid_v[i] = vec3(0.0)
         grid_bond[i] = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0])
         grid_dp[i] = vec3(0.0)
@@ -200,7 +203,8 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
         grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(),
         grid_vol: ti.template(), fbar: ti.template(), nh_only: ti.template(),
         group_field: ti.template(), ncell: ti.template(), two_field: ti.template(), grid_vc: ti.template(),
-        bond: ti.template(), link_frames: ti.template(), grid_bond: ti.template(), atomic: ti.template()):
+        bond: ti.template(), link_frames: ti.template(), grid_bond: ti.template(), atomic: ti.template(),
+        cellp: ti.template(), cell_slot: ti.template(), cell_a: ti.template(), cell_G: ti.template()):
     """Scatter mass and APIC momentum (with the stress impulse) to the grid (to the
     particle's own velocity field; with two fields also its deformed volume V0 J to
     ``grid_vc``, for :func:`field_contact`).
@@ -213,6 +217,10 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
     w m (n, s + n·(x_i - x_p), 1), to ``grid_bond`` (:func:`bond_ghosts`).
     With ``fbar`` the stress τ_p is first evaluated here, on the same stencil, from the
     nodal volume change that :func:`volume_scatter` left in ``grid_vol``.
+    With ``cellp``, a particle whose λ ln J term is solved on cells (:func:`pressure_solve`)
+    adds (V0, V0 ln J, V0 λ) to its cell's ``cell_a`` and V0 ∇w_ip to the cell's operator
+    ``cell_G`` (the cell holds 4³ nodes, those of its particles' stencils). Its cell lies
+    between nodes floor(x/dx) and floor(x/dx) + 1, inside the stencil: the slab colouring holds.
     """
     origin = ti.Vector([ox, oy, oz])
     for color in ti.static(range(1 if ti.static(atomic) else 2)):
@@ -223,9 +231,18 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                 p = order[ii]
                 base, fx, w = stencil(x[p], inv_dx, origin)
                 off = field_offset(two_field, group_field, group, p, ncell)
-                if ti.static(fbar):
-                    tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz,
-                                            off)
+                if ti.static(fbar or cellp):
+                    tau[p] = stress_at(nh_only, fbar, cellp, False, F[p], Jp[p], matid[p], mat_table, grid_vol,
+                                       base, w, ny, nz, off)
+                slot = -1
+                cell = ti.Vector([0, 0, 0])
+                if ti.static(cellp):
+                    if mat_table[matid[p], mat.CELL_P] > 0.0:
+                        cell = ti.cast(ti.floor(x[p] * inv_dx - origin), ti.i32)
+                        slot = cell_slot[off + (cell[0] * ny + cell[1]) * nz + cell[2]]
+                        if slot >= 0:
+                            lnJ = ti.log(ti.max(F[p].determinant(), mat.MIN_J))
+                            add_to(cell_a, slot, vol[p] * ti.Vector([1.0, lnJ, mat_table[matid[p], 1], 0.0]), atomic)
                 vj = 0.0
                 if ti.static(two_field):
                     vj = vol[p] * F[p].determinant()
@@ -248,6 +265,11 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                     idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
                     add_to(grid_v, idx, weight * (mv + affine @ dpos), atomic)
                     add_to(grid_m, idx, weight * m, atomic)
+                    if ti.static(cellp):
+                        if slot >= 0:  # V0 ∇w_ip, ∇w_ip = (4/dx²) w_ip (x_i - x_p) (MLS)
+                            lcl = base + ti.Vector([i, j, k]) - cell + 1
+                            add_to(cell_G, slot * 64 + (lcl[0] * 4 + lcl[1]) * 4 + lcl[2],
+                                   (vol[p] * 4.0 * inv_dx * inv_dx * weight) * dpos, atomic)
                     if ti.static(two_field):
                         add_to(grid_vc, idx, weight * vj, atomic)
                     if is_kin:
@@ -454,7 +476,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
         inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
         grid_mk: ti.template(), fbar: ti.template(), group_field: ti.template(), ncell: ti.template(),
         two_field: ti.template(), grid_ds: ti.template(), mass: ti.template(), impulse: ti.template(),
-        contact_id: ti.template()):
+        contact_id: ti.template(), cellp: ti.template()):
     """Gather velocity and its gradient, update F (and plasticity) and stress, advect.
 
     Bound (kinematic) particles keep their link-given position and velocity, but strain
@@ -463,7 +485,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
     completes the quadrature of the free nodes next to the bond, so the soft layer is held
     where its bound particles are, not a cell deeper (``bench thinlayer``). Where every
     node of the stencil is pinned, F is the rotation Q1 and the stress zero.
-    With ``fbar`` the stress is left to the next :func:`p2g` (:func:`fbar_stress_at`).
+    With ``fbar`` or ``cellp`` the stress is left to the next :func:`p2g` (:func:`stress_at`).
     With two fields a particle gathers from its own field, and a dynamic particle of
     field 0 records its share m_p Σ w_ip Δv_i of the other field's contact impulse
     (:func:`field_contact`) in ``impulse``, with ``contact_id`` SOFT_CONTACT where no
@@ -503,7 +525,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
             if ti.static(not nh_only):
                 if ti.cast(mat_table[mi, 2], ti.i32) == mat.FOAM:
                     Fn, jp = mat.plastic_return(Fn, jp, mat_table[mi, 3], mat_table[mi, 4])
-            if ti.static(not fbar):
+            if ti.static(not (fbar or cellp)):
                 tau[p] = elastic_stress(nh_only, Fn, jp, mi, mat_table)
             v[p] = new_v
             C[p] = new_C
@@ -520,19 +542,21 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
                 strain_rate = Q0.transpose() @ (new_C - C[p]) @ Q0
                 Fn = Q1 @ (ti.Matrix.identity(ti.f32, 3) + dt * strain_rate) @ Q0.transpose() @ F[p]
                 F[p] = Fn
-                if ti.static(not fbar):
+                if ti.static(not (fbar or cellp)):
                     tau[p] = elastic_stress(nh_only, Fn, Jp[p], mi, mat_table)
 
 
 @ti.func
 def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.template(),
-        x: ti.template(), F: ti.template(), vol: ti.template(), kind: ti.template(), ox: ti.template(),
+        x: ti.template(), F: ti.template(), vol: ti.template(), kind: ti.template(), matid: ti.template(),
+        mat_table: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(), inv_dx: ti.template(),
         grid_vol: ti.template(), group: ti.template(), group_field: ti.template(), ncell: ti.template(),
         two_field: ti.template(), atomic: ti.template()):
     """F-bar, step 1: each node gathers the rest volume Σ w V0 and the deformed volume
     Σ w V0 J of the particles around it (slab-ordered like :func:`p2g`; per field, so
-    two bodies that touch do not average their volume change)."""
+    two bodies that touch do not average their volume change). Particles whose volume term
+    is solved on cells (``mat.CELL_P``) take no part."""
     origin = ti.Vector([ox, oy, oz])
     for color in ti.static(range(1 if ti.static(atomic) else 2)):
         ti.loop_config(block_dim=128 if ti.static(atomic) else 1)
@@ -540,13 +564,36 @@ def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.
             lo, hi = slab_range(atomic, slab_start, color, h)
             for ii in range(lo, hi):
                 p = order[ii]
-                if kind[p] == DYNAMIC:
+                if kind[p] == DYNAMIC and mat_table[matid[p], mat.CELL_P] <= 0.0:
                     base, fx, w = stencil(x[p], inv_dx, origin)
                     off = field_offset(two_field, group_field, group, p, ncell)
                     vj = vol[p] * ti.Vector([1.0, F[p].determinant()])
                     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                         idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
                         add_to(grid_vol, idx, (w[i][0] * w[j][1] * w[k][2]) * vj, atomic)
+
+
+@ti.func
+def stress_at(nh_only: ti.template(), fbar: ti.template(), cellp: ti.template(), report: ti.template(), Fp, jp, mi,
+        mat_table: ti.template(), grid_vol: ti.template(), base, w, ny: ti.template(), nz: ti.template(), off):
+    """Kirchhoff stress [Pa] of a particle (deformation gradient Fp, plastic J jp, material row
+    mi, stencil (base, w)) as the substep uses it: for a material whose λ ln J term is solved on
+    cells, μ(F Fᵀ - I) (with ``report``, for readings after a step, the whole Neo-Hookean
+    stress); else the F-bar stress (:func:`fbar_stress_at`) or the plain elastic stress."""
+    tau = ti.Matrix.zero(ti.f32, 3, 3)
+    on_cells = False
+    if ti.static(cellp):
+        on_cells = mat_table[mi, mat.CELL_P] > 0.0
+    if on_cells:
+        tau = mat_table[mi, 0] * (Fp @ Fp.transpose() - ti.Matrix.identity(ti.f32, 3))
+        if ti.static(report):
+            tau += mat_table[mi, 1] * ti.log(ti.max(Fp.determinant(), mat.MIN_J)) * ti.Matrix.identity(ti.f32, 3)
+    else:
+        if ti.static(fbar):
+            tau = fbar_stress_at(nh_only, Fp, jp, mi, mat_table, grid_vol, base, w, ny, nz, off)
+        else:
+            tau = elastic_stress(nh_only, Fp, jp, mi, mat_table)
+    return tau
 
 
 @ti.func
@@ -576,18 +623,20 @@ def fbar_stress_at(nh_only: ti.template(), Fp, jp, mi, mat_table: ti.template(),
 
 
 @ti.func
-def fbar_stress(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.template(),
+def report_stress(nh_only: ti.template(), fbar: ti.template(), cellp: ti.template(), order: ti.template(),
+        n: ti.template(), x: ti.template(),
         F: ti.template(), tau: ti.template(), Jp: ti.template(), matid: ti.template(),
         mat_table: ti.template(), ox: ti.template(), oy: ti.template(), oz: ti.template(),
         ny: ti.template(), nz: ti.template(), inv_dx: ti.template(), grid_vol: ti.template(),
         group: ti.template(), group_field: ti.template(), ncell: ti.template(), two_field: ti.template()):
-    """:func:`fbar_stress_at` for every particle (the stress reported after a step)."""
+    """:func:`stress_at` (whole, with ``report``) for every particle: the stress reported after a step."""
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
         p = order[ii]
         base, _fx, w = stencil(x[p], inv_dx, origin)
         off = field_offset(two_field, group_field, group, p, ncell)
-        tau[p] = fbar_stress_at(nh_only, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny, nz, off)
+        tau[p] = stress_at(nh_only, fbar, cellp, True, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny,
+                           nz, off)
 
 
 @ti.func
@@ -744,6 +793,228 @@ def bond_ghosts(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
                     grid_v[idx] = v_i + ratio * (vsum / wsum - v_m)
 
 
+# --------------------------------------------------------------------------- cell pressure
+# Nearly incompressible silicone (ν → 0.5) at the shear wave's time step. For a material with
+# ``mat.CELL_P`` (SolverSettings.pressure = "implicit") the Neo-Hookean stress splits into
+# μ(F Fᵀ - I), kept explicit on the particles, and the volume term λ ln J · I, taken as one
+# value per grid cell, π_c = λ mean_(p in c)(ln J_p) (F-bar's idea with the cell as the patch,
+# so the volume constraint is not counted once per particle), and solved backward Euler in
+# every substep. The cell's operator is built from its particles' own MLS gradients,
+# G_ci = Σ_(p in c) V0_p ∇w_ip (4³ nodes i per cell), so the force of the cell pressures,
+# f_i = -Σ_c G_ci π_c, and their rate, d(mean ln J)/dt = Σ_i G_ci·v_i / V_c, are exactly
+# those of the particles' transfers (an earlier try with trilinear cell gradients was not, and
+# lost half the volume stiffness: BENCHMARKS.md, issue 10, seventh step). Backward Euler,
+#     π⁺ = πⁿ + λ Δt Gᵀv⁺ / V,   v⁺ = v* - Δt M⁻¹ G π⁺   (free nodes; pinned ones keep v*),
+# gives the symmetric positive definite system of the cell values
+#     [diag(V/λ) + Δt² Gᵀ M⁻¹ G] π⁺ = diag(V/λ) πⁿ + Δt Gᵀ v*,
+# solved by Jacobi-preconditioned conjugate gradients from πⁿ (exact in equilibrium). Cells are
+# numbered each substep (``cell_slot``: box cell → slot, or -1) so the operator is stored only
+# for occupied cells. Particles keep their own F (J from their velocity gradient, as always).
+
+PRESSURE_TOL = 1e-4  # CG stops when the preconditioned residual norm falls below this share of its start
+CG_RZ, CG_RZ0, CG_DONE = NCHUNK, NCHUNK + 1, NCHUNK + 2  # rows of G.cg_sum after the chunk partial sums
+CG_ROWS = NCHUNK + 3
+
+
+@ti.func
+def number_cells(P: ti.template(), S: ti.template(), G: ti.template(), O: ti.template(), ntot, ncell, ny, nz,
+        inv_dx, origin, two_field: ti.template()):
+    """Number the cells that hold particles of cell-pressure materials: ``G.cell_slot[c]`` = slot
+    or -1, ``G.slot_cell[slot]`` = c, ``G.cell_count`` = (slots, 1 if capacity ran out); then
+    clear their ``cell_a`` and ``cell_G`` rows. In box order: bit-reproducible."""
+    for ii in range(S.counts[N_ACTIVE]):  # mark (every particle of a cell writes the same 1)
+        p = O.order[ii]
+        if S.mat_table[P.matid[p], mat.CELL_P] > 0.0:
+            off = field_offset(two_field, S.group_field, P.group, p, ncell)
+            cell = ti.cast(ti.floor(P.x[p] * inv_dx - origin), ti.i32)
+            G.cell_slot[off + (cell[0] * ny + cell[1]) * nz + cell[2]] = 1
+    G.cell_count[0] = 0
+    G.cell_count[1] = 0
+    cap = G.slot_cell.shape[0]
+    ti.loop_config(serialize=True)
+    for c in range(ntot):
+        if G.cell_slot[c] == 1:
+            k = G.cell_count[0]
+            if k < cap:
+                G.cell_slot[c] = k
+                G.slot_cell[k] = c
+                G.cell_count[0] = k + 1
+            else:
+                G.cell_slot[c] = -1
+                G.cell_count[1] = 1
+        else:
+            G.cell_slot[c] = -1
+    for k in range(G.cell_count[0]):
+        G.cell_a[k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+    for k in range(G.cell_count[0] * 64):
+        G.cell_G[k] = vec3(0.0)
+
+
+@ti.func
+def free_node(grid_m: ti.template(), grid_mk: ti.template(), idx):
+    """A node that carries mass and is not held by a link (its velocity is an unknown)."""
+    return grid_m[idx] > 0.0 and not pinned(grid_m, grid_mk, idx)
+
+
+@ti.func
+def cell_node(c, l, ny, nz):
+    """Flat index of the node at offset l ∈ {0..63} (4³, z fastest) from cell c's node c - (1, 1, 1)."""
+    return c + ((l // 16 - 1) * ny + (l // 4) % 4 - 1) * nz + l % 4 - 1
+
+
+@ti.func
+def gather_cells(G: ti.template(), S: ti.template(), comp: ti.template(), geo, coef):
+    """t_i = M⁻¹ Σ_c G_ci q_c on free nodes, 0 elsewhere, into ``G.grid_t``; q is component
+    ``comp`` of ``G.cell_b`` (0: π, 2: the CG direction). Slip walls drop the normal component
+    (a projection: the operator stays symmetric). geo = (ntot, ncell, ny, nz, ox, oy, oz),
+    coef = (Δt, 1/dx, dx, α)."""
+    ntot, ncell, ny, nz = geo[0], geo[1], geo[2], geo[3]
+    for idx in range(ntot):
+        t = vec3(0.0)
+        live = True
+        if ti.static(comp == 2):  # the CG direction: nothing to do once converged
+            live = G.cg_sum[CG_DONE] == 0.0
+        if live:
+            if free_node(G.grid_m, G.grid_mk, idx):
+                cc = idx % ncell
+                node = ti.Vector([cc // (ny * nz), (cc // nz) % ny, cc % nz])
+                for l in range(64):
+                    cell = node - ti.Vector([l // 16, (l // 4) % 4, l % 4]) + 1  # node = cell - 1 + offset l
+                    if cell.min() >= 0:
+                        slot = G.cell_slot[idx - cc + (cell[0] * ny + cell[1]) * nz + cell[2]]
+                        if slot >= 0:
+                            t += G.cell_b[slot][comp] * G.cell_G[slot * 64 + l]
+                t /= G.grid_m[idx]
+                n_walls = S.counts[N_WALLS]
+                if n_walls > 0:
+                    xi = (ti.Vector([geo[4], geo[5], geo[6]]) + node) * coef[2]
+                    for w in range(n_walls):
+                        ax = ti.cast(S.walls[w, 0], ti.i32)
+                        if S.walls[w, 2] * (xi[ax] - S.walls[w, 1]) <= 1e-9:
+                            t[ax] = 0.0
+        G.grid_t[idx] = t
+
+
+@ti.func
+def slot_sum(step: ti.template(), G: ti.template(), geo, coef, atomic: ti.template()):
+    """Σ_k step(G, k, geo, coef) over the numbered cells (a step may also update its cell):
+    in fixed chunks summed in a fixed order on the CPU (bit-reproducible), atomically on GPUs."""
+    n = G.cell_count[0]
+    total = 0.0
+    if ti.static(atomic):
+        G.cg_sum[0] = 0.0
+        for k in range(n):
+            ti.atomic_add(G.cg_sum[0], step(G, k, geo, coef))
+        total = G.cg_sum[0]
+    else:
+        for ch in range(NCHUNK):
+            s = 0.0
+            for k in range(ch * n // NCHUNK, (ch + 1) * n // NCHUNK):
+                s += step(G, k, geo, coef)
+            G.cg_sum[ch] = s
+        for ch in ti.static(range(NCHUNK)):
+            total += G.cg_sum[ch]
+    return total
+
+
+@ti.func
+def cell_apply(G: ti.template(), k, geo, u_scale):
+    """Σ_i G_ci·(u_scale[0] v_i - u_scale[1] t_i) over the 4³ nodes of numbered cell k
+    (v = ``grid_v``, t = ``grid_t``)."""
+    ny, nz = geo[2], geo[3]
+    c = G.slot_cell[k]
+    s = 0.0
+    for l in range(64):
+        i = cell_node(c, l, ny, nz)
+        s += G.cell_G[k * 64 + l].dot(u_scale[0] * G.grid_v[i] - u_scale[1] * G.grid_t[i])
+    return s
+
+
+@ti.func
+def cg_start(G: ti.template(), k, geo, coef):
+    """Cell k: the Jacobi diagonal V/λ + Δt² Σ_i |G_ci|²/m_i, and the residual at the guess πⁿ,
+    r = Δt Gᵀ(v* - Δt M⁻¹ G πⁿ), z = r / diag, p = z. Returns rᵀz."""
+    ny, nz = geo[2], geo[3]
+    dt = coef[0]
+    a = G.cell_a[k]
+    c = G.slot_cell[k]
+    diag = a[0] * a[0] / a[2]  # V/λ̄, λ̄ = Σ V0 λ / V
+    for l in range(64):
+        i = cell_node(c, l, ny, nz)
+        if free_node(G.grid_m, G.grid_mk, i):
+            diag += dt * dt * G.cell_G[k * 64 + l].norm_sqr() / G.grid_m[i]
+    r = dt * cell_apply(G, k, geo, ti.Vector([1.0, dt]))
+    G.cell_a[k][3] = diag
+    G.cell_b[k] = ti.Vector([G.cell_b[k][0], r, r / diag, 0.0])
+    return r * r / diag
+
+
+@ti.func
+def cg_apply(G: ti.template(), k, geo, coef):
+    """Cell k: (A p)_k = (V/λ̄) p_k + Δt² (Gᵀ t)_k with t = M⁻¹ G p; returns p_k (A p)_k."""
+    dt = coef[0]
+    pAp = 0.0
+    if G.cg_sum[CG_DONE] == 0.0:
+        a = G.cell_a[k]
+        p = G.cell_b[k][2]
+        Ap = p * a[0] * a[0] / a[2] + dt * dt * cell_apply(G, k, geo, ti.Vector([0.0, -1.0]))
+        G.cell_b[k][3] = Ap
+        pAp = p * Ap
+    return pAp
+
+
+@ti.func
+def cg_update(G: ti.template(), k, geo, coef):
+    """Cell k: π += α p, r -= α A p (α = coef[3]); returns the new rᵀz."""
+    b = G.cell_b[k]
+    alpha = coef[3]
+    r = b[1] - alpha * b[3]
+    G.cell_b[k][0] = b[0] + alpha * b[2]
+    G.cell_b[k][1] = r
+    return r * r / G.cell_a[k][3]
+
+
+@ti.func
+def pressure_solve(G: ti.template(), S: ti.template(), geo, dt, inv_dx, iters: ti.template(),
+        atomic: ti.template()):
+    """The cells' values π⁺ (see the section comment) by at most ``iters`` Jacobi-PCG iterations
+    from πⁿ, then v ← v* - Δt M⁻¹ G π⁺ on free nodes. Expects ``G.cell_a`` = (Σ V0, Σ V0 ln J,
+    Σ V0 λ, -) and ``G.cell_G`` of the numbered cells from :func:`p2g`."""
+    ntot = geo[0]
+    coef = ti.Vector([dt, inv_dx, 1.0 / inv_dx, 0.0])
+    for k in range(G.cell_count[0]):  # the guess πⁿ = λ̄ mean(ln J)
+        a = G.cell_a[k]
+        G.cell_b[k] = ti.Vector([a[1] * a[2] / (a[0] * a[0]), 0.0, 0.0, 0.0])
+    G.cg_sum[CG_DONE] = 0.0
+    gather_cells(G, S, 0, geo, coef)  # t = M⁻¹ G πⁿ
+    rz = slot_sum(cg_start, G, geo, coef, atomic)
+    G.cg_sum[CG_RZ0] = rz
+    if rz <= 0.0:
+        G.cg_sum[CG_DONE] = 1.0
+    for _it in ti.static(range(iters)):
+        gather_cells(G, S, 2, geo, coef)  # t = M⁻¹ G p
+        pAp = slot_sum(cg_apply, G, geo, coef, atomic)
+        alpha = 0.0
+        if G.cg_sum[CG_DONE] == 0.0 and pAp > 0.0:
+            alpha = rz / pAp
+        coef[3] = alpha
+        rz_new = slot_sum(cg_update, G, geo, coef, atomic)
+        beta = 0.0
+        if alpha != 0.0:
+            beta = rz_new / rz
+            rz = rz_new
+        if rz <= PRESSURE_TOL * PRESSURE_TOL * G.cg_sum[CG_RZ0]:
+            G.cg_sum[CG_DONE] = 1.0
+        for k in range(G.cell_count[0]):  # p = z + β p
+            if alpha != 0.0:
+                G.cell_b[k][2] = G.cell_b[k][1] / G.cell_a[k][3] + beta * G.cell_b[k][2]
+    G.cg_sum[CG_RZ] = rz
+    gather_cells(G, S, 0, geo, coef)  # t = M⁻¹ G π⁺
+    for idx in range(ntot):
+        if free_node(G.grid_m, G.grid_mk, idx):
+            G.grid_v[idx] = G.grid_v[idx] - dt * G.grid_t[idx]
+
+
 @ti.kernel
 def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI,
                    col_pose: NDF2, col_impulse: NDF2):
@@ -859,7 +1130,11 @@ Grid = ti.types.argpack(
     grid_mk=NDF, grid_mq=NDF, grid_link=NDI,  # kinematic mass, quasi-static mass, link of those
     grid_dp=NDV, grid_vol=NDV2,  # contact momentum [N s]; (Σ w V0, Σ w V0 J) for F-bar
     grid_vc=NDF, grid_ds=NDV,  # two fields: deformed volume Σ w V0 J [m³]; field 0's contact Δv [m/s]
-    grid_bond=NDV5)  # Σ w m (n, d, 1) of bound particles that know the bond surface (bond_ghosts)
+    grid_bond=NDV5,  # Σ w m (n, d, 1) of bound particles that know the bond surface (bond_ghosts)
+    # cell pressure (pressure_solve): box cell -> slot (-1: none), slot -> box cell, (slots, overflow)
+    cell_slot=NDI, slot_cell=NDI, cell_count=NDI,
+    cell_a=NDV4, cell_b=NDV4,  # per slot: (Σ V0, Σ V0 ln J, Σ V0 λ, CG diagonal); CG (π, r, p, Ap)
+    cell_G=NDV, grid_t=NDV, cg_sum=NDF)  # Σ V0 ∇w per slot and node (64 rows); M⁻¹Gq per node; CG sums
 Scene = ti.types.argpack(
     counts=NDI, consts=NDF,  # rows N_LINKS.., and DX.. [m, m/s², 1/s, 1/s, m, cells, -]
     mat_table=NDF2,  # materials.material_table rows
@@ -933,7 +1208,7 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
 
 @ti.kernel
 def advance(W: World, dt: ti.f32, fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template(),
-            two_field: ti.template(), atomic: ti.template()):
+            two_field: ti.template(), atomic: ti.template(), cellp: ti.template()):
     """One MLS-MPM substep of ``dt`` seconds on the box that :func:`prepare` left in
     ``W.O.active_box``: clear grid, (F-bar volume scatter), P2G, grid update + BCs,
     (contact between the two fields), collider contact, G2P.
@@ -942,14 +1217,15 @@ def advance(W: World, dt: ti.f32, fbar: ti.template(), contact_mode: ti.template
     ``nh_only``: every material is Neo-Hookean (no SVD compiled in).
     ``two_field``: groups of both velocity fields are awake (the grid arrays hold 2 boxes).
     ``atomic``: scatter with atomic adds, one thread per particle (GPUs), not by slabs.
+    ``cellp``: 0, or the most CG iterations of the cells' volume term (:func:`pressure_solve`).
     """
-    substep(W.P, W.G, W.S, W.O, dt, fbar, contact_mode, nh_only, two_field, atomic)
+    substep(W.P, W.G, W.S, W.O, dt, fbar, contact_mode, nh_only, two_field, atomic, cellp)
 
 
 @ti.func
 def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), dt,
             fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template(), two_field: ti.template(),
-            atomic: ti.template()):
+            atomic: ti.template(), cellp: ti.template()):
     """Body of :func:`advance` on the packs of its World (P, G, S, O)."""
     dx = S.consts[DX]
     inv_dx = 1.0 / dx
@@ -964,14 +1240,17 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     ncell = O.active_box[3] * ny * nz
     ntot = ncell * (2 if ti.static(two_field) else 1)
     clear_grid(ntot, G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_dp, G.grid_vol, G.grid_vc, G.grid_ds,
-               G.grid_bond, two_field)
+               G.grid_bond, two_field, cellp, G.cell_slot)
+    if ti.static(cellp):
+        number_cells(P, S, G, O, ntot, ncell, ny, nz, inv_dx, ti.Vector([ox, oy, oz]), two_field)
     if ti.static(fbar):
-        volume_scatter(O.order, O.slab_start, n_slabs, P.x, P.F, P.vol, P.kind, ox, oy, oz, ny, nz, inv_dx,
-                       G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
+        volume_scatter(O.order, O.slab_start, n_slabs, P.x, P.F, P.vol, P.kind, P.matid, S.mat_table, ox, oy, oz,
+                       ny, nz, inv_dx, G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
     p2g(gravity, O.order, O.slab_start, n_slabs, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.mass, P.vol, P.kind,
         P.link, P.matid, S.mat_table, P.group, S.group_qs, ox, oy, oz, ny, nz, inv_dx, dt,
         G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only,
-        S.group_field, ncell, two_field, G.grid_vc, P.bond, S.link_frames, G.grid_bond, atomic)
+        S.group_field, ncell, two_field, G.grid_vc, P.bond, S.link_frames, G.grid_bond, atomic,
+        cellp, G.cell_slot, G.cell_a, G.cell_G)
     grid_update(ntot, ncell, ox, oy, oz, ny, nz, dx, dt, damping, relax,
                 G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
                 1 if ti.static(contact_mode == 2) else 0, n_col, S.col_kind, S.col_prm, S.col_frames,
@@ -981,6 +1260,11 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     if bond_on:
         bond_ghosts(ntot, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
                     G.grid_link, S.link_frames)
+    if ti.static(cellp):
+        pressure_solve(G, S, ti.Vector([ntot, ncell, ny, nz, ox, oy, oz]), dt, inv_dx, cellp, atomic)
+        if bond_on:  # the pressure moved free nodes near the bond: the ghosts follow
+            bond_ghosts(ntot, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
+                        G.grid_link, S.link_frames)
     if ti.static(two_field):
         field_contact(ncell, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_mk, G.grid_vc, G.grid_ds)
     if ti.static(contact_mode == 1):
@@ -995,27 +1279,30 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
                         G.grid_link, S.link_frames)
     g2p(nh_only, O.order, n, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.kind, P.matid, S.mat_table, P.group,
         S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, fbar,
-        S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id)
+        S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id, cellp)
 
 
 @ti.kernel
-def fbar_update(W: World, nh_only: ti.template(), two_field: ti.template(), atomic: ti.template()):
-    """The F-bar stress of every particle at its current F and position, on the box from
+def fbar_update(W: World, nh_only: ti.template(), two_field: ti.template(), atomic: ti.template(),
+                fbar: ti.template(), cellp: ti.template()):
+    """The stress of every particle at its current F and position (F-bar; the whole
+    Neo-Hookean stress where the volume term is solved on cells), on the box from
     :func:`prepare`: the substeps evaluate it in P2G, this leaves it current after a step."""
-    stress_pass(W.P, W.G, W.S, W.O, nh_only, two_field, atomic)
+    stress_pass(W.P, W.G, W.S, W.O, nh_only, two_field, atomic, fbar, cellp)
 
 
 @ti.func
 def stress_pass(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), nh_only: ti.template(),
-                two_field: ti.template(), atomic: ti.template()):
+                two_field: ti.template(), atomic: ti.template(), fbar: ti.template(), cellp: ti.template()):
     """Body of :func:`fbar_update`."""
     inv_dx = 1.0 / S.consts[DX]
     ox, oy, oz = O.active_box[0], O.active_box[1], O.active_box[2]
     ny, nz = O.active_box[4], O.active_box[5]
     ncell = O.active_box[3] * ny * nz
-    for i in range(ncell * (2 if ti.static(two_field) else 1)):
-        G.grid_vol[i] = ti.Vector([0.0, 0.0])
-    volume_scatter(O.order, O.slab_start, O.active_box[6], P.x, P.F, P.vol, P.kind, ox, oy, oz, ny, nz, inv_dx,
-                   G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
-    fbar_stress(nh_only, O.order, S.counts[N_ACTIVE], P.x, P.F, P.tau, P.Jp, P.matid, S.mat_table,
+    if ti.static(fbar):
+        for i in range(ncell * (2 if ti.static(two_field) else 1)):
+            G.grid_vol[i] = ti.Vector([0.0, 0.0])
+        volume_scatter(O.order, O.slab_start, O.active_box[6], P.x, P.F, P.vol, P.kind, P.matid, S.mat_table,
+                       ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
+    report_stress(nh_only, fbar, cellp, O.order, S.counts[N_ACTIVE], P.x, P.F, P.tau, P.Jp, P.matid, S.mat_table,
                 ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_field, ncell, two_field)

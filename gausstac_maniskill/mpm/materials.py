@@ -26,18 +26,26 @@ from ..config import MODELS, Material
 MODEL_IDS = {name: i for i, name in enumerate(MODELS)}
 NEO_HOOKEAN, FIXED_COROTATED, FOAM = (MODEL_IDS[m] for m in ("neo_hookean", "fixed_corotated", "foam"))
 
-#: Columns of the material table: mu, lam, model id, yield_compression, yield_stretch, hardening, density.
-TABLE_COLUMNS = ("mu", "lam", "model", "theta_c", "theta_s", "hardening", "density")
+#: Columns of the material table: mu, lam, model id, yield_compression, yield_stretch, hardening, density,
+#: and 1 where the λ ln J term is solved implicitly on the grid's cells (``kernels.pressure_solve``).
+TABLE_COLUMNS = ("mu", "lam", "model", "theta_c", "theta_s", "hardening", "density", "cell_pressure")
+CELL_P = TABLE_COLUMNS.index("cell_pressure")
 MIN_J = 0.05
 
 
-def material_table(materials: list[Material]) -> np.ndarray:
-    """Pack materials into a float32 table [M, 8] (columns ``TABLE_COLUMNS``, one pad column).
+def cell_pressure(material: Material, pressure: str) -> bool:
+    """Whether ``material``'s λ ln J term is solved implicitly on cells under
+    ``SolverSettings.pressure`` (Neo-Hookean materials only; the others stay explicit)."""
+    return pressure == "implicit" and material.model == "neo_hookean"
+
+
+def material_table(materials: list[Material], pressure: str = "explicit") -> np.ndarray:
+    """Pack materials into a float32 table [M, 8] (columns ``TABLE_COLUMNS``).
     The density column is the physical density [kg/m^3]: it gives particles their weight."""
     table = np.zeros((max(len(materials), 1), 8), np.float32)
     for i, m in enumerate(materials):
-        table[i, :7] = (m.mu, m.lam, MODEL_IDS[m.model], m.yield_compression,
-                        m.yield_stretch, m.hardening, m.density)
+        table[i] = (m.mu, m.lam, MODEL_IDS[m.model], m.yield_compression,
+                    m.yield_stretch, m.hardening, m.density, float(cell_pressure(m, pressure)))
     return table
 
 

@@ -57,7 +57,7 @@ from ..transforms import as_pose_matrix, matrix_to_quat, quat_to_matrix
 from . import kernels as K
 from .colliders import Collider, MeshCollider
 from .kinematics import FRAME
-from .materials import material_table
+from .materials import cell_pressure, material_table
 from .patch import ActivePatch, bind_in_place, carry_rigidly, groups_in_contact, rest_gap
 
 __all__ = ["MPMWorld", "StepInfo", "Group"]
@@ -452,9 +452,12 @@ class MPMWorld:
         return float(e[0]), float(e[1])
 
     def wave_speed(self) -> float:
-        """Largest P-wave speed [m/s] of the awake groups (quasi-static ones with their pseudo-mass)."""
-        speeds = [g.material.wave_speed / math.sqrt(g.mass_scale)
-                  for g in self.groups if g.awake and g.count > g.n_kinematic]
+        """Largest explicit wave speed [m/s] of the awake groups (quasi-static ones with their
+        pseudo-mass): the P-wave √((λ+2μ)/ρ), or √(2μ/ρ) where the volume term λ ln J is
+        solved implicitly on cells (``SolverSettings.pressure``)."""
+        speeds = [(math.sqrt(2.0 * g.material.mu / g.material.density)
+                   if cell_pressure(g.material, self.settings.pressure) else g.material.wave_speed)
+                  / math.sqrt(g.mass_scale) for g in self.groups if g.awake and g.count > g.n_kinematic]
         return max(speeds, default=0.0)
 
     # ------------------------------------------------------------------ driving
@@ -631,12 +634,18 @@ class MPMWorld:
                 break
             cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub)
         self._check_health()
+        if self._stress_flags()[1] and self._n_active and int(d["cell_count"].to_numpy()[1]):
+            raise SimulationError(
+                f"the cell pressure ran out of cell slots at step {self.step_count + 1} ({d['slot_cell'].shape[0]} "
+                f"for {self._n} particles): the material spread to more than one cell per two particles. "
+                f"Use SolverSettings(pressure='explicit') for such strongly expanding bodies.")
         if self._n_active and n_sub:
             # kinematic particles onto the link's end pose (the substeps place them at each
             # substep's start); with F-bar the stress is then brought up to the final F
             self._prepare(1.0, 1.0 + 1e-6, dt_sub)
-            if self.settings.fbar:
-                K.fbar_update(self._world_pack(), self._nh_only(), self._two_fields, self._atomic)
+            fbar, cellp = self._stress_flags()
+            if fbar or cellp:
+                K.fbar_update(self._world_pack(), self._nh_only(), self._two_fields, self._atomic, fbar, cellp)
         if frozen is not None and len(frozen):
             carry_rigidly(d["patch_frozen"], len(frozen), float(dt), d["link_pose"], d["x"], d["v"], d["C"],
                           d["F"], d["tau"], d["impulse"], d["contact_id"], d["link"])
@@ -761,11 +770,18 @@ class MPMWorld:
     def _nh_only(self) -> bool:
         return all(m.model == "neo_hookean" for m in self.materials)
 
-    def _substep(self, a0: float, a1: float, dt: float) -> int:
+    def _stress_flags(self) -> tuple[bool, int]:
+        """(F-bar for some material, CG iterations of the cells' volume term or 0): the kernels'
+        compile-time switches for this world's materials."""
         s = self.settings
+        cells = [cell_pressure(m, s.pressure) for m in self.materials]
+        return bool(s.fbar) and not all(cells), (int(s.pressure_iterations) if any(cells) else 0)
+
+    def _substep(self, a0: float, a1: float, dt: float) -> int:
         box = self._prepare(a0, a1, dt)
         mode = 0 if not self.colliders else (1 if self.contact == "particle" else 2)
-        K.advance(self._world_pack(), dt, bool(s.fbar), mode, self._nh_only(), self._two_fields, self._atomic)
+        fbar, cellp = self._stress_flags()
+        K.advance(self._world_pack(), dt, fbar, mode, self._nh_only(), self._two_fields, self._atomic, cellp)
         return int(box[3] * box[4] * box[5])
 
     def _upload_consts(self) -> None:
@@ -789,11 +805,30 @@ class MPMWorld:
         d["grid_vc"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_ds"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         d["grid_bond"] = ti.Vector.ndarray(5, ti.f32, shape=cap)
+        d["cell_slot"] = ti.ndarray(ti.i32, shape=cap)
+        d["grid_t"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         self._grid_cap = cap
+        self._alloc_cells()
+
+    def _alloc_cells(self) -> None:
+        """Per-cell arrays of the cell pressure (kernels.pressure_solve): room for one occupied cell
+        per two particles (8 per cell when seeded; kernels.number_cells flags an overflow, which
+        step() reports); and the Grid pack."""
+        d = self._dev
+        cells = max(self._n // 2, 1) + 64 if self._stress_flags()[1] else 1
+        if d.get("slot_cell") is None or d["slot_cell"].shape[0] != cells:
+            d["slot_cell"] = ti.ndarray(ti.i32, shape=cells)
+            d["cell_a"] = ti.Vector.ndarray(4, ti.f32, shape=cells)
+            d["cell_b"] = ti.Vector.ndarray(4, ti.f32, shape=cells)
+            d["cell_G"] = ti.Vector.ndarray(3, ti.f32, shape=cells * 64)
+        if d.get("cell_count") is None:
+            d["cell_count"] = ti.ndarray(ti.i32, shape=2)
+            d["cg_sum"] = ti.ndarray(ti.f32, shape=K.CG_ROWS)
         self._pack["W"] = None
         self._pack["G"] = K.Grid(**{k: d[k] for k in ("grid_v", "grid_m", "grid_mk", "grid_mq", "grid_link",
                                                        "grid_dp", "grid_vol", "grid_vc", "grid_ds",
-                                                       "grid_bond")})
+                                                       "grid_bond", "cell_slot", "slot_cell", "cell_count",
+                                                       "cell_a", "cell_b", "cell_G", "grid_t", "cg_sum")})
 
     def _explode_message(self, lo, hi) -> str:
         x = self._dev["x"].to_numpy()
@@ -893,7 +928,7 @@ class MPMWorld:
         d["box"] = ti.ndarray(ti.i32, shape=K.BOX)
         d["first_bad"] = ti.ndarray(ti.i32, shape=K.NCHUNK)
         d["vmax_chunk"] = ti.ndarray(ti.f32, shape=K.NCHUNK)
-        upload("mat_table", material_table(self.materials), ti.f32)
+        upload("mat_table", material_table(self.materials, self.settings.pressure), ti.f32)
         upload("group_qs", np.array([int(g.quasi_static) for g in self.groups] or [0], np.int32), ti.i32)
         upload("group_field", np.array([g.field for g in self.groups] or [0], np.int32), ti.i32)
         walls = np.array(self._walls, np.float32).reshape(-1, 3)
@@ -935,6 +970,8 @@ class MPMWorld:
         self._build_packs()
         if self._grid_cap == 0:
             self._alloc_grid(4096)
+        else:
+            self._alloc_cells()  # the awake particle count may have changed
         self._link_radius = []
         for i in range(len(self.link_names)):
             mask = (h["link"] == i) & (h["kind"] == 1) if self._n else np.zeros(0, bool)

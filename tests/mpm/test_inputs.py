@@ -98,6 +98,10 @@ def test_bad_bond_surface_is_named():
                         bond_normal=[0.0, 0.0, 1.0])
     with pytest.raises(ConfigError, match=r"SolverSettings.bond='glue' must be 'surface' or 'nodes'"):
         SolverSettings(bond="glue")
+    with pytest.raises(ConfigError, match=r"SolverSettings.pressure='sometimes' must be 'explicit' or 'implicit'"):
+        SolverSettings(pressure="sometimes")
+    with pytest.raises(ConfigError, match=r"SolverSettings.pressure_iterations=0 must be an integer in 1..200"):
+        SolverSettings(pressure_iterations=0)
     world.add_group("pad", pts, Material(), link="base", kinematic=kin)  # nothing was lost: the name is free
 
 
