@@ -18,6 +18,10 @@ Time integration differs by kind of group (explicit MLS-MPM substeps for all):
   within a control step. Their kinematic core holds them, so the pseudo-mass never
   shows as a wrong fall or swing of the pad; weight always uses the physical mass.
 
+With ``SolverSettings.pressure = "implicit"`` the λ ln J term of Neo-Hookean groups is one
+value per grid cell, solved backward Euler in every substep (``kernels.pressure_solve``); the
+rest of the stress stays explicit, and the substep follows √(2μ/ρ) instead of the P-wave.
+
 Each :meth:`MPMWorld.step` advances one control step Δt_ctrl: link and collider
 poses move from the previous pose to the one last set (position lerp, rotation
 slerp per substep); the substep count comes from the CFL bound
