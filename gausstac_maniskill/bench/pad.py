@@ -184,8 +184,8 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
     "phases": [...]}``; each phase (``"press"`` / ``"slide"`` at depth ``d`` [m]) holds
     hold-step means of ``Fn``, ``Ft``, ``Fy``, ``F_map`` [N], ``F_spread`` (max−min)/mean
-    of Fn, ``Fn_end`` and ``F_stress_end`` (means over the second half of the hold: the settled end)
-    of Fn, ``area_taxel``, ``area_particle`` [m²], ``peak_depth`` [m] and ``maps``
+    of Fn, ``Fn_end``, ``F_stress_end`` and ``F_pressure_end`` (means over the second half of the
+    hold: the settled end), ``area_taxel``, ``area_particle`` [m²], ``peak_depth`` [m] and ``maps``
     (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
     """
     t0 = time.perf_counter()
@@ -219,10 +219,11 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
         maps = {k: np.mean([m[k] for m in ms], axis=0) for k in MAPS}
         Fn = float(Fs[:, 2].mean())
         end = len(Fs) // 2
-        return dict(phase=phase, d=d, Fn=Fn, Fn_end=float(Fs[end:, 2].mean()),
-                    F_stress_end=float(np.mean([f[0] for f in Fstress[end:]])), Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
-                    F_map=float(maps["force"].sum()), F_stress=float(np.mean([f[0] for f in Fstress])),
-                    F_pressure=float(np.mean([f[1] for f in Fstress])),
+        stress, pressure = np.array(Fstress).T
+        return dict(phase=phase, d=d, Fn=Fn, Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
+                    F_map=float(maps["force"].sum()), F_stress=float(stress.mean()), F_pressure=float(pressure.mean()),
+                    Fn_end=float(Fs[end:, 2].mean()), F_stress_end=float(stress[end:].mean()),
+                    F_pressure_end=float(pressure[end:].mean()),
                     F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
                     area_taxel=float((maps["force"] > AREA_FORCE).sum() * taxel_area),
                     area_particle=float(np.mean(areas)), peak_depth=float(maps["depth"].max()), maps=maps)
@@ -414,7 +415,7 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
                              particles=c["particles"],
                              substeps=c["substeps"],
                              step_ms=c["step_ms"], Fn=c["phases"][0]["Fn_end"], F_spread=c["phases"][0]["F_spread"],
-                             F_stress=c["phases"][0]["F_stress_end"], F_pressure=c["phases"][0]["F_pressure"]))
+                             F_stress=c["phases"][0]["F_stress_end"], F_pressure=c["phases"][0]["F_pressure_end"]))
     from ..cosim import default_hand_settings
 
     default_ms = default_hand_settings().mass_scaling

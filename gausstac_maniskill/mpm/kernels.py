@@ -325,10 +325,7 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
                     v_link, omega, t0 = link_motion_at(link_frames, grid_link[idx], xi, dt)
                     vel += dt * omega.cross(omega.cross(xi - t0))
                     vel = v_link + relax * (vel - v_link)
-                for w in range(n_walls):
-                    ax = ti.cast(walls[w, 0], ti.i32)
-                    if walls[w, 2] * (xi[ax] - walls[w, 1]) <= 1e-9:
-                        vel[ax] = 0.0
+                vel = slip_walls(walls, n_walls, xi, vel)
                 if grid_contact:
                     for c in range(n_col):
                         phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, xi, dt)
@@ -363,6 +360,18 @@ def node_position(idx, ncell: ti.template(), ox: ti.template(), oy: ti.template(
     cell = idx % ncell
     i, j, k = cell // (ny * nz), (cell // nz) % ny, cell % nz
     return ti.Vector([ox + i, oy + j, oz + k], ti.f32) * dx
+
+
+@ti.func
+def slip_walls(walls: ti.template(), n_walls, xi, v):
+    """The vector v with its normal component dropped on every slip wall (symmetry plane,
+    bilateral) that node position xi [m] lies on or beyond."""
+    out = v
+    for w in range(n_walls):
+        ax = ti.cast(walls[w, 0], ti.i32)
+        if walls[w, 2] * (xi[ax] - walls[w, 1]) <= 1e-9:
+            out[ax] = 0.0
+    return out
 
 
 @ti.func
@@ -727,12 +736,7 @@ def contact_apply(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), 
         dp = grid_dp[idx]
         if m > 0.0 and not pinned(grid_m, grid_mk, idx) and dp.norm_sqr() > 0.0:
             xi = node_position(idx, ncell, ox, oy, oz, ny, nz, dx)
-            dv = dp / m
-            for w in range(n_walls):
-                ax = ti.cast(walls[w, 0], ti.i32)
-                if walls[w, 2] * (xi[ax] - walls[w, 1]) <= 1e-9:
-                    dv[ax] = 0.0
-            grid_v[idx] = grid_v[idx] + dv
+            grid_v[idx] = grid_v[idx] + slip_walls(walls, n_walls, xi, dp / m)
 
 
 @ti.func
@@ -866,7 +870,7 @@ def cell_node(c, l, ny, nz):
 def gather_cells(G: ti.template(), S: ti.template(), comp: ti.template(), geo, coef):
     """t_i = M⁻¹ Σ_c G_ci q_c on free nodes, 0 elsewhere, into ``G.grid_t``; q is component
     ``comp`` of ``G.cell_b`` (0: π, 2: the CG direction). Slip walls drop the normal component
-    (a projection: the operator stays symmetric). geo = (ntot, ncell, ny, nz, ox, oy, oz),
+    (:func:`slip_walls`, a projection: the operator stays symmetric). geo = (ntot, ncell, ny, nz, ox, oy, oz),
     coef = (Δt, 1/dx, dx, α)."""
     ntot, ncell, ny, nz = geo[0], geo[1], geo[2], geo[3]
     for idx in range(ntot):
@@ -884,14 +888,8 @@ def gather_cells(G: ti.template(), S: ti.template(), comp: ti.template(), geo, c
                         slot = G.cell_slot[idx - cc + (cell[0] * ny + cell[1]) * nz + cell[2]]
                         if slot >= 0:
                             t += G.cell_b[slot][comp] * G.cell_G[slot * 64 + l]
-                t /= G.grid_m[idx]
-                n_walls = S.counts[N_WALLS]
-                if n_walls > 0:
-                    xi = (ti.Vector([geo[4], geo[5], geo[6]]) + node) * coef[2]
-                    for w in range(n_walls):
-                        ax = ti.cast(S.walls[w, 0], ti.i32)
-                        if S.walls[w, 2] * (xi[ax] - S.walls[w, 1]) <= 1e-9:
-                            t[ax] = 0.0
+                xi = node_position(idx, ncell, geo[4], geo[5], geo[6], ny, nz, coef[2])
+                t = slip_walls(S.walls, S.counts[N_WALLS], xi, t / G.grid_m[idx])
         G.grid_t[idx] = t
 
 
@@ -918,15 +916,18 @@ def slot_sum(step: ti.template(), G: ti.template(), geo, coef, atomic: ti.templa
 
 
 @ti.func
-def cell_apply(G: ti.template(), k, geo, u_scale):
-    """Σ_i G_ci·(u_scale[0] v_i - u_scale[1] t_i) over the 4³ nodes of numbered cell k
-    (v = ``grid_v``, t = ``grid_t``)."""
+def cell_apply(G: ti.template(), k, geo, with_v: ti.template(), t_scale):
+    """Σ_i G_ci·u_i over the 4³ nodes of numbered cell k, u = v - t_scale·t with ``with_v``
+    (v = ``grid_v``), else u = t (t = ``grid_t``)."""
     ny, nz = geo[2], geo[3]
     c = G.slot_cell[k]
     s = 0.0
     for l in range(64):
         i = cell_node(c, l, ny, nz)
-        s += G.cell_G[k * 64 + l].dot(u_scale[0] * G.grid_v[i] - u_scale[1] * G.grid_t[i])
+        u = G.grid_t[i]
+        if ti.static(with_v):
+            u = G.grid_v[i] - t_scale * u
+        s += G.cell_G[k * 64 + l].dot(u)
     return s
 
 
@@ -943,7 +944,7 @@ def cg_start(G: ti.template(), k, geo, coef):
         i = cell_node(c, l, ny, nz)
         if free_node(G.grid_m, G.grid_mk, i):
             diag += dt * dt * G.cell_G[k * 64 + l].norm_sqr() / G.grid_m[i]
-    r = dt * cell_apply(G, k, geo, ti.Vector([1.0, dt]))
+    r = dt * cell_apply(G, k, geo, True, dt)
     G.cell_a[k][3] = diag
     G.cell_b[k] = ti.Vector([G.cell_b[k][0], r, r / diag, 0.0])
     return r * r / diag
@@ -957,7 +958,7 @@ def cg_apply(G: ti.template(), k, geo, coef):
     if G.cg_sum[CG_DONE] == 0.0:
         a = G.cell_a[k]
         p = G.cell_b[k][2]
-        Ap = p * a[0] * a[0] / a[2] + dt * dt * cell_apply(G, k, geo, ti.Vector([0.0, -1.0]))
+        Ap = p * a[0] * a[0] / a[2] + dt * dt * cell_apply(G, k, geo, False, 0.0)
         G.cell_b[k][3] = Ap
         pAp = p * Ap
     return pAp

@@ -157,6 +157,7 @@ class MPMWorld:
         self._pack: dict = {}  # kernel argument packs (kernels.Particles, Grid, Scene, Order)
         self._atomic = atomic_scatter()
         self._two_fields = False  # set by _push from the awake groups' fields
+        self._fbar, self._cellp = bool(self.settings.fbar), 0  # kernel switches, set by _push (_stress_flags)
         r = self.settings.patch_radius
         self._patch = ActivePatch(r, self.settings.dx) if r else None
         self._patched: list[int] = []  # groups simulated by patch in the current step
@@ -638,7 +639,7 @@ class MPMWorld:
                 break
             cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub)
         self._check_health()
-        if self._stress_flags()[1] and self._n_active and int(d["cell_count"].to_numpy()[1]):
+        if self._cellp and self._n_active and int(d["cell_count"].to_numpy()[1]):
             raise SimulationError(
                 f"the cell pressure ran out of cell slots at step {self.step_count + 1} ({d['slot_cell'].shape[0]} "
                 f"for {self._n} particles): the material spread to more than one cell per two particles. "
@@ -647,9 +648,9 @@ class MPMWorld:
             # kinematic particles onto the link's end pose (the substeps place them at each
             # substep's start); with F-bar the stress is then brought up to the final F
             self._prepare(1.0, 1.0 + 1e-6, dt_sub)
-            fbar, cellp = self._stress_flags()
-            if fbar or cellp:
-                K.fbar_update(self._world_pack(), self._nh_only(), self._two_fields, self._atomic, fbar, cellp)
+            if self._fbar or self._cellp:
+                K.fbar_update(self._world_pack(), self._nh_only(), self._two_fields, self._atomic, self._fbar,
+                              self._cellp)
         if frozen is not None and len(frozen):
             carry_rigidly(d["patch_frozen"], len(frozen), float(dt), d["link_pose"], d["x"], d["v"], d["C"],
                           d["F"], d["tau"], d["impulse"], d["contact_id"], d["link"])
@@ -784,8 +785,8 @@ class MPMWorld:
     def _substep(self, a0: float, a1: float, dt: float) -> int:
         box = self._prepare(a0, a1, dt)
         mode = 0 if not self.colliders else (1 if self.contact == "particle" else 2)
-        fbar, cellp = self._stress_flags()
-        K.advance(self._world_pack(), dt, fbar, mode, self._nh_only(), self._two_fields, self._atomic, cellp)
+        K.advance(self._world_pack(), dt, self._fbar, mode, self._nh_only(), self._two_fields, self._atomic,
+                  self._cellp)
         return int(box[3] * box[4] * box[5])
 
     def _upload_consts(self) -> None:
@@ -819,7 +820,7 @@ class MPMWorld:
         per two particles (8 per cell when seeded; kernels.number_cells flags an overflow, which
         step() reports); and the Grid pack."""
         d = self._dev
-        cells = max(self._n // 2, 1) + 64 if self._stress_flags()[1] else 1
+        cells = max(self._n // 2, 1) + 64 if self._cellp else 1
         if d.get("slot_cell") is None or d["slot_cell"].shape[0] != cells:
             d["slot_cell"] = ti.ndarray(ti.i32, shape=cells)
             d["cell_a"] = ti.Vector.ndarray(4, ti.f32, shape=cells)
@@ -913,6 +914,7 @@ class MPMWorld:
         self._n_active, self._n_kin = len(active), len(active_kin)
         # groups of both velocity fields awake (see add_group's ``field``): two grid copies
         self._two_fields = len({g.field for g in self.groups if g.awake}) == 2
+        self._fbar, self._cellp = self._stress_flags()  # from the materials, which only _push sees change
         # with the active patch the lists are rewritten every step: room for every particle
         room = n if self._patch is not None else 1
         upload("active", np.resize(active, max(len(active), room)), ti.i32)
@@ -975,7 +977,7 @@ class MPMWorld:
         if self._grid_cap == 0:
             self._alloc_grid(4096)
         else:
-            self._alloc_cells()  # the awake particle count may have changed
+            self._alloc_cells()  # the particle count or the materials may have changed
         self._link_radius = []
         for i in range(len(self.link_names)):
             mask = (h["link"] == i) & (h["kind"] == 1) if self._n else np.zeros(0, bool)
