@@ -659,7 +659,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         col_prm: ti.template(), col_frames: ti.template(), col_mu: ti.template(),
         col_sticky: ti.template(), sdf: ti.template(), sdf_info: ti.template(),
         max_push: ti.template(), reach: ti.template(), group: ti.template(), group_field: ti.template(),
-        ncell: ti.template(), two_field: ti.template(), atomic: ti.template()):
+        ncell: ti.template(), two_field: ti.template(), atomic: ti.template(), anchor: ti.template()):
     """Particle-detected contact, applied as momentum on the grid (of the particle's field).
 
     For each dynamic particle near a collider, its free velocity v* is gathered
@@ -674,6 +674,21 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
     that reaches free nodes, Σ_free w_ip · m_p Δv: that is the impulse the pad really
     exchanged, stored per particle (contact forces / tactile) and, negated, acting on
     the collider.
+
+    Static friction holds a position, not a velocity. A particle that sticks keeps an
+    anchor, the point of the collider it stuck to (in the collider's frame, ``anchor``).
+    While it stays in contact, the tangential change asked for is the one that brings its
+    predicted position back onto the anchor, -d_t/Δt (d_t the tangential drift from the
+    anchor), not only the one that cancels its present slip velocity. The impulse of one
+    particle reaches its nodes only in part (the rest of their mass belongs to other
+    particles), so a velocity-level stick removes only that part of the slip in every
+    substep and a loaded contact creeps at a speed proportional to its shear load: a
+    held, sheared pad let go of 79 % of its tangential force in 0.4 s, at μ = 0.5 and 5
+    alike (``bench pad`` plate slide, 2026-11-23). With the anchor the drift the partial impulses
+    leave is taken back in the next substep, like the normal penetration. Where
+    |d_t|/Δt exceeds μ times the normal velocity change the particle slides (Coulomb),
+    its friction opposes the drift, and its anchor moves to where it is predicted to end
+    the substep. A particle that leaves contact forgets its anchor.
     Slab-ordered like :func:`p2g` (atomic-free and deterministic), or atomic.
     """
     origin = ti.Vector([ox, oy, oz])
@@ -689,6 +704,8 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                         phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, x[p], dt)
                         if phi - radius[p] < reach:
                             near = True
+                    stuck_to = -1  # collider whose anchor the particle keeps after this substep
+                    slid = False
                     if near:
                         base, fx, w = stencil(x[p], inv_dx, origin)
                         off = field_offset(two_field, group_field, group, p, ncell)
@@ -704,15 +721,29 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                             if gap < 0.0:
                                 dvn = ti.min(-gap / dt, max_push)
                                 vrel = vp - vc
-                                vt = vrel - vrel.dot(nrm) * nrm
-                                vtn = vt.norm()
-                                dvt = vec3(0.0)
-                                if col_sticky[c] or vtn <= col_mu[c] * dvn:
-                                    dvt = -vt
-                                else:
-                                    dvt = -(col_mu[c] * dvn / vtn) * vt
+                                want = -(vrel - vrel.dot(nrm) * nrm)  # stop the slip (first contact)
+                                _R0, _t0, R1, t1 = frame_at(col_frames, c)
+                                if ti.cast(anchor[p][3], ti.i32) == c:  # back onto the anchor
+                                    a = ti.Vector([anchor[p][0], anchor[p][1], anchor[p][2]])
+                                    drift = x[p] + dt * vp - (R1 @ a + t1)
+                                    want = -(drift - drift.dot(nrm) * nrm) / dt
+                                wn = want.norm()
+                                if wn > max_push:  # a jump of the anchor (a teleported collider) is not a load
+                                    want *= max_push / wn
+                                    wn = max_push
+                                dvt = want
+                                if not col_sticky[c] and wn > col_mu[c] * dvn:  # Coulomb: it slides
+                                    dvt = (col_mu[c] * dvn / wn) * want
+                                    slid = True
                                 vp = vp + dvn * nrm + dvt
                                 contact_id[p] = c
+                                if ti.cast(anchor[p][3], ti.i32) != c:
+                                    slid = True  # a new contact: anchor where it ends this substep
+                                stuck_to = c
+                        if stuck_to >= 0 and slid:
+                            _R0, _t0, R1, t1 = frame_at(col_frames, stuck_to)
+                            a = R1.transpose() @ (x[p] + dt * vp - t1)
+                            anchor[p] = ti.Vector([a[0], a[1], a[2], ti.cast(stuck_to, ti.f32)])
                         if contact_id[p] >= 0:
                             J = mass[p] * (vp - v0)
                             free = 0.0
@@ -723,6 +754,8 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                 if not pinned(grid_m, grid_mk, idx):
                                     free += wi
                             impulse[p] += free * J
+                    if stuck_to < 0:
+                        anchor[p][3] = -1.0
 
 
 @ti.func
@@ -1123,6 +1156,7 @@ DX, GX, GY, GZ, DAMPING, RELAXATION, REACH, MARGIN, FIELD_MU, BOND = range(10)
 Particles = ti.types.argpack(  # member names are unique over the packs (Taichi flattens them)
     x=NDV, v=NDV, C=NDM, F=NDM, tau=NDM, Jp=NDF,  # state: position [m], velocity, APIC C, F, τ [Pa], plastic J
     impulse=NDV, contact_id=NDI,  # contact impulse [N s] of this control step, collider touched
+    anchor=NDV4,  # static friction: stuck point in its collider's frame [m], and that collider (-1: none)
     mass=NDF, vol=NDF, radius=NDF,  # mass [kg], rest volume [m³], contact radius [m]
     kind=NDI, link=NDI, matid=NDI, group=NDI,  # DYNAMIC | KINEMATIC, link, material row, group
     bond=NDV4)  # bound particles: normal of the bond surface (link frame), signed distance [m] (0: none)
@@ -1272,7 +1306,7 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
         contact_scatter(O.order, O.slab_start, n_slabs, P.x, P.kind, P.mass, P.radius, P.impulse,
                         P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp,
                         n_col, S.col_kind, S.col_prm, S.col_frames, S.col_mu, S.col_sticky, S.sdf, S.sdf_info,
-                        max_push, reach, P.group, S.group_field, ncell, two_field, atomic)
+                        max_push, reach, P.group, S.group_field, ncell, two_field, atomic, P.anchor)
         contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls,
                       n_walls)
         if bond_on:  # the contact moved free nodes near the bond: the ghosts follow

@@ -77,7 +77,14 @@ def _release_packs() -> None:
         world._pack.clear()
 
 
-_STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id")
+_STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor")
+
+
+def no_anchor(n: int) -> np.ndarray:
+    """Static-friction anchors of ``n`` particles that stick to nothing ([n, 4]: point, collider -1)."""
+    out = np.zeros((n, 4), np.float32)
+    out[:, 3] = -1.0
+    return out
 
 
 @dataclass
@@ -297,6 +304,7 @@ class MPMWorld:
             "C": np.zeros((n, 3, 3), np.float32), "F": np.tile(np.eye(3, dtype=np.float32), (n, 1, 1)),
             "tau": np.zeros((n, 3, 3), np.float32), "Jp": np.ones(n, np.float32),
             "impulse": np.zeros((n, 3), np.float32), "contact_id": np.full(n, -1, np.int32),
+            "anchor": no_anchor(n),
             "mass": np.full(n, rho * vol, np.float32), "vol": np.full(n, vol, np.float32),
             "radius": radius.astype(np.float32), "kind": kin.astype(np.int32),
             "matid": np.full(n, mid, np.int32), "link": np.full(n, lidx, np.int32),
@@ -520,6 +528,7 @@ class MPMWorld:
             sl = slice(g.start, g.stop)
             self._host["impulse"][sl] = 0.0
             self._host["contact_id"][sl] = -1
+            self._host["anchor"][sl] = no_anchor(g.count)
         elif g.link >= 0 and g.sleep_pose is not None:
             T = self._link_prev[g.link] @ np.linalg.inv(g.sleep_pose)
             R, t = T[:3, :3], T[:3, 3]
@@ -552,6 +561,7 @@ class MPMWorld:
         h["F"][sl] = (T[:3, :3] @ bind.T).astype(np.float32)
         h["impulse"][sl] = 0.0
         h["contact_id"][sl] = -1
+        h["anchor"][sl] = no_anchor(g.count)
         g.patch_state = 0
         self._dirty = True
 
@@ -897,6 +907,7 @@ class MPMWorld:
             for key in ("x", "v", "impulse", "X0"):
                 upload(key, h[key], ti.f32, (3,))
             upload("bond", h["bond"], ti.f32, (4,))
+            upload("anchor", h["anchor"], ti.f32, (4,))
             for key in ("C", "F", "tau"):
                 upload(key, h[key], ti.f32, (3, 3))
             for key in ("Jp", "mass", "vol", "radius"):
@@ -992,7 +1003,7 @@ class MPMWorld:
         pk["W"] = None  # World is assembled on first use (_world_pack)
         if self._n:
             pk["P"] = K.Particles(**{k: d[k] for k in (
-                "x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "mass", "vol", "radius",
+                "x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor", "mass", "vol", "radius",
                 "kind", "link", "matid", "group", "bond")})
             pk["placement"] = K.Placement(
                 **{k: d[k] for k in ("x", "v", "C", "X0", "link", "counts", "consts", "link_frames", "col_frames",
@@ -1037,7 +1048,9 @@ class MPMWorld:
 
     def load_state_dict(self, state: dict) -> None:
         """Restore a state from :meth:`state_dict` of a world built the same way (bit-exact)."""
-        parts = state.get("particles", {})
+        parts = dict(state.get("particles", {}))
+        if self._n and "anchor" not in parts and "x" in parts:  # saved before anchors: nothing sticks
+            parts["anchor"] = no_anchor(len(parts["x"]))
         for k in _STATE_FIELDS if self._n else ():
             if k not in parts or parts[k].shape != self._host[k].shape:
                 got = None if k not in parts else parts[k].shape
