@@ -722,8 +722,9 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                 dvn = ti.min(-gap / dt, max_push)
                                 vrel = vp - vc
                                 want = -(vrel - vrel.dot(nrm) * nrm)  # stop the slip (first contact)
-                                _R0, _t0, R1, t1 = frame_at(col_frames, c)
-                                if ti.cast(anchor[p][3], ti.i32) == c:  # back onto the anchor
+                                anchored = ti.cast(anchor[p][3], ti.i32) == c
+                                if anchored:  # back onto the anchor
+                                    _R0, _t0, R1, t1 = frame_at(col_frames, c)
                                     a = ti.Vector([anchor[p][0], anchor[p][1], anchor[p][2]])
                                     drift = x[p] + dt * vp - (R1 @ a + t1)
                                     want = -(drift - drift.dot(nrm) * nrm) / dt
@@ -732,13 +733,13 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                     want *= max_push / wn
                                     wn = max_push
                                 dvt = want
-                                if not col_sticky[c] and wn > col_mu[c] * dvn:  # Coulomb: it slides
+                                slides = not col_sticky[c] and wn > col_mu[c] * dvn
+                                if slides:  # Coulomb
                                     dvt = (col_mu[c] * dvn / wn) * want
-                                    slid = True
                                 vp = vp + dvn * nrm + dvt
                                 contact_id[p] = c
-                                if ti.cast(anchor[p][3], ti.i32) != c:
-                                    slid = True  # a new contact: anchor where it ends this substep
+                                # sliding or a new contact: anchor where it ends this substep
+                                slid = slid or slides or not anchored
                                 stuck_to = c
                         if stuck_to >= 0 and slid:
                             _R0, _t0, R1, t1 = frame_at(col_frames, stuck_to)

@@ -525,10 +525,7 @@ class MPMWorld:
         if not awake:
             if g.link >= 0:
                 g.sleep_pose = self._link_prev[g.link].copy()
-            sl = slice(g.start, g.stop)
-            self._host["impulse"][sl] = 0.0
-            self._host["contact_id"][sl] = -1
-            self._host["anchor"][sl] = no_anchor(g.count)
+            self._forget_contact(g)
         elif g.link >= 0 and g.sleep_pose is not None:
             T = self._link_prev[g.link] @ np.linalg.inv(g.sleep_pose)
             R, t = T[:3, :3], T[:3, 3]
@@ -559,11 +556,16 @@ class MPMWorld:
         h["tau"][sl] = 0.0
         h["Jp"][sl] = 1.0
         h["F"][sl] = (T[:3, :3] @ bind.T).astype(np.float32)
+        self._forget_contact(g)
+        g.patch_state = 0
+        self._dirty = True
+
+    def _forget_contact(self, g: Group) -> None:
+        """Clear group g's contact state on the host: impulses, touched colliders, friction anchors."""
+        sl, h = slice(g.start, g.stop), self._host
         h["impulse"][sl] = 0.0
         h["contact_id"][sl] = -1
         h["anchor"][sl] = no_anchor(g.count)
-        g.patch_state = 0
-        self._dirty = True
 
     def plan_substeps(self, dt: float, driver_speed: float | None = None) -> tuple[int, float]:
         """Substeps for a control step of ``dt`` seconds from the CFL bound.
