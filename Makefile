@@ -26,6 +26,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench soft
 	$(PY) -m gausstac_maniskill.bench patch
 	$(PY) -m gausstac_maniskill.bench look
+	$(PY) -m gausstac_maniskill.bench close
 
 clean:
 	rm -rf .venv out build *.egg-info

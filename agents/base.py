@@ -4,8 +4,15 @@ them to any registered hand agent by link names.
 An agent becomes a GaussTac agent by having the class attributes of
 :class:`GaussTacAgent`: the pads (:class:`~gausstac_maniskill.config.PadSpec`), the URDF
 their collision meshes come from, and optionally a folder of hand Gaussians
-(``gaussians.ply`` + ``links.json``) for the splat camera. Nothing else about the
-agent changes: same URDF, controllers and keyframes in SAPIEN.
+(``gaussians.ply`` + ``links.json``) for the splat camera.
+
+One thing changes in SAPIEN: a pad link collides with its **rigid core**, its collision
+geometry without the soft layer (:func:`~gausstac_maniskill.tactile.pad_core_meshes`). The
+MPM pad handles contact in the layer in front of the core, and an object that reaches
+the core stops the finger (it can never pass through). The agent loads a copy of its
+URDF with those collision meshes (:func:`core_urdf`, written once to
+:func:`~gausstac_maniskill.assets.cache_path`). Controllers, keyframes, visuals and every
+other link are the agent's own.
 """
 from __future__ import annotations
 
@@ -22,7 +29,7 @@ from ..config import PadSpec
 from ..errors import AssetError, ConfigError
 from ..urdf import link_names
 
-__all__ = ["GaussTacAgent", "add_gausstac_pads", "load_hand_gaussians"]
+__all__ = ["GaussTacAgent", "add_gausstac_pads", "core_urdf", "load_hand_gaussians"]
 
 
 class GaussTacAgent:
@@ -34,16 +41,77 @@ class GaussTacAgent:
         gausstac_gaussians: folder holding the hand's ``gaussians.ply`` and ``links.json``
             (link-local Gaussians); ``None``: the splat camera draws pads and soft objects
             over SAPIEN's render of the rigid hand.
+        gausstac_core: pad links collide in SAPIEN with their rigid core (default). ``False``
+            keeps the URDF's collision meshes (the rigid fingertip then stops before the
+            pad compresses).
     """
 
     gausstac_pads: tuple = ()
     gausstac_urdf: str | None = None
     gausstac_gaussians: str | None = None
+    gausstac_core: bool = True
+
+    def __init__(self, *args, **kwargs):
+        if self.gausstac_pads and self.gausstac_core and self.urdf_path:
+            self.urdf_path = str(core_urdf(type(self)))  # before ManiSkill loads the articulation
+        super().__init__(*args, **kwargs)
 
     @classmethod
     def pad_urdf(cls) -> str:
         """The URDF the pads are built from."""
         return cls.gausstac_urdf or cls.urdf_path
+
+
+def core_urdf(agent: type) -> str:
+    """The agent's URDF (``agent.urdf_path``, what SAPIEN loads) with each pad link's
+    collision geometry replaced by its rigid core, built from the pad meshes of
+    ``agent.pad_urdf()`` (its convex pieces, :func:`~gausstac_maniskill.tactile.pad_core_meshes`).
+    Written once per content to
+    ``cache_path("cores", <hash>)``; the path of the URDF is returned.
+
+    Raises:
+        AssetError: a URDF or pad mesh is missing.
+        ConfigError: a pad leaves no core (see :func:`~gausstac_maniskill.tactile.pad_core_meshes`).
+    """
+    return _core_urdf(agent.uid, str(agent.urdf_path), agent.pad_urdf(), tuple(agent.gausstac_pads))
+
+
+@lru_cache(maxsize=16)
+def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
+    import hashlib
+
+    from ..assets import cache_path
+    from ..tactile import pad_core_meshes, pad_mesh
+    from ..tactile.pad import CORE_DEPTH
+    from ..urdf import write_urdf_with_collisions
+
+    _check_pad_links(uid, pad_urdf, pads)
+    by_link: dict[str, list] = {}
+    for p in pads:
+        by_link.setdefault(p.link, []).append(p)
+    meshes = {link: pad_mesh(specs[0], pad_urdf) for link, specs in by_link.items()}
+    key = hashlib.sha1()
+    for path in (urdf, pad_urdf):
+        key.update(os.path.abspath(path).encode())
+        with open(path, "rb") as f:
+            key.update(f.read())
+    for link, specs in sorted(by_link.items()):
+        key.update(repr([(s.link, s.axis, s.cone_deg, s.thickness, CORE_DEPTH) for s in specs]).encode())
+        key.update(meshes[link].vertices.tobytes())
+    folder = cache_path("cores", key.hexdigest()[:16])
+    out = folder / os.path.basename(urdf)
+    if not out.is_file():
+        files = {}
+        folder.mkdir(parents=True, exist_ok=True)
+        for link, specs in by_link.items():
+            pieces = pad_core_meshes(specs, meshes[link], mesh_name=f"the collision mesh of {link!r}")
+            files[link] = [folder / f"{link}_core{i}.obj" for i in range(len(pieces))]
+            for piece, path in zip(pieces, files[link]):
+                tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.obj")
+                piece.export(tmp)
+                os.replace(tmp, path)
+        write_urdf_with_collisions(urdf, out, files)
+    return str(out)
 
 
 def _check_pad_links(agent_uid: str, urdf: str, pads: Sequence[PadSpec]) -> None:

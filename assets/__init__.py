@@ -1,6 +1,7 @@
 """GaussTac's packaged assets: one folder per hand (``allegro_hand_right/gaussians.ply`` +
 ``links.json``, ``ability_hand_right/finger_L2_hull.obj``) and the example captured scene
 (``tabletop_scene/gaussians.ply``, made by :mod:`gausstac_maniskill.splat.example_scene`).
+Files generated per user (the pad links' rigid cores) go to :func:`cache_path`.
 
 The repository's top-level ``assets/`` is installed as the package
 ``gausstac_maniskill.assets`` (``pyproject.toml``: package-dir + package-data), so the
@@ -11,10 +12,11 @@ files are found through the package wherever it is installed (editable or from a
 """
 from __future__ import annotations
 
+import os
 from importlib.resources import files
 from pathlib import Path
 
-__all__ = ["ASSET_ROOT", "asset_path"]
+__all__ = ["ASSET_ROOT", "asset_path", "cache_path"]
 
 
 def _root() -> Path:
@@ -33,3 +35,12 @@ ASSET_ROOT: Path = _root()
 def asset_path(*parts: str) -> Path:
     """``ASSET_ROOT / parts...`` (it need not exist: some assets are written on first use)."""
     return ASSET_ROOT.joinpath(*parts)
+
+
+def cache_path(*parts: str) -> Path:
+    """A path in GaussTac's cache of generated files (the pad links' rigid-core URDFs):
+    ``$GAUSSTAC_CACHE``, else ``$XDG_CACHE_HOME/gausstac_maniskill``, else
+    ``~/.cache/gausstac_maniskill``. Nothing in it is needed twice: it may be deleted."""
+    root = os.environ.get("GAUSSTAC_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "gausstac_maniskill")
+    return Path(root).joinpath(*parts)

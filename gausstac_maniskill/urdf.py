@@ -49,6 +49,7 @@ __all__ = [
     "primitive_mesh",
     "resolve_mesh_path",
     "rpy_matrix",
+    "write_urdf_with_collisions",
 ]
 
 MOVABLE_JOINTS = ("revolute", "continuous", "prismatic")
@@ -409,6 +410,56 @@ def resolve_mesh_path(urdf: str | os.PathLike, filename: str, where: str = "<mes
     tried = ", ".join(str(c) for c in candidates[:4]) + (" ..." if len(candidates) > 4 else "")
     raise AssetError(f"{urdf}: {where} filename={filename!r}: mesh file not found "
                      f"(tried {tried})")
+
+
+def write_urdf_with_collisions(urdf: str | os.PathLike, out: str | os.PathLike,
+                               collisions: Mapping[str, str | os.PathLike | Sequence]) -> Path:
+    """Write a copy of ``urdf`` to ``out`` whose links in ``collisions`` collide with the
+    given meshes instead of their own ``<collision>`` elements.
+
+    Every ``<mesh filename>`` of the copy is made absolute (resolved with
+    :func:`resolve_mesh_path`; one that cannot be resolved is kept as written), so the copy
+    loads from any folder. The new meshes are in their link's frame (identity ``<origin>``).
+    The file is written atomically (several processes may write the same one).
+
+    Args:
+        urdf: the source URDF file.
+        out: the file to write.
+        collisions: link name -> mesh file [m, link frame], or a list of them (one
+            ``<collision>`` each: convex pieces, which SAPIEN keeps apart).
+
+    Raises:
+        AssetError: ``urdf`` is missing or malformed.
+        ConfigError: a link in ``collisions`` is not in the URDF.
+    """
+    model = parse_urdf(urdf)  # checks the file and gives the error messages
+    missing = sorted(set(collisions) - set(model.links))
+    if missing:
+        raise ConfigError(f"{urdf}: write_urdf_with_collisions: no links {missing} (links: {model.links})")
+    tree = ET.parse(urdf)
+    for mesh in tree.getroot().iter("mesh"):
+        filename = mesh.get("filename")
+        if filename:
+            try:
+                mesh.set("filename", str(resolve_mesh_path(urdf, filename).resolve()))
+            except AssetError:
+                pass  # an absent visual mesh stays as written (SAPIEN then reports it)
+    for link in tree.getroot().findall("link"):
+        name = link.get("name")
+        if name not in collisions:
+            continue
+        for el in link.findall("collision"):
+            link.remove(el)
+        files = collisions[name]
+        for file in [files] if isinstance(files, (str, os.PathLike)) else files:
+            col = ET.SubElement(link, "collision")
+            ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=str(Path(file).resolve()))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    tree.write(tmp, encoding="utf-8", xml_declaration=True)
+    os.replace(tmp, out)
+    return out
 
 
 # --------------------------------------------------------------------------- meshes

@@ -21,11 +21,13 @@ of the surroundings for the splat camera, and captured objects (:meth:`GaussTacE
 ride on SAPIEN actors; both are splatted in the same rasterizer pass as the hand, so
 occlusion between them is depth-correct.
 
-Pads touch objects only through the MPM: the pad links' SAPIEN collisions with the
-registered objects are turned off (otherwise the rigid fingertip would stop before the
-pad compresses); the pad reaction goes back to SAPIEN as an external wrench on
-two-way-coupled dynamic objects, one SAPIEN step late (with such an object the MPM steps
-after every SAPIEN step instead of once per control step).
+Pads touch objects through the MPM. In SAPIEN a pad link collides with its rigid core
+only, its collision geometry without the soft layer (:func:`~gausstac_maniskill.agents.core_urdf`):
+the MPM pad handles the contact in the layer in front of the core, and an object that
+reaches the core stops the finger (hard stop: a finger never passes through an object).
+The pad reaction goes back to SAPIEN as an external wrench on two-way-coupled dynamic
+objects, one SAPIEN step late (with such an object the MPM steps after every SAPIEN step
+instead of once per control step).
 
 Units: SI. ``physx_cpu`` runs one env per process (use ``gym.vector.AsyncVectorEnv``);
 the code keeps a batch axis everywhere.
@@ -63,8 +65,6 @@ from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSour
 
 __all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND"]
 
-#: Collision group-2 bit shared by pad links and MPM objects (shapes sharing it do not collide).
-PAD_OBJECT_BIT = 29
 #: splat camera background [RGB in 0..1] behind a captured scene (``splat_background=None``)
 SCENE_BACKGROUND = (0.0, 0.0, 0.0)
 
@@ -212,7 +212,6 @@ class GaussTacEnv(BaseEnv):
         if two_way and getattr(actor, "px_body_type", "dynamic") != "dynamic":
             raise ConfigError(f"two_way coupling needs a dynamic actor; {name!r} is {actor.px_body_type}")
         self._rigid[name] = RigidObject(name, actor, collider, gaussians, bool(two_way))
-        actor.set_collision_group_bit(2, PAD_OBJECT_BIT, 1)
 
     def add_captured_object(self, name: str, actor, capture, placement=None) -> None:
         """Draw ``actor`` in the splat camera with captured Gaussians that follow its pose
@@ -282,8 +281,6 @@ class GaussTacEnv(BaseEnv):
     def _after_reconfigure(self, options):
         super()._after_reconfigure(options)
         self._pose_source = SapienPoseSource(self.agent)
-        for spec in self.agent.gausstac_pads:
-            self.agent.robot.links_map[spec.link].set_collision_group_bit(2, PAD_OBJECT_BIT, 1)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
                                             lambda: [sim.tactile() for sim in self.cosims],

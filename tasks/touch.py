@@ -22,8 +22,9 @@ and ends within about 0.6 mm of the hand's travel past first contact. A cube too
 the rate gets a warning (it is pushed in jumps). (The pads' quasi-static mass scaling also
 makes them heavier than they are, so a fast pad hits the cube with too much momentum.)
 
-The pads feel the cube only through the MPM (SAPIEN collisions between pad links and
-the cube are off; the hand's other links still collide with it). There is no goal
+The pads feel the cube through the MPM; in SAPIEN a pad link collides with its rigid core
+only (the link without its soft layer), so the cube reaches the core only once it has
+compressed the pad through its thickness. There is no goal
 beyond touching: ``success`` when the touch pad's normal force exceeds
 ``force_threshold``. ``info`` also carries every pad's force and the cube's displacement
 since the episode start. Units: SI.

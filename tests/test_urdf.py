@@ -170,3 +170,22 @@ def test_fixed_joint_may_have_a_zero_axis_and_missing_file_is_named(tmp_path):
     assert np.allclose(fk["b"][:3, 3], [0, 0, 0.1])
     with pytest.raises(AssetError, match="nowhere.urdf"):
         parse_urdf(tmp_path / "nowhere.urdf")
+
+
+def test_urdf_with_new_collisions_loads_from_anywhere(tmp_path):
+    """write_urdf_with_collisions swaps one link's collision geometry and makes every mesh
+    path absolute, so the copy in another folder reads like the original."""
+    from gausstac_maniskill.urdf import write_urdf_with_collisions
+
+    src = default_hand_urdf()
+    box = trimesh.creation.box(extents=(0.01, 0.02, 0.03))
+    box.export(tmp_path / "core.obj")
+    out = write_urdf_with_collisions(src, tmp_path / "sub" / "hand.urdf", {"link_3.0_tip": tmp_path / "core.obj"})
+    np.testing.assert_allclose(link_mesh(out, "link_3.0_tip").extents, (0.01, 0.02, 0.03), atol=1e-9)
+    np.testing.assert_allclose(link_mesh(out, "link_7.0_tip").vertices, link_mesh(src, "link_7.0_tip").vertices)
+    np.testing.assert_allclose(link_mesh(out, "link_2.0", "visual").vertices, link_mesh(src, "link_2.0", "visual").vertices)
+    assert parse_urdf(out).links == parse_urdf(src).links
+    two = write_urdf_with_collisions(src, tmp_path / "two.urdf", {"link_3.0_tip": [tmp_path / "core.obj"] * 2})
+    assert len(parse_urdf(two).geometry("link_3.0_tip", "collision")) == 2
+    with pytest.raises(ConfigError, match="link_99"):
+        write_urdf_with_collisions(src, tmp_path / "x.urdf", {"link_99": tmp_path / "core.obj"})

@@ -19,6 +19,7 @@ BENCHMARKS = {
     "soft": "gausstac_maniskill.bench.soft",
     "patch": "gausstac_maniskill.bench.patch",
     "look": "gausstac_maniskill.bench.look",
+    "close": "gausstac_maniskill.bench.close",
 }
 
 

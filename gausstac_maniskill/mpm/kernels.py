@@ -50,6 +50,8 @@ SHARE = 0.1  # ... and each brings at least this share (the node lies at both su
 SOFT_CONTACT = -2  # contact_id of a particle touched by the other field (colliders are >= 0)
 BIG = 1 << 29
 NCHUNK = 16  # particle chunks of the bounds/health reductions (rows of their output arrays)
+BOND_STRETCH = 2.0  # a bound particle's principal stretches stay in [1/BOND_STRETCH, BOND_STRETCH] (limit_stretch)
+MAX_STRETCH = 3.0  # ... and a free particle's in [1/MAX_STRETCH, MAX_STRETCH]
 
 
 @ti.func
@@ -528,8 +530,9 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
                 if contact_id[p] == -1:
                     contact_id[p] = SOFT_CONTACT
         if not is_kin:
-            # deformation gradient: F <- (I + Δt ∇v) F, then the material's return map
-            Fn = (ti.Matrix.identity(ti.f32, 3) + dt * new_C) @ F[p]
+            # deformation gradient: F <- (I + Δt ∇v) F, kept in the stretch range the explicit
+            # step can carry (limit_stretch), then the material's return map
+            Fn = limit_stretch((ti.Matrix.identity(ti.f32, 3) + dt * new_C) @ F[p], MAX_STRETCH)
             jp = Jp[p]
             if ti.static(not nh_only):
                 if ti.cast(mat_table[mi, 2], ti.i32) == mat.FOAM:
@@ -549,10 +552,36 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
             else:
                 # C[p] is the link's rigid velocity gradient (kinematic_update)
                 strain_rate = Q0.transpose() @ (new_C - C[p]) @ Q0
-                Fn = Q1 @ (ti.Matrix.identity(ti.f32, 3) + dt * strain_rate) @ Q0.transpose() @ F[p]
+                Fn = limit_stretch(Q1 @ (ti.Matrix.identity(ti.f32, 3) + dt * strain_rate) @ Q0.transpose() @ F[p],
+                                   BOND_STRETCH)
                 F[p] = Fn
                 if ti.static(not (fbar or cellp)):
                     tau[p] = elastic_stress(nh_only, Fn, Jp[p], mi, mat_table)
+
+
+@ti.func
+def limit_stretch(F, bound: ti.template()):
+    """F with its principal stretches clamped to [1/bound, bound]: a numerical safeguard far
+    outside a silicone pad's working range, where the explicit step fails.
+
+    A pad closed hard on an object is crushed to a quarter of its thickness against its
+    rigid core and dragged along: the last cells shear without bound, and a stretch of 70×
+    made the stress (μ F Fᵀ), the wave speed and then the pad blow up (PressCube, the whole
+    hand closed). Clamped, the excess is lost like plastic flow (the layer tears). A bound
+    particle cannot move at all, so its F integrates whatever gradient the free nodes beside
+    it carry: it gets the tighter ``BOND_STRETCH`` (a bond strained two-fold has torn).
+    The SVD runs only where the invariants of C = FᵀF allow a stretch outside the range:
+    λ_max(C) ≤ tr C and λ_min(C) ≥ det C / I2(C)."""
+    C = F.transpose() @ F
+    i1 = C.trace()
+    i2 = 0.5 * (i1 * i1 - (C @ C).trace())
+    out = F
+    if i1 > bound * bound or C.determinant() * bound * bound < i2:
+        U, sig, V = ti.svd(F)
+        for d in ti.static(range(3)):
+            sig[d, d] = ti.min(ti.max(sig[d, d], 1.0 / bound), bound)
+        out = U @ sig @ V.transpose()
+    return out
 
 
 @ti.func

@@ -19,7 +19,7 @@ from ..config import PadSpec
 from ..errors import AssetError, ConfigError, ResolutionWarning
 from ..mpm.sampling import mesh_particles
 
-__all__ = ["Pad", "build_pad", "pad_mesh", "allegro_pad_specs", "pad_specs_for_links", "ALLEGRO_TIPS"]
+__all__ = ["Pad", "build_pad", "pad_mesh", "pad_core_meshes", "allegro_pad_specs", "pad_specs_for_links", "ALLEGRO_TIPS"]
 
 #: Fingertip links of ManiSkill's Allegro right hand (thumb, index, middle, ring).
 ALLEGRO_TIPS = ("link_15.0_tip", "link_3.0_tip", "link_7.0_tip", "link_11.0_tip")
@@ -99,6 +99,86 @@ def pad_mesh(spec: PadSpec, urdf: str):
     return trimesh.load(spec.mesh, force="mesh")
 
 
+#: Depth of a pad link's rigid core below the pad surface, as a fraction of the pad's thickness:
+#: an object that reaches the core has compressed the layer to a quarter of its thickness.
+#: With the core at the full thickness, an object stopped by it touched the bound particles
+#: behind the layer, and the last soft cells crushed between them made the pad blow up
+#: (PressCube with the hand closed hard, 2 mm grid).
+CORE_DEPTH = 0.75
+
+
+def _cone_centre(mesh) -> np.ndarray:
+    """The point a pad's cone is seen from: the mesh's centre of mass (bounds centre if it has no volume)."""
+    return mesh.center_mass if mesh.is_volume else mesh.bounds.mean(0)
+
+
+def pad_core_meshes(specs, mesh, mesh_name: str = "") -> list:
+    """The rigid core of a pad link: its collision geometry without the soft layers, as
+    convex pieces (what SAPIEN collides with).
+
+    * The inset: the link's (convex hull of its) mesh with every face plane moved inward by
+      ``CORE_DEPTH · thickness`` (the deepest over ``specs``). In front of it lies the layer
+      that compresses; an object that reaches it has squeezed the pad to a quarter of its
+      thickness, and stops the finger (hard stop).
+    * The back: the convex hull of the mesh's vertices outside every pad's cone (the link's
+      own rigid surface), when they span a volume and do not cover a pad's apex. On a long
+      link (a phalanx with a pad on its side) they do, and the core is the inset alone:
+      there an object touching the link off the pad meets the core ``CORE_DEPTH · thickness``
+      late.
+
+    The union of both contains everything deeper than the stop. Near a cone's rim the back's
+    hull also covers some of the layer (it is convex): there an object meets the rigid link
+    sooner, as it would at the edge of a real fingertip's pulp.
+
+    Args:
+        specs: the :class:`PadSpec` (or several) on one link.
+        mesh: the pad mesh (``trimesh.Trimesh``, link frame, metres), as :func:`pad_mesh` gives.
+        mesh_name: label for error messages.
+
+    Returns:
+        One or two convex ``trimesh.Trimesh`` in the link frame [m] (the inset first).
+
+    Raises:
+        ConfigError: a pad's ``thickness`` leaves no core (the stop lies deeper than the
+            mesh's centre is from its nearest face).
+    """
+    import trimesh
+    from scipy.spatial import HalfspaceIntersection
+
+    specs = [specs] if isinstance(specs, PadSpec) else list(specs)
+    hull = mesh if mesh.is_convex else mesh.convex_hull
+    centre = _cone_centre(hull)
+    room = float(np.min(np.einsum("ij,ij->i", hull.face_normals, hull.triangles[:, 0] - centre)))
+    for spec in specs:
+        if CORE_DEPTH * spec.thickness >= room:
+            raise ConfigError(
+                f"pad {spec.name!r} on {spec.link!r}: PadSpec.thickness={spec.thickness:g} m leaves no rigid core "
+                f"in {mesh_name or 'its mesh'} (the surface is {room:g} m from the centre at its nearest); "
+                "use a thinner pad")
+    depth = CORE_DEPTH * max(spec.thickness for spec in specs)
+    # the inset: every face plane n·x = d moved to n·x = d - depth (scipy's half-spaces are
+    # A x + b <= 0); many planes meet near each corner, so the corners are merged to 0.1 mm
+    # (PhysX simplifies a convex mesh to 255 vertices anyway)
+    normals = hull.face_normals
+    offsets = np.einsum("ij,ij->i", normals, hull.triangles[:, 0])
+    inset = HalfspaceIntersection(np.column_stack([normals, depth - offsets]), centre).intersections
+    inset = inset[trimesh.grouping.unique_rows(inset, digits=4)[0]]
+    direction = hull.vertices - centre
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+    back = np.ones(len(hull.vertices), bool)
+    for spec in specs:
+        back &= direction @ np.asarray(spec.axis) < math.cos(math.radians(spec.cone_deg))
+    pieces = [trimesh.convex.convex_hull(inset)]
+    if back.sum() >= 4 and np.linalg.matrix_rank(hull.vertices[back][1:] - hull.vertices[back][0], tol=1e-6) == 3:
+        rear = trimesh.convex.convex_hull(hull.vertices[back])
+        # on a long link (a phalanx) the rest of the link spans over the pad: then the inset alone
+        apexes = [hull.vertices[np.argmax(hull.vertices @ np.asarray(s.axis))] - 0.5 * depth * np.asarray(s.axis)
+                  for s in specs]
+        if not rear.contains(np.array(apexes)).any():
+            pieces.append(rear)
+    return pieces
+
+
 def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "") -> Pad:
     """Fill ``spec``'s region of ``mesh`` (link frame) with particles.
 
@@ -125,7 +205,7 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
     pts, dist, nrm = mesh_particles(mesh, spacing, name=label, with_query=True)
     keep = dist <= spec.thickness + KINEMATIC_CELLS * dx
     axis = np.asarray(spec.axis)
-    centre = mesh.center_mass if mesh.is_volume else mesh.bounds.mean(0)
+    centre = _cone_centre(mesh)
     direction = pts - centre
     direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
     keep &= direction @ axis >= math.cos(math.radians(spec.cone_deg))

@@ -84,3 +84,34 @@ def test_layer_thinner_than_a_cell_is_refused_and_under_resolved_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_layer_resolution(spec, 0.5e-3)  # 4 cells: resolved, silent
+
+
+def test_rigid_core_is_the_link_without_the_soft_layer():
+    """pad_core_meshes: in the pad's cone the core lies CORE_DEPTH·thickness below the surface
+    (the finger's hard stop), outside it the core is the link's own collision mesh, no soft
+    particle shallower than the stop lies inside it (but near the cone's rim) and every
+    bound particle does."""
+    from gausstac_maniskill.tactile import pad_core_meshes
+    from gausstac_maniskill.tactile.pad import CORE_DEPTH
+
+    spec = allegro_pad_specs()[1]
+    mesh = link_mesh(default_hand_urdf(), spec.link)
+    pieces = pad_core_meshes(spec, mesh)
+    assert len(pieces) == 2 and all(p.is_convex and p.is_watertight for p in pieces)
+    stop = CORE_DEPTH * spec.thickness
+    lo, hi = np.min([p.bounds[0] for p in pieces], 0), np.max([p.bounds[1] for p in pieces], 0)
+    # along the pad axis (+x) the core stops `stop` short of the surface; at the back (-x)
+    # and along the finger (z) the rigid link is unchanged
+    assert hi[0] == pytest.approx(mesh.bounds[1, 0] - stop, abs=2e-5)
+    assert lo[0] == pytest.approx(mesh.bounds[0, 0], abs=1e-9)
+    np.testing.assert_allclose([lo[2], hi[2]], mesh.bounds[:, 2], atol=1e-9)
+    pad = build_pad(spec, mesh, H, DX)
+    inside = np.any([p.contains(pad.rest) for p in pieces], 0)
+    d = pad.rest - mesh.center_mass
+    angle = np.degrees(np.arccos(d @ np.asarray(spec.axis) / np.linalg.norm(d, axis=1)))
+    shallow = pad.depth < stop - 1e-4
+    assert not np.any(inside & shallow & (angle < spec.cone_deg - 15))  # the layer is in front of the core
+    assert np.mean(inside[shallow]) < 0.2  # near the rim the back of the link covers some of it (15 %)
+    assert np.all(inside[pad.depth > spec.thickness + H])  # the link behind the layer is core
+    with pytest.raises(ConfigError, match="no rigid core"):
+        pad_core_meshes(PadSpec(link=spec.link, thickness=0.02), mesh)

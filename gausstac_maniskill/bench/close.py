@@ -1,0 +1,83 @@
+"""``python -m gausstac_maniskill.bench close`` — the whole hand closed hard on a fixed cube.
+
+``GaussTac-PressCube-v1`` (``physx_cpu``, ``pd_joint_delta_pos`` at ManiSkill's Allegro
+drive gains) with every joint driven towards closing (action +1) for ``--steps`` control
+steps of 50 ms. The index pad meets the cube's face 2–4 mm in front of it in the first
+step; the fingers then curl on and drag along the face. Per step it prints each pad's normal
+force (its force map's sum) [N], how deep the deepest vertex of each pad link's rigid core
+lies inside the cube (the hard stop: PhysX's slop only, never the layer's thickness) [mm],
+the range of the particles' volume ratio J and principal stretches, and the wall time.
+A ``SimulationError`` ends the run and is printed (it is what the code did before the rigid
+cores and the stretch safeguard: see BENCHMARKS.md, issue 11).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import cli, write_report
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = cli("close", __doc__)
+    ap.add_argument("--dx", type=float, default=1e-3, help="MPM grid spacing [m] (default 1 mm, the tasks')")
+    ap.add_argument("--steps", type=int, default=30, help="control steps (default 30)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default="out/bench_close", help="folder for the report")
+    args = ap.parse_args(argv)
+    import gymnasium as gym
+    from tqdm import tqdm
+
+    import gausstac_maniskill  # noqa: F401  (registers the tasks)
+    from ..errors import SimulationError
+    from ..pose.sapien_source import vec7_to_matrix
+    from ..tactile import pad_core_meshes, pad_mesh
+    from ..tasks.press_cube import CUBE_HALF
+
+    env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=args.dx)
+    env.reset(seed=args.seed)
+    u = env.unwrapped
+    specs = u.agent.gausstac_pads
+    cores = {s.link: np.concatenate([c.vertices for c in pad_core_meshes(s, pad_mesh(s, type(u.agent).pad_urdf()))])
+             for s in specs}
+    names = u._pose_source.link_names
+    action = np.ones(env.action_space.shape, np.float32)
+    lines = [f"GaussTac-PressCube-v1, whole hand closing (action +1), dx = {args.dx * 1e3:g} mm, seed {args.seed}",
+             "",
+             "| step | " + " | ".join(f"{s.name} [N]" for s in specs) + " | deepest core vertex in the cube [mm] "
+             "| J min..max | stretch min..max | wall [s] |",
+             "|" + "---|" * (len(specs) + 5)]
+    peak = {s.name: 0.0 for s in specs}
+    try:
+        for k in tqdm(range(args.steps), desc="close", leave=False):
+            t0 = time.perf_counter()
+            try:
+                env.step(action)
+            except SimulationError as e:
+                lines.append(f"| {k} | SimulationError: {str(e)[:160]} |")
+                break
+            wall = time.perf_counter() - t0
+            P = u._pose_source.all_link_poses()[0].double().numpy()
+            C = vec7_to_matrix(u.block.pose.raw_pose)[0].double().numpy()
+            deepest = -np.inf
+            for s in specs:
+                T = P[names.index(s.link)]
+                local = (cores[s.link] @ T[:3, :3].T + T[:3, 3] - C[:3, 3]) @ C[:3, :3]
+                deepest = max(deepest, float(np.min(np.asarray(CUBE_HALF) - np.abs(local), axis=1).max()))
+            F = {s.name: u.pad_force(s.name).item() for s in specs}
+            for n, f in F.items():
+                peak[n] = max(peak[n], f)
+            st = u.cosims[0].flat_state()
+            Fd = st["p_F"].reshape(-1, 3, 3)
+            J, sv = np.linalg.det(Fd), np.linalg.svd(Fd, compute_uv=False)
+            lines.append(f"| {k} | " + " | ".join(f"{F[s.name]:.1f}" for s in specs)
+                         + f" | {max(deepest, 0.0) * 1e3:.2f} | {J.min():.2f}..{J.max():.2f} "
+                           f"| {sv.min():.2f}..{sv.max():.2f} | {wall:.2f} |")
+    finally:
+        env.close()
+    lines += ["", "peak force [N]: " + ", ".join(f"{n} {v:.1f}" for n, v in peak.items())]
+    text = "\n".join(lines)
+    print(text)
+    write_report(args.out, f"close_dx{args.dx * 1e3:g}mm.md", text)
+    return 0

@@ -1,0 +1,71 @@
+"""Hard stop (issue 11, point 1): a pad link collides in SAPIEN with its rigid core, so a
+finger closed hard on an object stops with its pad compressed in front of the core instead
+of passing through, and the crushed pad stays finite with non-negative forces."""
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import gausstac_maniskill  # noqa: F401  (registers agents and tasks)
+from gausstac_maniskill.pose.sapien_source import vec7_to_matrix
+from gausstac_maniskill.tactile import pad_core_meshes, pad_mesh
+from gausstac_maniskill.tactile.pad import CORE_DEPTH
+from gausstac_maniskill.tasks.press_cube import CUBE_HALF
+
+pytestmark = pytest.mark.sapien
+
+
+@pytest.fixture(scope="module")
+def press_env():
+    env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=2e-3)
+    yield env
+    env.close()
+
+
+def _core_depth_in_box(u, link: str, cores) -> float:
+    """How deep [m] the deepest vertex of ``link``'s core lies inside the cube (<= 0: outside)."""
+    names = u._pose_source.link_names
+    P = u._pose_source.all_link_poses()[0, names.index(link)].double().numpy()
+    C = vec7_to_matrix(u.block.pose.raw_pose)[0].double().numpy()
+    v = np.concatenate([c.vertices for c in cores]) @ P[:3, :3].T + P[:3, 3]
+    local = (v - C[:3, 3]) @ C[:3, :3]
+    inside = np.min(np.asarray(CUBE_HALF) - np.abs(local), axis=1)  # > 0: inside, by this much
+    return float(inside.max())
+
+
+def test_sapien_collides_with_the_pad_links_core(press_env):
+    u = press_env.unwrapped
+    press_env.reset(seed=0)
+    from mani_skill.utils.geometry.trimesh_utils import get_component_meshes
+
+    for spec in u.agent.gausstac_pads:
+        mesh = pad_mesh(spec, type(u.agent).pad_urdf())
+        shapes = get_component_meshes(u.agent.robot.links_map[spec.link]._objs[0])
+        top = max(float(m.vertices[:, 0].max()) for m in shapes)  # along the pad axis (+x)
+        # PhysX cooks the convex pieces (at most 255 vertices each): within 0.2 mm of the stop
+        assert top == pytest.approx(mesh.bounds[1, 0] - CORE_DEPTH * spec.thickness, abs=2e-4), spec.name
+
+
+def test_hand_closed_hard_on_the_fixed_cube_stops_at_the_cores(press_env):
+    """Every joint driven towards closing (+1 for 12 control steps, pd_joint_delta_pos at
+    ManiSkill's gains): without the cores the index tip went 3.5 mm into the cube and the
+    crushed pad blew up on the second step (SimulationError)."""
+    u = press_env.unwrapped
+    press_env.reset(seed=0)
+    cores = {s.link: pad_core_meshes(s, pad_mesh(s, type(u.agent).pad_urdf())) for s in u.agent.gausstac_pads}
+    action = np.ones(press_env.action_space.shape, np.float32)
+    peak = {p: 0.0 for p in u.pad_names}
+    for _ in range(12):
+        press_env.step(action)
+        for spec in u.agent.gausstac_pads:
+            f = u.pad_force(spec.name).item()
+            maps = u.tactile()[spec.name]
+            assert np.isfinite(f) and f >= 0.0, (spec.name, f)
+            assert all(torch.isfinite(m).all() for m in maps.values())
+            # a taxel is the contact force along the sensor's z: at the rim of the curved pad a
+            # dragged contact's friction may point slightly outwards (-0.012 N of 68 N seen)
+            assert maps["force"].min().item() >= -1e-3 * f, (spec.name, maps["force"].min().item(), f)
+            peak[spec.name] = max(peak[spec.name], f)
+            assert _core_depth_in_box(u, spec.link, cores[spec.link]) < 1e-3, spec.name  # PhysX's slop only
+    assert peak["index"] > 5.0  # the index pad was pressed hard onto the cube ...
+    assert max(peak.values()) < 500.0  # ... and its force stayed bounded
