@@ -20,6 +20,7 @@ import difflib
 import json
 import os
 from functools import lru_cache
+from pathlib import Path
 from typing import Mapping, Sequence
 
 from mani_skill.agents.base_agent import BaseAgent
@@ -99,6 +100,12 @@ def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
         key.update(repr([(s.link, s.axis, s.cone_deg, s.thickness, CORE_DEPTH) for s in specs]).encode())
         key.update(meshes[link].vertices.tobytes())
     folder = cache_path("cores", key.hexdigest()[:16])
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:  # a read-only home: the temporary folder will do
+        import tempfile
+
+        folder = Path(tempfile.gettempdir(), "gausstac_maniskill", "cores", key.hexdigest()[:16])
     out = folder / os.path.basename(urdf)
     if not out.is_file():
         files = {}
