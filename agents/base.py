@@ -30,7 +30,7 @@ from ..config import PadSpec
 from ..errors import AssetError, ConfigError
 from ..urdf import link_names
 
-__all__ = ["GaussTacAgent", "add_gausstac_pads", "core_urdf", "load_hand_gaussians"]
+__all__ = ["GaussTacAgent", "add_gausstac_pads", "core_meshes", "core_urdf", "load_hand_gaussians"]
 
 
 class GaussTacAgent:
@@ -82,14 +82,12 @@ def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
     import hashlib
 
     from ..assets import cache_path
-    from ..tactile import pad_core_meshes, pad_mesh
+    from ..tactile import pad_mesh
     from ..tactile.pad import CORE_DEPTH
     from ..urdf import write_urdf_with_collisions
 
     _check_pad_links(uid, pad_urdf, pads)
-    by_link: dict[str, list] = {}
-    for p in pads:
-        by_link.setdefault(p.link, []).append(p)
+    by_link = _pads_by_link(pads)
     meshes = {link: pad_mesh(specs[0], pad_urdf) for link, specs in by_link.items()}
     key = hashlib.sha1()
     for path in (urdf, pad_urdf):
@@ -106,12 +104,11 @@ def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
         import tempfile
 
         folder = Path(tempfile.gettempdir(), "gausstac_maniskill", "cores", key.hexdigest()[:16])
+        folder.mkdir(parents=True, exist_ok=True)
     out = folder / os.path.basename(urdf)
     if not out.is_file():
         files = {}
-        folder.mkdir(parents=True, exist_ok=True)
-        for link, specs in by_link.items():
-            pieces = pad_core_meshes(specs, meshes[link], mesh_name=f"the collision mesh of {link!r}")
+        for link, pieces in _link_cores(by_link, meshes).items():
             files[link] = [folder / f"{link}_core{i}.obj" for i in range(len(pieces))]
             for piece, path in zip(pieces, files[link]):
                 tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.obj")
@@ -119,6 +116,31 @@ def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
                 os.replace(tmp, path)
         write_urdf_with_collisions(urdf, out, files)
     return str(out)
+
+
+def core_meshes(agent: type) -> dict[str, list]:
+    """Pad link name -> the convex pieces of its rigid core (``trimesh.Trimesh``, link frame,
+    metres), as :func:`core_urdf` gives them to SAPIEN."""
+    from ..tactile import pad_mesh
+
+    by_link = _pads_by_link(agent.gausstac_pads)
+    return _link_cores(by_link, {link: pad_mesh(specs[0], agent.pad_urdf()) for link, specs in by_link.items()})
+
+
+def _pads_by_link(pads) -> dict[str, list]:
+    """Link name -> the pads on it, in order."""
+    by_link: dict[str, list] = {}
+    for p in pads:
+        by_link.setdefault(p.link, []).append(p)
+    return by_link
+
+
+def _link_cores(by_link: dict, meshes: dict) -> dict[str, list]:
+    """Link name -> rigid-core pieces, from the link's pads and pad mesh."""
+    from ..tactile import pad_core_meshes
+
+    return {link: pad_core_meshes(specs, meshes[link], mesh_name=f"the collision mesh of {link!r}")
+            for link, specs in by_link.items()}
 
 
 def _check_pad_links(agent_uid: str, urdf: str, pads: Sequence[PadSpec]) -> None:

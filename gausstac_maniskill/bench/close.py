@@ -19,6 +19,19 @@ import numpy as np
 from . import cli, write_report
 
 
+def core_depth_in_cube(env, link: str, vertices: np.ndarray) -> float:
+    """How deep [m] the deepest of ``vertices`` ([N, 3], link ``link``'s frame: its rigid
+    core) lies inside PressCube's cube now (<= 0: outside it). ``env``: the unwrapped
+    ``GaussTac-PressCube-v1``, env 0."""
+    from ..pose.sapien_source import vec7_to_matrix
+    from ..tasks.press_cube import CUBE_HALF
+
+    T = env._pose_source.all_link_poses()[0, env._pose_source.link_names.index(link)].double().numpy()
+    C = vec7_to_matrix(env.block.pose.raw_pose)[0].double().numpy()
+    local = (vertices @ T[:3, :3].T + T[:3, 3] - C[:3, 3]) @ C[:3, :3]
+    return float(np.min(np.asarray(CUBE_HALF) - np.abs(local), axis=1).max())  # > 0: inside, by this much
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = cli("close", __doc__)
     ap.add_argument("--dx", type=float, default=1e-3, help="MPM grid spacing [m] (default 1 mm, the tasks')")
@@ -30,18 +43,14 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     import gausstac_maniskill  # noqa: F401  (registers the tasks)
+    from ..agents.base import core_meshes
     from ..errors import SimulationError
-    from ..pose.sapien_source import vec7_to_matrix
-    from ..tactile import pad_core_meshes, pad_mesh
-    from ..tasks.press_cube import CUBE_HALF
 
     env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=args.dx)
     env.reset(seed=args.seed)
     u = env.unwrapped
     specs = u.agent.gausstac_pads
-    cores = {s.link: np.concatenate([c.vertices for c in pad_core_meshes(s, pad_mesh(s, type(u.agent).pad_urdf()))])
-             for s in specs}
-    names = u._pose_source.link_names
+    cores = {link: np.concatenate([c.vertices for c in pieces]) for link, pieces in core_meshes(type(u.agent)).items()}
     action = np.ones(env.action_space.shape, np.float32)
     lines = [f"GaussTac-PressCube-v1, whole hand closing (action +1), dx = {args.dx * 1e3:g} mm, seed {args.seed}",
              "",
@@ -58,13 +67,7 @@ def main(argv: list[str] | None = None) -> int:
                 lines.append(f"| {k} | SimulationError: {str(e)[:160]} |")
                 break
             wall = time.perf_counter() - t0
-            P = u._pose_source.all_link_poses()[0].double().numpy()
-            C = vec7_to_matrix(u.block.pose.raw_pose)[0].double().numpy()
-            deepest = -np.inf
-            for s in specs:
-                T = P[names.index(s.link)]
-                local = (cores[s.link] @ T[:3, :3].T + T[:3, 3] - C[:3, 3]) @ C[:3, :3]
-                deepest = max(deepest, float(np.min(np.asarray(CUBE_HALF) - np.abs(local), axis=1).max()))
+            deepest = max(core_depth_in_cube(u, link, v) for link, v in cores.items())
             F = {s.name: u.pad_force(s.name).item() for s in specs}
             for n, f in F.items():
                 peak[n] = max(peak[n], f)

@@ -148,7 +148,9 @@ def pad_core_meshes(specs, mesh, mesh_name: str = "") -> list:
     specs = [specs] if isinstance(specs, PadSpec) else list(specs)
     hull = mesh if mesh.is_convex else mesh.convex_hull
     centre = _cone_centre(hull)
-    room = float(np.min(np.einsum("ij,ij->i", hull.face_normals, hull.triangles[:, 0] - centre)))
+    normals = hull.face_normals
+    offsets = np.einsum("ij,ij->i", normals, hull.triangles[:, 0])  # face planes n·x = d
+    room = float(np.min(offsets - normals @ centre))
     for spec in specs:
         if CORE_DEPTH * spec.thickness >= room:
             raise ConfigError(
@@ -156,11 +158,9 @@ def pad_core_meshes(specs, mesh, mesh_name: str = "") -> list:
                 f"in {mesh_name or 'its mesh'} (the surface is {room:g} m from the centre at its nearest); "
                 "use a thinner pad")
     depth = CORE_DEPTH * max(spec.thickness for spec in specs)
-    # the inset: every face plane n·x = d moved to n·x = d - depth (scipy's half-spaces are
+    # the inset: every face plane moved to n·x = d - depth (scipy's half-spaces are
     # A x + b <= 0); many planes meet near each corner, so the corners are merged to 0.1 mm
     # (PhysX simplifies a convex mesh to 255 vertices anyway)
-    normals = hull.face_normals
-    offsets = np.einsum("ij,ij->i", normals, hull.triangles[:, 0])
     inset = HalfspaceIntersection(np.column_stack([normals, depth - offsets]), centre).intersections
     inset = inset[trimesh.grouping.unique_rows(inset, digits=4)[0]]
     direction = hull.vertices - centre

@@ -7,10 +7,10 @@ import pytest
 import torch
 
 import gausstac_maniskill  # noqa: F401  (registers agents and tasks)
-from gausstac_maniskill.pose.sapien_source import vec7_to_matrix
-from gausstac_maniskill.tactile import pad_core_meshes, pad_mesh
+from gausstac_maniskill.agents.base import core_meshes
+from gausstac_maniskill.bench.close import core_depth_in_cube
+from gausstac_maniskill.tactile import pad_mesh
 from gausstac_maniskill.tactile.pad import CORE_DEPTH
-from gausstac_maniskill.tasks.press_cube import CUBE_HALF
 
 pytestmark = pytest.mark.sapien
 
@@ -20,17 +20,6 @@ def press_env():
     env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=2e-3)
     yield env
     env.close()
-
-
-def _core_depth_in_box(u, link: str, cores) -> float:
-    """How deep [m] the deepest vertex of ``link``'s core lies inside the cube (<= 0: outside)."""
-    names = u._pose_source.link_names
-    P = u._pose_source.all_link_poses()[0, names.index(link)].double().numpy()
-    C = vec7_to_matrix(u.block.pose.raw_pose)[0].double().numpy()
-    v = np.concatenate([c.vertices for c in cores]) @ P[:3, :3].T + P[:3, 3]
-    local = (v - C[:3, 3]) @ C[:3, :3]
-    inside = np.min(np.asarray(CUBE_HALF) - np.abs(local), axis=1)  # > 0: inside, by this much
-    return float(inside.max())
 
 
 def test_sapien_collides_with_the_pad_links_core(press_env):
@@ -52,7 +41,7 @@ def test_hand_closed_hard_on_the_fixed_cube_stops_at_the_cores(press_env):
     crushed pad blew up on the second step (SimulationError)."""
     u = press_env.unwrapped
     press_env.reset(seed=0)
-    cores = {s.link: pad_core_meshes(s, pad_mesh(s, type(u.agent).pad_urdf())) for s in u.agent.gausstac_pads}
+    cores = {link: np.concatenate([c.vertices for c in pieces]) for link, pieces in core_meshes(type(u.agent)).items()}
     action = np.ones(press_env.action_space.shape, np.float32)
     peak = {p: 0.0 for p in u.pad_names}
     for _ in range(12):
@@ -66,6 +55,6 @@ def test_hand_closed_hard_on_the_fixed_cube_stops_at_the_cores(press_env):
             # dragged contact's friction may point slightly outwards (-0.012 N of 68 N seen)
             assert maps["force"].min().item() >= -1e-3 * f, (spec.name, maps["force"].min().item(), f)
             peak[spec.name] = max(peak[spec.name], f)
-            assert _core_depth_in_box(u, spec.link, cores[spec.link]) < 1e-3, spec.name  # PhysX's slop only
+            assert core_depth_in_cube(u, spec.link, cores[spec.link]) < 1e-3, spec.name  # PhysX's slop only
     assert peak["index"] > 5.0  # the index pad was pressed hard onto the cube ...
     assert max(peak.values()) < 500.0  # ... and its force stayed bounded
