@@ -137,6 +137,13 @@ class GaussTacSim:
             raise ConfigError(f"unknown rigid object {name!r}; objects: {sorted(self._objects)}")
         return self.world.collider_wrench(self._objects[name])
 
+    def link_wrench(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """Reaction force [N] and torque [N·m] (about the link origin, world frame) that the
+        pads bound to hand link ``link`` passed to it during the last step: what objects
+        pushed on them, through a massless layer (for two-way coupling of the hand; equal
+        and opposite to the rigid objects' share of :meth:`object_wrench`)."""
+        return self.world.link_wrench(link)
+
     # ------------------------------------------------------------------ stepping
     def step(self, link_poses: Mapping[str, np.ndarray], dt: float,
              object_poses: Mapping[str, np.ndarray] | None = None) -> dict[str, dict[str, torch.Tensor]]:
@@ -369,6 +376,7 @@ class GaussTacSim:
             collider_prev=np.asarray(w["collider_prev"], np.float64).reshape(-1, 4, 4),
             collider_pose=np.asarray(w["collider_pose"], np.float64).reshape(-1, 4, 4),
             collider_impulse=np.asarray(w["collider_impulse"], np.float64),
+            link_impulse=np.asarray(w["link_impulse"], np.float64).reshape(-1, 6),
             group_awake=np.asarray(w["awake"], bool), group_sleep_pose=sleep, group_has_sleep_pose=has_sleep,
             scalars=np.array([w["time"], w["step_count"], w["vmax"], w["last_dt_ctrl"]], np.float64),
             link_pose=np.stack([self._link_pose[k] for k in sorted(self._link_pose)]),
@@ -391,6 +399,7 @@ class GaussTacSim:
             "collider_prev": list(np.asarray(state["collider_prev"], np.float64)),
             "collider_pose": list(np.asarray(state["collider_pose"], np.float64)),
             "collider_impulse": np.asarray(state["collider_impulse"], np.float64),
+            "link_impulse": np.asarray(state["link_impulse"], np.float64) if "link_impulse" in state else None,
             "awake": np.asarray(state["group_awake"], bool),
             "sleep_pose": [np.asarray(T, np.float64) if h else None
                            for T, h in zip(state["group_sleep_pose"], state["group_has_sleep_pose"])],

@@ -1080,9 +1080,16 @@ def pressure_solve(G: ti.template(), S: ti.template(), geo, dt, inv_dx, iters: t
 
 
 @ti.kernel
-def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI,
-                   col_pose: NDF2, col_impulse: NDF2):
-    """Sum per-particle contact impulses into each collider's reaction (deterministic)."""
+def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI, link: NDI,
+                   col_pose: NDF2, link_pose: NDF2, col_impulse: NDF2, link_impulse: NDF2):
+    """Sum the per-particle contact impulses of the control step (deterministic):
+
+    * into each collider's reaction, -J about the collider's end origin;
+    * into the reaction on each particle's link, +J about the link's end origin: the layer
+      is taken as massless (quasi-static), so what its particles receive from colliders
+      and from the other field passes to the link that holds them, and a pad's link and
+      the object it presses take equal and opposite impulses.
+    """
     ti.loop_config(serialize=True)
     for ii in range(n):
         p = active[ii]
@@ -1094,6 +1101,13 @@ def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI
             for d in ti.static(range(3)):
                 col_impulse[c, d] += J[d]
                 col_impulse[c, 3 + d] += tq[d]
+        lk = link[p]
+        if c != -1 and lk >= 0:
+            o = ti.Vector([link_pose[lk, 7], link_pose[lk, 8], link_pose[lk, 9]])
+            tq = (x[p] - o).cross(impulse[p])
+            for d in ti.static(range(3)):
+                link_impulse[lk, d] += impulse[p][d]
+                link_impulse[lk, 3 + d] += tq[d]
 
 
 @ti.kernel

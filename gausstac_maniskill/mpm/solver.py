@@ -158,6 +158,7 @@ class MPMWorld:
         self._dirty = True
         self._vmax = 0.0
         self._col_impulse = np.zeros((0, 6))
+        self._link_impulse = np.zeros((0, 6))
         self._last_dt_ctrl = 1.0
         self._reach = 0.0
         self._link_radius: list[float] = []
@@ -180,6 +181,7 @@ class MPMWorld:
         self._link_prev.append(T.copy())
         self._link_next.append(T.copy())
         self._link_twist.append(np.zeros(6))
+        self._link_impulse = np.concatenate([self._link_impulse, np.zeros((1, 6))])
         self._dirty = True
         return len(self.link_names) - 1
 
@@ -453,6 +455,16 @@ class MPMWorld:
         J = self._col_impulse[index] / self._last_dt_ctrl if len(self._col_impulse) else np.zeros(6)
         return J[:3].copy(), J[3:].copy()
 
+    def link_wrench(self, link) -> tuple[np.ndarray, np.ndarray]:
+        """Mean reaction (force [N], torque [N·m] about the link's origin, world frame) that
+        ``link`` (name or index) received through the particles bound to it during the last
+        control step: the contact impulses those particles took from colliders and from the
+        other field, passed on by a massless layer (see :func:`kernels.reduce_contact`).
+        Equal and opposite to the colliders' share of :meth:`collider_wrench`."""
+        i = self.link_index(link)
+        J = self._link_impulse[i] / self._last_dt_ctrl
+        return J[:3].copy(), J[3:].copy()
+
     def energy(self) -> tuple[float, float]:
         """(kinetic, elastic) energy [J] of the awake dynamic particles."""
         self._push()
@@ -642,8 +654,8 @@ class MPMWorld:
                 K.follow_links(d["active"], self._n_active, d["v"], d["C"], d["x"], d["kind"], d["link"],
                                d["group"], d["group_qs"], d["twist_change"])
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
-        col_imp = np.zeros((max(len(self.colliders), 1), 6), np.float32)
-        d["col_impulse"].from_numpy(col_imp)
+        d["col_impulse"].from_numpy(np.zeros((max(len(self.colliders), 1), 6), np.float32))
+        d["link_impulse"].from_numpy(np.zeros((max(len(self.link_names), 1), 6), np.float32))
         self._host_stale = True  # from here on the device holds the newer state
         cells = 0
         for k in range(n_sub):
@@ -669,9 +681,10 @@ class MPMWorld:
         if self._patched and self._n_active:
             self._note_patch_contact()
         if self._n_active and self.contact == "particle":
-            K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"],
-                             d["col_pose"], d["col_impulse"])
+            K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"], d["link"],
+                             d["col_pose"], d["link_pose"], d["col_impulse"], d["link_impulse"])
         self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
+        self._link_impulse = d["link_impulse"].to_numpy().astype(np.float64)[: len(self.link_names)]
         for i in range(len(self.link_names)):
             self._link_prev[i] = self._link_next[i].copy()
         self._link_twist = twists
@@ -975,6 +988,7 @@ class MPMWorld:
         d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
         d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
         d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
+        d["link_impulse"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 6))
         d["link_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), FRAME))
         d["col_frames"] = ti.ndarray(ti.f32, shape=(nc, FRAME))
         d["group_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.groups), 1), FRAME))
@@ -1046,6 +1060,7 @@ class MPMWorld:
             "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in self.groups],
             "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
             "collider_impulse": self._col_impulse.copy(), "last_dt_ctrl": self._last_dt_ctrl,
+            "link_impulse": self._link_impulse.copy(),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -1077,6 +1092,8 @@ class MPMWorld:
         self.time, self.step_count = float(state["time"]), int(state["step_count"])
         self._vmax = float(state["vmax"])
         self._col_impulse = state["collider_impulse"].copy()
+        li = state.get("link_impulse")  # saved before link reactions: none
+        self._link_impulse = np.zeros((len(self.link_names), 6)) if li is None else np.asarray(li, np.float64).copy()
         self._last_dt_ctrl = float(state["last_dt_ctrl"])
         self._dirty = True
 

@@ -75,6 +75,31 @@ def test_collider_sliding_at_1_m_per_s():
     assert drift.max() < 5e-3  # nothing flew off
 
 
+def test_link_takes_back_what_the_collider_gets():
+    """A sphere pressed off-centre into a pad bound to its base link: the link's reaction is
+    equal and opposite to the collider's, its torque the collider's moment carried to the
+    link origin. This guards the accounting of kernels.reduce_contact (a massless layer:
+    the code against itself, so that two-way coupling conserves momentum between the
+    SAPIEN bodies), not the physics of the contact (test_hertz, bench pad)."""
+    world = pad_world(dx=2e-3, size=(0.016, 0.016, 0.006))
+    R, x0, depth = 4e-3, np.array([3e-3, -2e-3, 0.0]), 1e-3
+    c = world.add_collider(Sphere(radius=R, pose=make_pose(x0 + [0, 0, R]), friction=0.5))
+    dt = 20 * world.settings.cfl * world.settings.dx / world.wave_speed()
+    for k in range(20):
+        world.set_collider_pose(c, make_pose(x0 + [0, 0, R - depth * (k + 1) / 20]))
+        world.step(dt)
+    F_col, tau_col = world.collider_wrench(c)
+    F_link, tau_link = world.link_wrench("base")
+    assert F_col[2] > 0.5  # pushed up by the pad
+    np.testing.assert_allclose(F_link, -F_col, rtol=1e-5, atol=1e-6 * abs(F_col[2]))
+    o_col, o_link = world.colliders[c].pose[:3, 3], world.link_pose("base")[:3, 3]
+    moment = tau_col + np.cross(o_col - o_link, F_col)  # the collider's moment about the link origin
+    np.testing.assert_allclose(tau_link, -moment, atol=2e-4 * abs(F_col[2]) * R)
+    assert abs(tau_link[1]) > 0.5 * x0[0] * F_col[2]  # off-centre: a real lever, not zeros
+    with pytest.raises(ConfigError, match="unknown link"):
+        world.link_wrench("finger")
+
+
 def test_kinematic_link_rotating_180_deg_in_one_second():
     # quasi-static mass scaling keeps this at ~1400 substeps
     s = SolverSettings(dx=2e-3, gravity=(0, 0, 0), mass_scaling=100.0, max_substeps=100000)
