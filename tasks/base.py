@@ -26,8 +26,10 @@ only, its collision geometry without the soft layer (:func:`~gausstac_maniskill.
 the MPM pad handles the contact in the layer in front of the core, and an object that
 reaches the core stops the finger (hard stop: a finger never passes through an object).
 The pad reaction goes back to SAPIEN as an external wrench on two-way-coupled dynamic
-objects, one SAPIEN step late (with such an object the MPM steps after every SAPIEN step
-instead of once per control step).
+objects and, with ``pad_reaction``, equal and opposite on the pad links, one SAPIEN step
+late (the MPM then steps after every SAPIEN step instead of once per control step). The
+pad is massless on the SAPIEN side: what its particles take from an object in a step, its
+link takes back, so the impulses on the two bodies cancel.
 
 Units: SI. ``physx_cpu`` runs one env per process (use ``gym.vector.AsyncVectorEnv``);
 the code keeps a batch axis everywhere.
@@ -63,7 +65,12 @@ from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
                        TactileSensorConfig, stack_tactile)
 
-__all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND"]
+__all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND",
+           "PAD_REACTION_MIN_FREQ"]
+
+#: SAPIEN rate [Hz] from which ``pad_reaction`` held a hand closed hard on a fixed cube
+#: (``bench close --reaction``: flung fingers at 100, 500 and 1000 Hz, none at 2000 Hz)
+PAD_REACTION_MIN_FREQ = 2000
 
 #: splat camera background [RGB in 0..1] behind a captured scene (``splat_background=None``)
 SCENE_BACKGROUND = (0.0, 0.0, 0.0)
@@ -142,6 +149,15 @@ class GaussTacEnv(BaseEnv):
             (plain SAPIEN cameras at the same poses: rigid meshes only, no pad deformation).
         record_mpm_state: put the MPM state in ``get_state_dict`` (exact replay; ~150 B per
             particle per recorded step).
+        pad_reaction: apply the pads' contact reaction to their links in SAPIEN: what the
+            pads push on objects, the fingers feel, equal and opposite (the MPM then steps
+            after every SAPIEN step). Off by default for now: the coupling is explicit, one
+            SAPIEN step late, and the hand's distal links are light (10-40 g), so it is
+            stable only at a high ``sim_freq``: a hand closed hard on a fixed cube flings
+            its fingers at 100-1000 Hz and holds at 2000 Hz (``bench close --reaction``,
+            BENCHMARKS.md); a warning says so below :data:`PAD_REACTION_MIN_FREQ`.
+            Without it the hand is driven kinematically as far as the pads are concerned
+            (the rigid cores still stop a finger).
     """
 
     SUPPORTED_ROBOTS = ["allegro_hand_right_gausstac"]
@@ -150,7 +166,8 @@ class GaussTacEnv(BaseEnv):
     def __init__(self, *args, robot_uids="allegro_hand_right_gausstac", mpm_dx: float = 1.0e-3,
                  mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
                  splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
-                 scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene", **kwargs):
+                 scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
+                 pad_reaction: bool = False, **kwargs):
         backend.ensure_init()
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
@@ -159,6 +176,7 @@ class GaussTacEnv(BaseEnv):
         self.splat_size = tuple(int(v) for v in splat_size)
         self.render_size = tuple(int(v) for v in render_size)
         self.record_mpm_state = bool(record_mpm_state)
+        self.pad_reaction = bool(pad_reaction)
         if camera not in ("splat", "sapien"):
             raise ConfigError(f"camera={camera!r}: use 'splat' (Gaussian Splatting) or 'sapien'")
         self.camera_kind = camera
@@ -173,13 +191,22 @@ class GaussTacEnv(BaseEnv):
         self.cosims: list[GaussTacSim] = []
         self._rigid: dict[str, RigidObject] = {}
         self._soft: dict[str, SoftObject] = {}
-        self._wrench: dict[str, np.ndarray] = {}
+        self._wrench: dict[str, np.ndarray] = {}  # object -> [B, 6] acting during the next SAPIEN step
+        self._link_wrench = np.zeros((0, 0, 6))  # [B, pad links, 6] acting during the next SAPIEN step
         self._pad_geometry: dict = {}  # pad name -> Pad at this env's resolution
         self._cosim_stale = True
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
         self.step_timing: dict[str, float] = {}
         self._splat_source = _EnvSplatSource(self)
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
+        if self.pad_reaction and self.gpu_sim_enabled:
+            raise ConfigError("pad_reaction=True needs sim_backend='physx_cpu': the reaction is applied per "
+                              "rigid body, which the GPU simulation does not offer yet")
+        if self.pad_reaction and self.sim_freq < PAD_REACTION_MIN_FREQ:
+            warnings.warn(f"pad_reaction=True at sim_freq={self.sim_freq} Hz: the explicit pad-link coupling was "
+                          f"measured stable from {PAD_REACTION_MIN_FREQ} Hz on a hand closed hard on an object; "
+                          "below, a hard press can fling a finger (pass sim_config=dict(sim_freq=...))",
+                          UserWarning, stacklevel=2)
 
     # ------------------------------------------------------------------ set-up
     def _load_agent(self, options: dict, initial_agent_poses=None, *args, **kwargs):
@@ -407,6 +434,7 @@ class GaussTacEnv(BaseEnv):
                 self._add_captured_layers(sim, b)
             self.cosims.append(sim)
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
+        self._link_wrench = np.zeros((self.num_envs, len(self.pad_links) if self.pad_reaction else 0, 6))
         self._cosim_stale = False
         self.step_timing["cosim_build"] = time.perf_counter() - t0
 
@@ -450,10 +478,11 @@ class GaussTacEnv(BaseEnv):
     @property
     def mpm_every_sim_step(self) -> bool:
         """Whether the MPM steps after every SAPIEN step (``sim_timestep``) instead of once
-        per control step: on when a two-way coupled object exists, so that the wrench
-        applied to it lags by one SAPIEN step, not one control step (explicit coupling is
-        stable for m > k·dt²/4). The total number of MPM substeps is about the same."""
-        return any(o.two_way for o in self._rigid.values())
+        per control step: on with ``pad_reaction`` or a two-way coupled object, so that
+        the wrench applied lags by one SAPIEN step, not one control step (explicit coupling
+        of a mass m to a pad of contact stiffness k is stable for m > k·dt²/4). The total
+        number of MPM substeps is about the same."""
+        return self.pad_reaction or any(o.two_way for o in self._rigid.values())
 
     def _step_mpm(self, dt: float) -> None:
         self._ensure_cosims()
@@ -462,8 +491,9 @@ class GaussTacEnv(BaseEnv):
         for b, sim in enumerate(self.cosims):
             sim.step(links[b], dt, objects[b])
             for name in self._wrench:
-                f, tau = sim.object_wrench(name)
-                self._wrench[name][b] = np.concatenate([f, tau])
+                self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
+            for i in range(self._link_wrench.shape[1]):
+                self._link_wrench[b, i] = np.concatenate(sim.link_wrench(self.pad_links[i]))
         self.step_timing["mpm"] = self.step_timing.get("mpm", 0.0) + time.perf_counter() - t0
 
     def _after_simulation_step(self):
@@ -481,17 +511,28 @@ class GaussTacEnv(BaseEnv):
         self.step_timing["tactile"] = time.perf_counter() - t1
 
     def _before_simulation_step(self):
+        """Two-way coupling: the pads' reactions of the last MPM step act during this SAPIEN
+        step, on the two-way objects and, equal and opposite, on the pad links."""
         super()._before_simulation_step()
         for name, w in self._wrench.items():
-            if not np.any(w):
-                continue
-            actor = self._rigid[name].actor
-            origin = actor.pose.raw_pose[:, :3].detach().cpu().double().numpy()
-            for b, body in enumerate(actor._bodies):
-                com = np.asarray((body.entity_pose * body.cmass_local_pose).p, np.float64)
-                force, torque = w[b, :3], w[b, 3:]
-                torque_com = torque + np.cross(origin[b] - com, force)  # torque was about the actor origin
-                body.add_force_torque(force.astype(np.float32), torque_com.astype(np.float32))
+            _apply_wrench(self._rigid[name].actor, w)
+        if self._link_wrench.shape[1]:
+            links = self.agent.robot.links_map
+            for i, name in enumerate(self.pad_links):
+                _apply_wrench(links[name], self._link_wrench[:, i])
+
+    @property
+    def pad_links(self) -> list[str]:
+        """Names of the links that carry pads (each once, in pad order)."""
+        return list(dict.fromkeys(p.link for p in self.agent.gausstac_pads))
+
+    def pad_link_wrench(self) -> torch.Tensor:
+        """[B, len(pad_links), 6] force [N] and torque [N·m] (about each link's origin, world
+        frame) the pads passed to their links during the last MPM step; with
+        ``pad_reaction`` it acts on the links during the next SAPIEN step."""
+        self._ensure_cosims()
+        out = [[np.concatenate(sim.link_wrench(link)) for link in self.pad_links] for sim in self.cosims]
+        return torch.as_tensor(np.array(out), dtype=torch.float32, device=self.device)
 
     def object_wrench(self, name: str) -> torch.Tensor:
         """[B, 6] force [N] and torque [N·m] (about the object origin) the pads exerted on
@@ -563,6 +604,8 @@ class GaussTacEnv(BaseEnv):
         task = self._get_task_state()
         if self._wrench:  # the two-way wrench acting during the next SAPIEN step
             task = {**task, **{f"wrench_{n}": torch.as_tensor(w, dtype=torch.float64) for n, w in self._wrench.items()}}
+        if self._link_wrench.size:  # the same for the pad links, [B, L * 6]
+            task["link_wrench"] = torch.as_tensor(self._link_wrench.reshape(self.num_envs, -1), dtype=torch.float64)
         if task:  # [B] leaves as [B, 1]: ManiSkill's replay indexes every state leaf as [..., D]
             state["task"] = {k: (v[:, None] if v.ndim == 1 else v).clone() for k, v in task.items()}
         if self.record_mpm_state and self.cosims and not self._cosim_stale:
@@ -583,6 +626,7 @@ class GaussTacEnv(BaseEnv):
             v = common.to_tensor(v).cpu()
             task[k] = v[rows] if v.shape[0] == self.num_envs else v  # rows of the envs being set
         wrench = {k[len("wrench_"):]: task.pop(k) for k in list(task) if k.startswith("wrench_")}
+        link_wrench = task.pop("link_wrench", None)
         if task:  # back to the task's own shapes ([B, 1] -> [B])
             now = self._get_task_state()
             task = {k: v[..., 0] if k in now and now[k].ndim == 1 and v.ndim == 2 else v for k, v in task.items()}
@@ -599,6 +643,8 @@ class GaussTacEnv(BaseEnv):
         for name, w in wrench.items():
             if name in self._wrench:
                 self._wrench[name][rows.numpy()] = w.double().numpy()
+        if link_wrench is not None and self._link_wrench.size:
+            self._link_wrench[rows.numpy()] = link_wrench.double().numpy().reshape(len(rows), -1, 6)
 
 
 def _load_scene_capture(scene_ply, scene_pose, camera: str):
@@ -617,6 +663,22 @@ def _load_scene_capture(scene_ply, scene_pose, camera: str):
 
         scene_ply, scene_pose = EXAMPLE_SCENE, EXAMPLE_PLACEMENT if scene_pose is None else scene_pose
     return load_capture(scene_ply, Similarity.coerce(scene_pose, "scene_pose"))
+
+
+def _apply_wrench(entity, w: np.ndarray) -> None:
+    """Add w [B, 6] (force [N], torque [N·m] about the entity's origin, world frame) to the
+    rigid body of each env of a ManiSkill actor or link for the coming SAPIEN step (CPU
+    sim), as a force at its centre of mass and the torque that keeps the moment."""
+    if not np.any(w):
+        return
+    origin = entity.pose.raw_pose[:, :3].detach().cpu().double().numpy()
+    for b, body in enumerate(entity._bodies):
+        if not np.any(w[b]):
+            continue
+        com = np.asarray((body.entity_pose * body.cmass_local_pose).p, np.float64)
+        force, torque = w[b, :3], w[b, 3:]
+        torque_com = torque + np.cross(origin[b] - com, force)  # the moment about the centre of mass
+        body.add_force_torque(force.astype(np.float32), torque_com.astype(np.float32))
 
 
 def batched_pose(p, q) -> Pose:

@@ -6,7 +6,12 @@ steps of 50 ms. The index pad meets the cube's face 2–4 mm in front of it in t
 step; the fingers then curl on and drag along the face. Per step it prints each pad's normal
 force (its force map's sum) [N], how deep the deepest vertex of each pad link's rigid core
 lies inside the cube (the hard stop: PhysX's slop only, never the layer's thickness) [mm],
-the range of the particles' volume ratio J and principal stretches, and the wall time.
+the range of the particles' volume ratio J and principal stretches, the speed of the
+fastest pad link [m/s] and the wall time.
+
+``--reaction`` applies the pads' reaction to their links (``pad_reaction=True``: the MPM
+then steps after every SAPIEN step) and ``--sim-freq`` sets SAPIEN's rate [Hz]: the
+explicit coupling's stability against the time step (BENCHMARKS.md, issue 11).
 A ``SimulationError`` ends the run and is printed (it is what the code did before the rigid
 cores and the stretch safeguard: see BENCHMARKS.md, issue 11).
 """
@@ -37,6 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dx", type=float, default=1e-3, help="MPM grid spacing [m] (default 1 mm, the tasks')")
     ap.add_argument("--steps", type=int, default=30, help="control steps (default 30)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--sim-freq", type=int, default=100, help="SAPIEN steps per second (default 100, ManiSkill's)")
+    ap.add_argument("--reaction", action="store_true", help="apply the pads' reaction to their links")
     ap.add_argument("--out", default="out/bench_close", help="folder for the report")
     args = ap.parse_args(argv)
     import gymnasium as gym
@@ -46,18 +53,22 @@ def main(argv: list[str] | None = None) -> int:
     from ..agents.base import core_meshes
     from ..errors import SimulationError
 
-    env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=args.dx)
+    env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=args.dx,
+                   pad_reaction=args.reaction, sim_config=dict(sim_freq=args.sim_freq))
     env.reset(seed=args.seed)
     u = env.unwrapped
     specs = u.agent.gausstac_pads
     cores = {link: np.concatenate([c.vertices for c in pieces]) for link, pieces in core_meshes(type(u.agent)).items()}
     action = np.ones(env.action_space.shape, np.float32)
-    lines = [f"GaussTac-PressCube-v1, whole hand closing (action +1), dx = {args.dx * 1e3:g} mm, seed {args.seed}",
+    links = [u.agent.robot.links_map[s.link] for s in specs]
+    lines = [f"GaussTac-PressCube-v1, whole hand closing (action +1), dx = {args.dx * 1e3:g} mm, seed {args.seed}, "
+             f"SAPIEN at {args.sim_freq} Hz, pad reaction on the links {'on' if args.reaction else 'off'}",
              "",
              "| step | " + " | ".join(f"{s.name} [N]" for s in specs) + " | deepest core vertex in the cube [mm] "
-             "| J min..max | stretch min..max | wall [s] |",
-             "|" + "---|" * (len(specs) + 5)]
+             "| J min..max | stretch min..max | fastest pad link [m/s] | wall [s] |",
+             "|" + "---|" * (len(specs) + 6)]
     peak = {s.name: 0.0 for s in specs}
+    fastest = 0.0
     try:
         for k in tqdm(range(args.steps), desc="close", leave=False):
             t0 = time.perf_counter()
@@ -74,13 +85,17 @@ def main(argv: list[str] | None = None) -> int:
             st = u.cosims[0].flat_state()
             Fd = st["p_F"].reshape(-1, 3, 3)
             J, sv = np.linalg.det(Fd), np.linalg.svd(Fd, compute_uv=False)
+            speed = max(float(np.linalg.norm(link.get_linear_velocity()[0].numpy())) for link in links)
+            fastest = max(fastest, speed)
             lines.append(f"| {k} | " + " | ".join(f"{F[s.name]:.1f}" for s in specs)
                          + f" | {max(deepest, 0.0) * 1e3:.2f} | {J.min():.2f}..{J.max():.2f} "
-                           f"| {sv.min():.2f}..{sv.max():.2f} | {wall:.2f} |")
+                           f"| {sv.min():.2f}..{sv.max():.2f} | {speed:.2f} | {wall:.2f} |")
     finally:
         env.close()
-    lines += ["", "peak force [N]: " + ", ".join(f"{n} {v:.1f}" for n, v in peak.items())]
+    lines += ["", "peak force [N]: " + ", ".join(f"{n} {v:.1f}" for n, v in peak.items())
+              + f"; fastest pad link {fastest:.2f} m/s"]
     text = "\n".join(lines)
     print(text)
-    write_report(args.out, f"close_dx{args.dx * 1e3:g}mm.md", text)
+    tag = f"_{args.sim_freq}Hz_reaction" if args.reaction else ""
+    write_report(args.out, f"close_dx{args.dx * 1e3:g}mm{tag}.md", text)
     return 0
