@@ -216,6 +216,7 @@ class GaussTacEnv(BaseEnv):
             uid = getattr(self.agent, "uid", self.robot_uids)
             raise ConfigError(f"robot_uids={uid!r} has no GaussTac pads: use 'allegro_hand_right_gausstac' or an "
                               "agent made with gausstac_maniskill.agents.add_gausstac_pads(...)")
+        self._pad_links = list(dict.fromkeys(p.link for p in self.agent.gausstac_pads))  # read every SAPIEN step
 
     #: height [m] of the ground plane under the hand (``None``: no ground)
     ground_altitude: float | None = -0.15
@@ -434,7 +435,7 @@ class GaussTacEnv(BaseEnv):
                 self._add_captured_layers(sim, b)
             self.cosims.append(sim)
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
-        self._link_wrench = np.zeros((self.num_envs, len(self.pad_links) if self.pad_reaction else 0, 6))
+        self._link_wrench = np.zeros((self.num_envs, len(self._pad_links) if self.pad_reaction else 0, 6))
         self._cosim_stale = False
         self.step_timing["cosim_build"] = time.perf_counter() - t0
 
@@ -492,8 +493,8 @@ class GaussTacEnv(BaseEnv):
             sim.step(links[b], dt, objects[b])
             for name in self._wrench:
                 self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
-            for i in range(self._link_wrench.shape[1]):
-                self._link_wrench[b, i] = np.concatenate(sim.link_wrench(self.pad_links[i]))
+            if self._link_wrench.shape[1]:
+                self._link_wrench[b] = self._pad_link_wrenches(sim)
         self.step_timing["mpm"] = self.step_timing.get("mpm", 0.0) + time.perf_counter() - t0
 
     def _after_simulation_step(self):
@@ -518,21 +519,25 @@ class GaussTacEnv(BaseEnv):
             _apply_wrench(self._rigid[name].actor, w)
         if self._link_wrench.shape[1]:
             links = self.agent.robot.links_map
-            for i, name in enumerate(self.pad_links):
+            for i, name in enumerate(self._pad_links):
                 _apply_wrench(links[name], self._link_wrench[:, i])
 
     @property
     def pad_links(self) -> list[str]:
         """Names of the links that carry pads (each once, in pad order)."""
-        return list(dict.fromkeys(p.link for p in self.agent.gausstac_pads))
+        return list(self._pad_links)
 
     def pad_link_wrench(self) -> torch.Tensor:
         """[B, len(pad_links), 6] force [N] and torque [N·m] (about each link's origin, world
         frame) the pads passed to their links during the last MPM step; with
         ``pad_reaction`` it acts on the links during the next SAPIEN step."""
         self._ensure_cosims()
-        out = [[np.concatenate(sim.link_wrench(link)) for link in self.pad_links] for sim in self.cosims]
-        return torch.as_tensor(np.array(out), dtype=torch.float32, device=self.device)
+        out = np.stack([self._pad_link_wrenches(sim) for sim in self.cosims])
+        return torch.as_tensor(out, dtype=torch.float32, device=self.device)
+
+    def _pad_link_wrenches(self, sim: GaussTacSim) -> np.ndarray:
+        """[len(pad_links), 6] of one co-simulator (see :meth:`pad_link_wrench`)."""
+        return np.array([np.concatenate(sim.link_wrench(link)) for link in self._pad_links])
 
     def object_wrench(self, name: str) -> torch.Tensor:
         """[B, 6] force [N] and torque [N·m] (about the object origin) the pads exerted on
