@@ -144,6 +144,17 @@ class GaussTacSim:
         and opposite to the rigid objects' share of :meth:`object_wrench`)."""
         return self.world.link_wrench(link)
 
+    def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:
+        """Per object that hand link ``link``'s pads touched in the last step, ``[7]``: the
+        force [N] and torque [N·m] (about the link origin, world frame) it passed to the
+        link, and the pads' indentation [m] (deepest displacement of a touching pad particle
+        from its rest place, along its push). Keys: rigid object names; ``None`` for soft
+        objects (the other velocity field). Objects not touched are left out; the values
+        sum to :meth:`link_wrench`."""
+        rows = self.world.link_contacts(link)
+        names = {i: n for n, i in self._objects.items()}
+        return {names.get(i): r for i, r in enumerate(rows) if (i in names or i == len(rows) - 1) and np.any(r[:6])}
+
     # ------------------------------------------------------------------ stepping
     def step(self, link_poses: Mapping[str, np.ndarray], dt: float,
              object_poses: Mapping[str, np.ndarray] | None = None) -> dict[str, dict[str, torch.Tensor]]:
@@ -376,7 +387,7 @@ class GaussTacSim:
             collider_prev=np.asarray(w["collider_prev"], np.float64).reshape(-1, 4, 4),
             collider_pose=np.asarray(w["collider_pose"], np.float64).reshape(-1, 4, 4),
             collider_impulse=np.asarray(w["collider_impulse"], np.float64),
-            link_impulse=np.asarray(w["link_impulse"], np.float64).reshape(-1, 6),
+            pair_impulse=np.asarray(w["pair_impulse"], np.float64),
             group_awake=np.asarray(w["awake"], bool), group_sleep_pose=sleep, group_has_sleep_pose=has_sleep,
             scalars=np.array([w["time"], w["step_count"], w["vmax"], w["last_dt_ctrl"]], np.float64),
             link_pose=np.stack([self._link_pose[k] for k in sorted(self._link_pose)]),
@@ -399,7 +410,7 @@ class GaussTacSim:
             "collider_prev": list(np.asarray(state["collider_prev"], np.float64)),
             "collider_pose": list(np.asarray(state["collider_pose"], np.float64)),
             "collider_impulse": np.asarray(state["collider_impulse"], np.float64),
-            "link_impulse": np.asarray(state["link_impulse"], np.float64) if "link_impulse" in state else None,
+            **{k: np.asarray(state[k], np.float64) for k in ("pair_impulse", "link_impulse") if k in state},
             "awake": np.asarray(state["group_awake"], bool),
             "sleep_pose": [np.asarray(T, np.float64) if h else None
                            for T, h in zip(state["group_sleep_pose"], state["group_has_sleep_pose"])],

@@ -29,7 +29,7 @@ import taichi as ti
 
 from . import materials as mat
 from .colliders import collider_contact
-from .kinematics import frame_at, quat_to_mat, write_frames
+from .kinematics import frame_at, pose_at, quat_to_mat, write_frames
 
 vec3 = ti.math.vec3
 mat3 = ti.math.mat3
@@ -1080,15 +1080,18 @@ def pressure_solve(G: ti.template(), S: ti.template(), geo, dt, inv_dx, iters: t
 
 
 @ti.kernel
-def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI, link: NDI,
-                   col_pose: NDF2, link_pose: NDF2, col_impulse: NDF2, link_impulse: NDF2):
+def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI, link: NDI, X_rest: NDV,
+                   col_pose: NDF2, link_pose: NDF2, n_slot: ti.i32, col_impulse: NDF2, pair_impulse: NDF2):
     """Sum the per-particle contact impulses of the control step (deterministic):
 
     * into each collider's reaction, -J about the collider's end origin;
-    * into the reaction on each particle's link, +J about the link's end origin: the layer
-      is taken as massless (quasi-static), so what its particles receive from colliders
-      and from the other field passes to the link that holds them, and a pad's link and
-      the object it presses take equal and opposite impulses.
+    * into the reaction on each particle's link, +J about the link's end origin, per
+      contact pair (row ``link * n_slot + collider``; slot ``n_slot - 1`` holds what came
+      from the other field): the layer is taken as massless (quasi-static), so what its
+      particles receive from an object passes to the link that holds them, and a pad's
+      link and the object it presses take equal and opposite impulses. Column 6 of a pair
+      row is its indentation [m]: the largest displacement of a touching particle from
+      its rest place on the link, along the push it received.
     """
     ti.loop_config(serialize=True)
     for ii in range(n):
@@ -1103,11 +1106,16 @@ def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI
                 col_impulse[c, 3 + d] += tq[d]
         lk = link[p]
         if c != -1 and lk >= 0:
-            o = ti.Vector([link_pose[lk, 7], link_pose[lk, 8], link_pose[lk, 9]])
+            R, o = pose_at(link_pose, lk, 1.0)
             tq = (x[p] - o).cross(impulse[p])
+            row = lk * n_slot + (c if c >= 0 else n_slot - 1)
             for d in ti.static(range(3)):
-                link_impulse[lk, d] += impulse[p][d]
-                link_impulse[lk, 3 + d] += tq[d]
+                pair_impulse[row, d] += impulse[p][d]
+                pair_impulse[row, 3 + d] += tq[d]
+            push = impulse[p].norm()
+            if push > 0.0:
+                depth = (x[p] - (R @ X_rest[p] + o)).dot(impulse[p]) / push
+                pair_impulse[row, 6] = ti.max(pair_impulse[row, 6], depth)
 
 
 @ti.kernel

@@ -158,7 +158,7 @@ class MPMWorld:
         self._dirty = True
         self._vmax = 0.0
         self._col_impulse = np.zeros((0, 6))
-        self._link_impulse = np.zeros((0, 6))
+        self._pair_impulse = np.zeros((0, 1, 7))  # [link, collider + other field, J | moment | depth]
         self._last_dt_ctrl = 1.0
         self._reach = 0.0
         self._link_radius: list[float] = []
@@ -181,7 +181,7 @@ class MPMWorld:
         self._link_prev.append(T.copy())
         self._link_next.append(T.copy())
         self._link_twist.append(np.zeros(6))
-        self._link_impulse = np.concatenate([self._link_impulse, np.zeros((1, 6))])
+        self._pair_impulse = np.concatenate([self._pair_impulse, np.zeros((1,) + self._pair_impulse.shape[1:])])
         self._dirty = True
         return len(self.link_names) - 1
 
@@ -340,6 +340,7 @@ class MPMWorld:
         # one impulse row per collider from the start, so the state keeps its shape before
         # and after the first step (recorders stack states of successive steps)
         self._col_impulse = np.concatenate([self._col_impulse, np.zeros((1, 6))])
+        self._pair_impulse = np.insert(self._pair_impulse, self._pair_impulse.shape[1] - 1, 0.0, axis=1)
         self._dirty = True
         return len(self.colliders) - 1
 
@@ -461,9 +462,19 @@ class MPMWorld:
         control step: the contact impulses those particles took from colliders and from the
         other field, passed on by a massless layer (see :func:`kernels.reduce_contact`).
         Equal and opposite to the colliders' share of :meth:`collider_wrench`."""
-        i = self.link_index(link)
-        J = self._link_impulse[i] / self._last_dt_ctrl
+        J = self._pair_impulse[self.link_index(link), :, :6].sum(0) / self._last_dt_ctrl
         return J[:3].copy(), J[3:].copy()
+
+    def link_contacts(self, link) -> np.ndarray:
+        """[len(colliders) + 1, 7] per object that ``link``'s particles touched during the last
+        control step: the mean force [N] and torque [N·m] (about the link's origin, world
+        frame) it passed to the link, and the indentation [m] (the deepest displacement of
+        a touching particle from its rest place on the link, along its push). Row c < C:
+        collider c; the last row: the other velocity field (soft objects). Rows sum to
+        :meth:`link_wrench`."""
+        out = self._pair_impulse[self.link_index(link)].copy()
+        out[:, :6] /= self._last_dt_ctrl
+        return out
 
     def energy(self) -> tuple[float, float]:
         """(kinetic, elastic) energy [J] of the awake dynamic particles."""
@@ -655,7 +666,7 @@ class MPMWorld:
                                d["group"], d["group_qs"], d["twist_change"])
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
         d["col_impulse"].from_numpy(np.zeros((max(len(self.colliders), 1), 6), np.float32))
-        d["link_impulse"].from_numpy(np.zeros((max(len(self.link_names), 1), 6), np.float32))
+        d["pair_impulse"].from_numpy(np.zeros(d["pair_impulse"].shape, np.float32))
         self._host_stale = True  # from here on the device holds the newer state
         cells = 0
         for k in range(n_sub):
@@ -681,10 +692,12 @@ class MPMWorld:
         if self._patched and self._n_active:
             self._note_patch_contact()
         if self._n_active and self.contact == "particle":
-            K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"], d["link"],
-                             d["col_pose"], d["link_pose"], d["col_impulse"], d["link_impulse"])
+            K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"], d["link"], d["X0"],
+                             d["col_pose"], d["link_pose"], len(self.colliders) + 1, d["col_impulse"], d["pair_impulse"])
         self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
-        self._link_impulse = d["link_impulse"].to_numpy().astype(np.float64)[: len(self.link_names)]
+        pairs = d["pair_impulse"].to_numpy().astype(np.float64)
+        self._pair_impulse = pairs[: len(self.link_names) * (len(self.colliders) + 1)].reshape(
+            len(self.link_names), len(self.colliders) + 1, 7)
         for i in range(len(self.link_names)):
             self._link_prev[i] = self._link_next[i].copy()
         self._link_twist = twists
@@ -988,7 +1001,7 @@ class MPMWorld:
         d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
         d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
         d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
-        d["link_impulse"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 6))
+        d["pair_impulse"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1) * (len(self.colliders) + 1), 7))
         d["link_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), FRAME))
         d["col_frames"] = ti.ndarray(ti.f32, shape=(nc, FRAME))
         d["group_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.groups), 1), FRAME))
@@ -1060,7 +1073,7 @@ class MPMWorld:
             "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in self.groups],
             "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
             "collider_impulse": self._col_impulse.copy(), "last_dt_ctrl": self._last_dt_ctrl,
-            "link_impulse": self._link_impulse.copy(),
+            "pair_impulse": self._pair_impulse.copy(),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -1092,8 +1105,11 @@ class MPMWorld:
         self.time, self.step_count = float(state["time"]), int(state["step_count"])
         self._vmax = float(state["vmax"])
         self._col_impulse = state["collider_impulse"].copy()
-        li = state.get("link_impulse")  # saved before link reactions: none
-        self._link_impulse = np.zeros((len(self.link_names), 6)) if li is None else np.asarray(li, np.float64).copy()
+        self._pair_impulse = np.zeros((len(self.link_names), len(self.colliders) + 1, 7))
+        if "pair_impulse" in state:
+            self._pair_impulse[...] = state["pair_impulse"]
+        elif state.get("link_impulse") is not None:  # saved before per-object pairs: the link's sum, no depth
+            self._pair_impulse[:, -1, :6] = np.asarray(state["link_impulse"], np.float64).reshape(-1, 6)
         self._last_dt_ctrl = float(state["last_dt_ctrl"])
         self._dirty = True
 

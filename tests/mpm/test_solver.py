@@ -98,6 +98,14 @@ def test_link_takes_back_what_the_collider_gets():
     assert abs(tau_link[1]) > 0.5 * x0[0] * F_col[2]  # off-centre: a real lever, not zeros
     with pytest.raises(ConfigError, match="unknown link"):
         world.link_wrench("finger")
+    # per object: all of it came from the sphere (row c; the last row, the other field, is empty),
+    # and the pad's indentation is the depth the sphere was pushed to (1 mm)
+    pairs = world.link_contacts("base")
+    assert pairs.shape == (len(world.colliders) + 1, 7)
+    np.testing.assert_allclose(pairs[c, :3], F_link, rtol=1e-6)
+    assert not np.any(pairs[-1])
+    print("indentation [mm]", pairs[c, 6] * 1e3)
+    assert 0.7 * depth < pairs[c, 6] < 1.1 * depth
 
 
 def test_kinematic_link_rotating_180_deg_in_one_second():
