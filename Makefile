@@ -27,7 +27,8 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench patch
 	$(PY) -m gausstac_maniskill.bench look
 	$(PY) -m gausstac_maniskill.bench close
-	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction --sim-freq 2000
+	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction --sim-freq 100
+	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction explicit --sim-freq 2000
 
 clean:
 	rm -rf .venv out build *.egg-info

@@ -26,10 +26,13 @@ only, its collision geometry without the soft layer (:func:`~gausstac_maniskill.
 the MPM pad handles the contact in the layer in front of the core, and an object that
 reaches the core stops the finger (hard stop: a finger never passes through an object).
 The pad reaction goes back to SAPIEN as an external wrench on two-way-coupled dynamic
-objects and, with ``pad_reaction``, equal and opposite on the pad links, one SAPIEN step
-late (the MPM then steps after every SAPIEN step instead of once per control step). The
-pad is massless on the SAPIEN side: what its particles take from an object in a step, its
-link takes back, so the impulses on the two bodies cancel.
+objects and, with ``pad_reaction``, equal and opposite on the pad links (the MPM then
+steps after every SAPIEN step instead of once per control step). By default it acts
+through one-sided contact springs that PhysX integrates implicitly with the links' motion
+(:mod:`.contact_spring`: stable at ManiSkill's 100 Hz); ``pad_reaction="explicit"`` applies
+it as forces one SAPIEN step late (stable from :data:`PAD_REACTION_MIN_FREQ`). The pad is
+massless on the SAPIEN side: what its particles take from an object in a step, its link
+takes back, so the impulses on the two bodies cancel.
 
 Units: SI. ``physx_cpu`` runs one env per process (use ``gym.vector.AsyncVectorEnv``);
 the code keeps a batch axis everywhere.
@@ -64,12 +67,13 @@ from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
 from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
                        TactileSensorConfig, stack_tactile)
+from .contact_spring import ContactSpring
 
 __all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND",
            "PAD_REACTION_MIN_FREQ"]
 
-#: SAPIEN rate [Hz] from which ``pad_reaction`` held a hand closed hard on a fixed cube
-#: (``bench close --reaction``: flung fingers at 100, 500 and 1000 Hz, none at 2000 Hz)
+#: SAPIEN rate [Hz] from which ``pad_reaction="explicit"`` held a hand closed hard on a fixed
+#: cube (``bench close --reaction explicit``: flung fingers at 100, 500 and 1000 Hz, none at 2000 Hz)
 PAD_REACTION_MIN_FREQ = 2000
 
 #: splat camera background [RGB in 0..1] behind a captured scene (``splat_background=None``)
@@ -151,13 +155,17 @@ class GaussTacEnv(BaseEnv):
             particle per recorded step).
         pad_reaction: apply the pads' contact reaction to their links in SAPIEN: what the
             pads push on objects, the fingers feel, equal and opposite (the MPM then steps
-            after every SAPIEN step). Off by default for now: the coupling is explicit, one
-            SAPIEN step late, and the hand's distal links are light (10-40 g), so it is
-            stable only at a high ``sim_freq``: a hand closed hard on a fixed cube flings
-            its fingers at 100-1000 Hz and holds at 2000 Hz (``bench close --reaction``,
-            BENCHMARKS.md); a warning says so below :data:`PAD_REACTION_MIN_FREQ`.
-            Without it the hand is driven kinematically as far as the pads are concerned
-            (the rigid cores still stop a finger).
+            after every SAPIEN step). ``True`` (= ``"implicit"``): through one-sided contact
+            springs that PhysX integrates with the links' motion
+            (:mod:`~gausstac_maniskill.tasks.contact_spring`), stable at ManiSkill's 100 Hz;
+            it runs SAPIEN with PhysX's PGS solver (``enable_tgs=False``; TGS raises a
+            ``ConfigError``). ``"explicit"``: as forces one SAPIEN step late, stable only
+            at a high ``sim_freq`` because the hand's distal links are light (10-40 g): a
+            hand closed hard on a fixed cube flings its fingers at 100-1000 Hz and holds at
+            2000 Hz (``bench close --reaction explicit``, BENCHMARKS.md); a warning says so
+            below :data:`PAD_REACTION_MIN_FREQ`. ``False`` (default): the hand is driven
+            kinematically as far as the pads are concerned (the rigid cores still stop a
+            finger), and the pads crush against their cores when a finger presses hard.
     """
 
     SUPPORTED_ROBOTS = ["allegro_hand_right_gausstac"]
@@ -176,7 +184,11 @@ class GaussTacEnv(BaseEnv):
         self.splat_size = tuple(int(v) for v in splat_size)
         self.render_size = tuple(int(v) for v in render_size)
         self.record_mpm_state = bool(record_mpm_state)
+        if pad_reaction not in (False, True, "implicit", "explicit"):
+            raise ConfigError(f"pad_reaction={pad_reaction!r}: use False, True (= 'implicit') or 'explicit'")
         self.pad_reaction = bool(pad_reaction)
+        #: how the pads' reaction reaches their links: None, "implicit" or "explicit"
+        self.pad_coupling = None if not pad_reaction else "implicit" if pad_reaction is True else pad_reaction
         if camera not in ("splat", "sapien"):
             raise ConfigError(f"camera={camera!r}: use 'splat' (Gaussian Splatting) or 'sapien'")
         self.camera_kind = camera
@@ -192,7 +204,9 @@ class GaussTacEnv(BaseEnv):
         self._rigid: dict[str, RigidObject] = {}
         self._soft: dict[str, SoftObject] = {}
         self._wrench: dict[str, np.ndarray] = {}  # object -> [B, 6] acting during the next SAPIEN step
-        self._link_wrench = np.zeros((0, 0, 6))  # [B, pad links, 6] acting during the next SAPIEN step
+        # [B, pad links, rigid objects + soft, 7] pad contacts of the last MPM step (pad_reaction)
+        self._contacts = np.zeros((0, 0, 1, 7))
+        self._contact_drives: list = []  # [B][pad link][object]: implicit contact springs (pad_reaction)
         self._pad_geometry: dict = {}  # pad name -> Pad at this env's resolution
         self._cosim_stale = True
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
@@ -202,11 +216,22 @@ class GaussTacEnv(BaseEnv):
         if self.pad_reaction and self.gpu_sim_enabled:
             raise ConfigError("pad_reaction=True needs sim_backend='physx_cpu': the reaction is applied per "
                               "rigid body, which the GPU simulation does not offer yet")
-        if self.pad_reaction and self.sim_freq < PAD_REACTION_MIN_FREQ:
-            warnings.warn(f"pad_reaction=True at sim_freq={self.sim_freq} Hz: the explicit pad-link coupling was "
+        if self.pad_coupling == "implicit" and self.sim_config.scene_config.enable_tgs:
+            raise ConfigError("pad_reaction=True needs PhysX's PGS solver (sim_config=dict(scene_config=dict("
+                              "enable_tgs=False)), the default with pad_reaction): TGS does not hold the contact "
+                              "springs' stiffness against the joint drives (see tasks/contact_spring.py)")
+        if self.pad_coupling == "explicit" and self.sim_freq < PAD_REACTION_MIN_FREQ:
+            warnings.warn(f"pad_reaction='explicit' at sim_freq={self.sim_freq} Hz: the explicit pad-link coupling was "
                           f"measured stable from {PAD_REACTION_MIN_FREQ} Hz on a hand closed hard on an object; "
                           "below, a hard press can fling a finger (pass sim_config=dict(sim_freq=...))",
                           UserWarning, stacklevel=2)
+
+    @property
+    def _default_sim_config(self):
+        cfg = super()._default_sim_config
+        if self.pad_coupling == "implicit":  # contact springs need PGS (tasks/contact_spring.py)
+            cfg.scene_config.enable_tgs = False
+        return cfg
 
     # ------------------------------------------------------------------ set-up
     def _load_agent(self, options: dict, initial_agent_poses=None, *args, **kwargs):
@@ -308,6 +333,14 @@ class GaussTacEnv(BaseEnv):
 
     def _after_reconfigure(self, options):
         super()._after_reconfigure(options)
+        self._contact_drives = []
+        if self.pad_coupling == "implicit":  # [B][pad link][rigid objects..., soft objects]
+            for b, sub in enumerate(self.scene.sub_scenes):
+                self._contact_drives.append([
+                    [ContactSpring(sub, self.agent.robot.links_map[name]._objs[b].entity,
+                                   o.actor._objs[b] if o.two_way else None) for o in self._rigid.values()]
+                    + [ContactSpring(sub, self.agent.robot.links_map[name]._objs[b].entity)]
+                    for name in self._pad_links])
         self._pose_source = SapienPoseSource(self.agent)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
@@ -435,7 +468,8 @@ class GaussTacEnv(BaseEnv):
                 self._add_captured_layers(sim, b)
             self.cosims.append(sim)
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
-        self._link_wrench = np.zeros((self.num_envs, len(self._pad_links) if self.pad_reaction else 0, 6))
+        self._contacts = np.zeros((self.num_envs, len(self._pad_links) if self.pad_reaction else 0,
+                                   len(self._rigid) + 1, 7))
         self._cosim_stale = False
         self.step_timing["cosim_build"] = time.perf_counter() - t0
 
@@ -480,9 +514,10 @@ class GaussTacEnv(BaseEnv):
     def mpm_every_sim_step(self) -> bool:
         """Whether the MPM steps after every SAPIEN step (``sim_timestep``) instead of once
         per control step: on with ``pad_reaction`` or a two-way coupled object, so that
-        the wrench applied lags by one SAPIEN step, not one control step (explicit coupling
-        of a mass m to a pad of contact stiffness k is stable for m > k·dt²/4). The total
-        number of MPM substeps is about the same."""
+        the reaction is renewed every SAPIEN step, not every control step (explicit coupling
+        of a mass m to a pad of contact stiffness k is stable for m > k·dt²/4; the contact
+        springs of ``pad_reaction=True`` predict only one SAPIEN step). The total number of
+        MPM substeps is about the same."""
         return self.pad_reaction or any(o.two_way for o in self._rigid.values())
 
     def _step_mpm(self, dt: float) -> None:
@@ -493,8 +528,8 @@ class GaussTacEnv(BaseEnv):
             sim.step(links[b], dt, objects[b])
             for name in self._wrench:
                 self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
-            if self._link_wrench.shape[1]:
-                self._link_wrench[b] = self._pad_link_wrenches(sim)
+            if self._contacts.shape[1]:
+                self._contacts[b] = self._pad_contacts(sim)
         self.step_timing["mpm"] = self.step_timing.get("mpm", 0.0) + time.perf_counter() - t0
 
     def _after_simulation_step(self):
@@ -515,12 +550,31 @@ class GaussTacEnv(BaseEnv):
         """Two-way coupling: the pads' reactions of the last MPM step act during this SAPIEN
         step, on the two-way objects and, equal and opposite, on the pad links."""
         super()._before_simulation_step()
-        for name, w in self._wrench.items():
+        if not self._contacts.shape[1]:
+            for name, w in self._wrench.items():
+                _apply_wrench(self._rigid[name].actor, w)
+            return
+        links = [self.agent.robot.links_map[n] for n in self._pad_links]
+        objects = list(self._rigid.values())
+        link_w, obj_w = self._contacts[..., :6].sum(2), {n: w.copy() for n, w in self._wrench.items()}
+        if self.pad_coupling == "implicit":  # what the springs carry is taken off the explicit wrenches
+            for b in range(self.num_envs):
+                for i, link in enumerate(links):
+                    for j, drive in enumerate(self._contact_drives[b][i]):
+                        obj = objects[j] if j < len(objects) and objects[j].two_way else None
+                        spring = drive.update(link._objs[b].entity.pose, self._contacts[b, i, j],
+                                              None if obj is None else obj.actor._objs[b].pose)
+                        if spring is not None:
+                            force, point = spring
+                            link_w[b, i, :3] -= force
+                            link_w[b, i, 3:] -= np.cross(point - _position(link, b), force)
+                            if obj is not None:
+                                obj_w[obj.name][b, :3] += force
+                                obj_w[obj.name][b, 3:] += np.cross(point - _position(obj.actor, b), force)
+        for name, w in obj_w.items():
             _apply_wrench(self._rigid[name].actor, w)
-        if self._link_wrench.shape[1]:
-            links = self.agent.robot.links_map
-            for i, name in enumerate(self._pad_links):
-                _apply_wrench(links[name], self._link_wrench[:, i])
+        for i, link in enumerate(links):
+            _apply_wrench(link, link_w[:, i])
 
     @property
     def pad_links(self) -> list[str]:
@@ -538,6 +592,17 @@ class GaussTacEnv(BaseEnv):
     def _pad_link_wrenches(self, sim: GaussTacSim) -> np.ndarray:
         """[len(pad_links), 6] of one co-simulator (see :meth:`pad_link_wrench`)."""
         return np.array([np.concatenate(sim.link_wrench(link)) for link in self._pad_links])
+
+    def _pad_contacts(self, sim: GaussTacSim) -> np.ndarray:
+        """[len(pad_links), rigid objects + 1, 7] of one co-simulator: per pad link and
+        object touched (rigid objects in registration order, then soft objects) the force,
+        torque about the link origin and indentation of :meth:`GaussTacSim.link_contacts`."""
+        order = {name: j for j, name in enumerate(self._rigid)}
+        out = np.zeros((len(self._pad_links), len(self._rigid) + 1, 7))
+        for i, link in enumerate(self._pad_links):
+            for name, row in sim.link_contacts(link).items():
+                out[i, order.get(name, len(self._rigid))] += row
+        return out
 
     def object_wrench(self, name: str) -> torch.Tensor:
         """[B, 6] force [N] and torque [N·m] (about the object origin) the pads exerted on
@@ -609,8 +674,8 @@ class GaussTacEnv(BaseEnv):
         task = self._get_task_state()
         if self._wrench:  # the two-way wrench acting during the next SAPIEN step
             task = {**task, **{f"wrench_{n}": torch.as_tensor(w, dtype=torch.float64) for n, w in self._wrench.items()}}
-        if self._link_wrench.size:  # the same for the pad links, [B, L * 6]
-            task["link_wrench"] = torch.as_tensor(self._link_wrench.reshape(self.num_envs, -1), dtype=torch.float64)
+        if self._contacts.size:  # the pads' contacts acting on their links, [B, L * (O + 1) * 7]
+            task["pad_contacts"] = torch.as_tensor(self._contacts.reshape(self.num_envs, -1), dtype=torch.float64)
         if task:  # [B] leaves as [B, 1]: ManiSkill's replay indexes every state leaf as [..., D]
             state["task"] = {k: (v[:, None] if v.ndim == 1 else v).clone() for k, v in task.items()}
         if self.record_mpm_state and self.cosims and not self._cosim_stale:
@@ -631,7 +696,7 @@ class GaussTacEnv(BaseEnv):
             v = common.to_tensor(v).cpu()
             task[k] = v[rows] if v.shape[0] == self.num_envs else v  # rows of the envs being set
         wrench = {k[len("wrench_"):]: task.pop(k) for k in list(task) if k.startswith("wrench_")}
-        link_wrench = task.pop("link_wrench", None)
+        contacts = task.pop("pad_contacts", None)
         if task:  # back to the task's own shapes ([B, 1] -> [B])
             now = self._get_task_state()
             task = {k: v[..., 0] if k in now and now[k].ndim == 1 and v.ndim == 2 else v for k, v in task.items()}
@@ -648,8 +713,8 @@ class GaussTacEnv(BaseEnv):
         for name, w in wrench.items():
             if name in self._wrench:
                 self._wrench[name][rows.numpy()] = w.double().numpy()
-        if link_wrench is not None and self._link_wrench.size:
-            self._link_wrench[rows.numpy()] = link_wrench.double().numpy().reshape(len(rows), -1, 6)
+        if contacts is not None and self._contacts.size:
+            self._contacts[rows.numpy()] = contacts.double().numpy().reshape((len(rows),) + self._contacts.shape[1:])
 
 
 def _load_scene_capture(scene_ply, scene_pose, camera: str):
@@ -684,6 +749,11 @@ def _apply_wrench(entity, w: np.ndarray) -> None:
         force, torque = w[b, :3], w[b, 3:]
         torque_com = torque + np.cross(origin[b] - com, force)  # the moment about the centre of mass
         body.add_force_torque(force.astype(np.float32), torque_com.astype(np.float32))
+
+
+def _position(entity, b: int) -> np.ndarray:
+    """World position [m] of env ``b``'s body of a ManiSkill actor or link."""
+    return entity.pose.raw_pose[b, :3].detach().cpu().double().numpy()
 
 
 def batched_pose(p, q) -> Pose:

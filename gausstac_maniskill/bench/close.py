@@ -9,9 +9,11 @@ lies inside the cube (the hard stop: PhysX's slop only, never the layer's thickn
 the range of the particles' volume ratio J and principal stretches, the speed of the
 fastest pad link [m/s] and the wall time.
 
-``--reaction`` applies the pads' reaction to their links (``pad_reaction=True``: the MPM
-then steps after every SAPIEN step) and ``--sim-freq`` sets SAPIEN's rate [Hz]: the
-explicit coupling's stability against the time step (BENCHMARKS.md, issue 11).
+``--reaction`` applies the pads' reaction to their links (``pad_reaction``: the MPM then
+steps after every SAPIEN step), through implicit contact springs (the default,
+``tasks/contact_spring.py``) or, with ``--reaction explicit``, as forces one SAPIEN step
+late; ``--sim-freq`` sets SAPIEN's rate [Hz]: each coupling's stability against the time
+step (BENCHMARKS.md, issue 11).
 A ``SimulationError`` ends the run and is printed (it is what the code did before the rigid
 cores and the stretch safeguard: see BENCHMARKS.md, issue 11).
 """
@@ -43,7 +45,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=30, help="control steps (default 30)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--sim-freq", type=int, default=100, help="SAPIEN steps per second (default 100, ManiSkill's)")
-    ap.add_argument("--reaction", action="store_true", help="apply the pads' reaction to their links")
+    ap.add_argument("--reaction", nargs="?", const="implicit", choices=("implicit", "explicit"), default=None,
+                    help="apply the pads' reaction to their links: implicit contact springs (default) or explicit "
+                         "forces one SAPIEN step late")
     ap.add_argument("--out", default="out/bench_close", help="folder for the report")
     args = ap.parse_args(argv)
     import gymnasium as gym
@@ -54,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     from ..errors import SimulationError
 
     env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=args.dx,
-                   pad_reaction=args.reaction, sim_config=dict(sim_freq=args.sim_freq))
+                   pad_reaction=args.reaction or False, sim_config=dict(sim_freq=args.sim_freq))
     env.reset(seed=args.seed)
     u = env.unwrapped
     specs = u.agent.gausstac_pads
@@ -62,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     action = np.ones(env.action_space.shape, np.float32)
     links = [u.agent.robot.links_map[s.link] for s in specs]
     lines = [f"GaussTac-PressCube-v1, whole hand closing (action +1), dx = {args.dx * 1e3:g} mm, seed {args.seed}, "
-             f"SAPIEN at {args.sim_freq} Hz, pad reaction on the links {'on' if args.reaction else 'off'}",
+             f"SAPIEN at {args.sim_freq} Hz, pad reaction on the links {args.reaction or 'off'}",
              "",
              "| step | " + " | ".join(f"{s.name} [N]" for s in specs) + " | deepest core vertex in the cube [mm] "
              "| J min..max | stretch min..max | fastest pad link [m/s] | wall [s] |",
@@ -96,6 +100,6 @@ def main(argv: list[str] | None = None) -> int:
               + f"; fastest pad link {fastest:.2f} m/s"]
     text = "\n".join(lines)
     print(text)
-    tag = f"_{args.sim_freq}Hz_reaction" if args.reaction else ""
+    tag = f"_{args.sim_freq}Hz_{args.reaction}" if args.reaction else ""
     write_report(args.out, f"close_dx{args.dx * 1e3:g}mm{tag}.md", text)
     return 0
