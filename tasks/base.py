@@ -186,7 +186,6 @@ class GaussTacEnv(BaseEnv):
         self.record_mpm_state = bool(record_mpm_state)
         if pad_reaction not in (False, True, "implicit", "explicit"):
             raise ConfigError(f"pad_reaction={pad_reaction!r}: use False, True (= 'implicit') or 'explicit'")
-        self.pad_reaction = bool(pad_reaction)
         #: how the pads' reaction reaches their links: None, "implicit" or "explicit"
         self.pad_coupling = None if not pad_reaction else "implicit" if pad_reaction is True else pad_reaction
         if camera not in ("splat", "sapien"):
@@ -225,6 +224,11 @@ class GaussTacEnv(BaseEnv):
                           f"measured stable from {PAD_REACTION_MIN_FREQ} Hz on a hand closed hard on an object; "
                           "below, a hard press can fling a finger (pass sim_config=dict(sim_freq=...))",
                           UserWarning, stacklevel=2)
+
+    @property
+    def pad_reaction(self) -> bool:
+        """Whether the pads' reaction acts on their links (see ``pad_coupling``)."""
+        return self.pad_coupling is not None
 
     @property
     def _default_sim_config(self):
@@ -336,11 +340,12 @@ class GaussTacEnv(BaseEnv):
         self._contact_drives = []
         if self.pad_coupling == "implicit":  # [B][pad link][rigid objects..., soft objects]
             for b, sub in enumerate(self.scene.sub_scenes):
-                self._contact_drives.append([
-                    [ContactSpring(sub, self.agent.robot.links_map[name]._objs[b].entity,
-                                   o.actor._objs[b] if o.two_way else None) for o in self._rigid.values()]
-                    + [ContactSpring(sub, self.agent.robot.links_map[name]._objs[b].entity)]
-                    for name in self._pad_links])
+                per_link = []
+                for name in self._pad_links:
+                    link = self.agent.robot.links_map[name]._objs[b].entity
+                    per_link.append([ContactSpring(sub, link, o.actor._objs[b] if o.two_way else None)
+                                     for o in self._rigid.values()] + [ContactSpring(sub, link)])
+                self._contact_drives.append(per_link)
         self._pose_source = SapienPoseSource(self.agent)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
@@ -555,22 +560,21 @@ class GaussTacEnv(BaseEnv):
                 _apply_wrench(self._rigid[name].actor, w)
             return
         links = [self.agent.robot.links_map[n] for n in self._pad_links]
-        objects = list(self._rigid.values())
         link_w, obj_w = self._contacts[..., :6].sum(2), {n: w.copy() for n, w in self._wrench.items()}
         if self.pad_coupling == "implicit":  # what the springs carry is taken off the explicit wrenches
-            for b in range(self.num_envs):
-                for i, link in enumerate(links):
-                    for j, drive in enumerate(self._contact_drives[b][i]):
-                        obj = objects[j] if j < len(objects) and objects[j].two_way else None
-                        spring = drive.update(link._objs[b].entity.pose, self._contacts[b, i, j],
-                                              None if obj is None else obj.actor._objs[b].pose)
-                        if spring is not None:
-                            force, point = spring
-                            link_w[b, i, :3] -= force
-                            link_w[b, i, 3:] -= np.cross(point - _position(link, b), force)
-                            if obj is not None:
-                                obj_w[obj.name][b, :3] += force
-                                obj_w[obj.name][b, 3:] += np.cross(point - _position(obj.actor, b), force)
+            parents = [n if o.two_way else None for n, o in self._rigid.items()] + [None]  # soft: the world
+            for b, per_link in enumerate(self._contact_drives):
+                for i, springs in enumerate(per_link):
+                    for j, (spring, parent) in enumerate(zip(springs, parents)):
+                        acting = spring.update(self._contacts[b, i, j])
+                        if acting is None:
+                            continue
+                        force, point = acting
+                        link_w[b, i, :3] -= force
+                        link_w[b, i, 3:] -= np.cross(point - spring.link.pose.p, force)
+                        if parent is not None:
+                            obj_w[parent][b, :3] += force
+                            obj_w[parent][b, 3:] += np.cross(point - spring.parent.pose.p, force)
         for name, w in obj_w.items():
             _apply_wrench(self._rigid[name].actor, w)
         for i, link in enumerate(links):
@@ -749,11 +753,6 @@ def _apply_wrench(entity, w: np.ndarray) -> None:
         force, torque = w[b, :3], w[b, 3:]
         torque_com = torque + np.cross(origin[b] - com, force)  # the moment about the centre of mass
         body.add_force_torque(force.astype(np.float32), torque_com.astype(np.float32))
-
-
-def _position(entity, b: int) -> np.ndarray:
-    """World position [m] of env ``b``'s body of a ManiSkill actor or link."""
-    return entity.pose.raw_pose[b, :3].detach().cpu().double().numpy()
 
 
 def batched_pose(p, q) -> Pose:

@@ -55,6 +55,7 @@ class ContactSpring:
     """
 
     def __init__(self, sub_scene, link, parent=None):
+        self.link, self.parent = link, parent
         self.drive = sub_scene.create_drive(parent, sapien.Pose(), link, sapien.Pose())
         self._free = self.drive.get_limit_x()  # unlimited, as created
         self.active = False
@@ -65,15 +66,14 @@ class ContactSpring:
             self.drive.set_limit_x(*self._free)
             self.active = False
 
-    def update(self, link_pose: sapien.Pose, contact: np.ndarray, parent_pose: sapien.Pose | None = None):
-        """Set the spring for the coming SAPIEN step from the link's contact of the last MPM step.
+    def update(self, contact: np.ndarray):
+        """Set the spring for the coming SAPIEN step from the link's contact of the last MPM
+        step, computed at the link's pose now.
 
         Args:
-            link_pose: the link's world pose now (where the MPM computed the contact).
             contact: [7] force [N] and torque [N·m] about the link origin (world frame) that
                 the pad passed to the link, and its indentation [m]
                 (:meth:`~gausstac_maniskill.cosim.GaussTacSim.link_contacts`).
-            parent_pose: the parent object's world pose now (``None``: world).
 
         Returns:
             ``(force [3] N, point [3] m)``: the force the spring exerts on the link now and
@@ -84,12 +84,13 @@ class ContactSpring:
         if f <= 0.0 or not np.isfinite(f):
             self.release()
             return None
+        link_pose = self.link.pose
         origin = np.asarray(link_pose.p, np.float64)
         point = origin + np.cross(force, torque) / f**2  # centre of pressure: on F's line of action
         stiffness = GAIN * f / max(depth, MIN_DEPTH)
         frame = sapien.Pose(point.astype(np.float32), matrix_to_quat(_frame_along(force / f)).astype(np.float32))
         self.drive.set_pose_in_child(link_pose.inv() * frame)
-        self.drive.set_pose_in_parent(frame if parent_pose is None else parent_pose.inv() * frame)
+        self.drive.set_pose_in_parent(frame if self.parent is None else self.parent.pose.inv() * frame)
         # x: the link's offset along n from where F was computed; pushed while x < f / K
         self.drive.set_limit_x(f / stiffness, float(self._free[1]), stiffness, 0.0)
         self.active = True
