@@ -27,6 +27,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench patch
 	$(PY) -m gausstac_maniskill.bench look
 	$(PY) -m gausstac_maniskill.bench close
+	$(PY) -m gausstac_maniskill.bench drive_contact
 	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction --sim-freq 100
 	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction explicit --sim-freq 2000
 

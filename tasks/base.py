@@ -27,10 +27,12 @@ the MPM pad handles the contact in the layer in front of the core, and an object
 reaches the core stops the finger (hard stop: a finger never passes through an object).
 The pad reaction goes back to SAPIEN as an external wrench on two-way-coupled dynamic
 objects and, with ``pad_reaction``, equal and opposite on the pad links (the MPM then
-steps after every SAPIEN step instead of once per control step). By default it acts
-through one-sided contact springs that PhysX integrates implicitly with the links' motion
-(:mod:`.contact_spring`: stable at ManiSkill's 100 Hz); ``pad_reaction="explicit"`` applies
-it as forces one SAPIEN step late (stable from :data:`PAD_REACTION_MIN_FREQ`). The pad is
+steps after every SAPIEN step instead of once per control step). By default the links'
+share is folded into the hand's joint drives, which PhysX integrates implicitly
+(:mod:`.joint_contact`: the finger settles where its drives balance the pad, at ManiSkill's
+100 Hz), and a two-way object's share acts through a one-sided contact spring
+(:mod:`.contact_spring`); ``pad_reaction="explicit"`` applies it as forces one SAPIEN
+step late (stable from :data:`PAD_REACTION_MIN_FREQ`). The pad is
 massless on the SAPIEN side: what its particles take from an object in a step, its link
 takes back, so the impulses on the two bodies cancel.
 
@@ -67,7 +69,8 @@ from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
 from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
                        TactileSensorConfig, stack_tactile)
-from .contact_spring import ContactSpring
+from .contact_spring import ContactSpring, centre_of_pressure
+from .joint_contact import JointContact
 
 __all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND",
            "PAD_REACTION_MIN_FREQ"]
@@ -155,11 +158,14 @@ class GaussTacEnv(BaseEnv):
             particle per recorded step).
         pad_reaction: apply the pads' contact reaction to their links in SAPIEN: what the
             pads push on objects, the fingers feel, equal and opposite (the MPM then steps
-            after every SAPIEN step). ``True`` (= ``"implicit"``): through one-sided contact
-            springs that PhysX integrates with the links' motion
-            (:mod:`~gausstac_maniskill.tasks.contact_spring`), stable at ManiSkill's 100 Hz;
-            it runs SAPIEN with PhysX's PGS solver (``enable_tgs=False``; TGS raises a
-            ``ConfigError``). ``"explicit"``: as forces one SAPIEN step late, stable only
+            after every SAPIEN step). ``True`` (= ``"implicit"``): folded into the hand's
+            joint drives for each SAPIEN step
+            (:mod:`~gausstac_maniskill.tasks.joint_contact`; at rest the drives' torques
+            balance the pad's wrench through the finger's Jacobian), and on two-way objects
+            through one-sided contact springs (:mod:`~gausstac_maniskill.tasks.contact_spring`);
+            stable at ManiSkill's 100 Hz. It runs SAPIEN with PhysX's PGS solver
+            (``enable_tgs=False``; TGS raises a ``ConfigError``) and needs ``"force"``-mode
+            drives. ``"explicit"``: as forces one SAPIEN step late, stable only
             at a high ``sim_freq`` because the hand's distal links are light (10-40 g): a
             hand closed hard on a fixed cube flings its fingers at 100-1000 Hz and holds at
             2000 Hz (``bench close --reaction explicit``, BENCHMARKS.md); a warning says so
@@ -205,7 +211,8 @@ class GaussTacEnv(BaseEnv):
         self._wrench: dict[str, np.ndarray] = {}  # object -> [B, 6] acting during the next SAPIEN step
         # [B, pad links, rigid objects + soft, 7] pad contacts of the last MPM step (pad_reaction)
         self._contacts = np.zeros((0, 0, 1, 7))
-        self._contact_drives: list = []  # [B][pad link][object]: implicit contact springs (pad_reaction)
+        self._joint_contacts: list = []  # [B] the pads' reaction folded into the hand's drives (pad_reaction)
+        self._object_springs: list = []  # [B][pad link][rigid object]: springs on two-way objects (pad_reaction)
         self._pad_geometry: dict = {}  # pad name -> Pad at this env's resolution
         self._cosim_stale = True
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
@@ -218,7 +225,7 @@ class GaussTacEnv(BaseEnv):
         if self.pad_coupling == "implicit" and self.sim_config.scene_config.enable_tgs:
             raise ConfigError("pad_reaction=True needs PhysX's PGS solver (sim_config=dict(scene_config=dict("
                               "enable_tgs=False)), the default with pad_reaction): TGS does not hold the contact "
-                              "springs' stiffness against the joint drives (see tasks/contact_spring.py)")
+                              "springs on two-way objects (see tasks/contact_spring.py)")
         if self.pad_coupling == "explicit" and self.sim_freq < PAD_REACTION_MIN_FREQ:
             warnings.warn(f"pad_reaction='explicit' at sim_freq={self.sim_freq} Hz: the explicit pad-link coupling was "
                           f"measured stable from {PAD_REACTION_MIN_FREQ} Hz on a hand closed hard on an object; "
@@ -233,7 +240,7 @@ class GaussTacEnv(BaseEnv):
     @property
     def _default_sim_config(self):
         cfg = super()._default_sim_config
-        if self.pad_coupling == "implicit":  # contact springs need PGS (tasks/contact_spring.py)
+        if self.pad_coupling == "implicit":  # the objects' contact springs need PGS (tasks/contact_spring.py)
             cfg.scene_config.enable_tgs = False
         return cfg
 
@@ -337,15 +344,14 @@ class GaussTacEnv(BaseEnv):
 
     def _after_reconfigure(self, options):
         super()._after_reconfigure(options)
-        self._contact_drives = []
-        if self.pad_coupling == "implicit":  # [B][pad link][rigid objects..., soft objects]
+        self._joint_contacts, self._object_springs = [], []
+        if self.pad_coupling == "implicit":
             for b, sub in enumerate(self.scene.sub_scenes):
-                per_link = []
-                for name in self._pad_links:
-                    link = self.agent.robot.links_map[name]._objs[b].entity
-                    per_link.append([ContactSpring(sub, link, o.actor._objs[b] if o.two_way else None)
-                                     for o in self._rigid.values()] + [ContactSpring(sub, link)])
-                self._contact_drives.append(per_link)
+                links = [self.agent.robot.links_map[name]._objs[b] for name in self._pad_links]
+                self._joint_contacts.append(JointContact(self.agent.robot._objs[b], links))
+                # [pad link][two-way rigid object or None]
+                self._object_springs.append([[ContactSpring(sub, o.actor._objs[b]) if o.two_way else None
+                                              for o in self._rigid.values()] for _ in self._pad_links])
         self._pose_source = SapienPoseSource(self.agent)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
@@ -561,20 +567,23 @@ class GaussTacEnv(BaseEnv):
             return
         links = [self.agent.robot.links_map[n] for n in self._pad_links]
         link_w, obj_w = self._contacts[..., :6].sum(2), {n: w.copy() for n, w in self._wrench.items()}
-        if self.pad_coupling == "implicit":  # what the springs carry is taken off the explicit wrenches
-            parents = [n if o.two_way else None for n, o in self._rigid.items()] + [None]  # soft: the world
-            for b, per_link in enumerate(self._contact_drives):
+        if self.pad_coupling == "implicit":  # the links' share goes through their drives, the objects' through springs
+            link_w[:] = 0.0
+            for b, (hand, per_link) in enumerate(zip(self._joint_contacts, self._object_springs)):
+                hand.fold(self._contacts[b])
                 for i, springs in enumerate(per_link):
-                    for j, (spring, parent) in enumerate(zip(springs, parents)):
-                        acting = spring.update(self._contacts[b, i, j])
-                        if acting is None:
+                    origin = np.asarray(hand.links[i].entity_pose.p, np.float64)
+                    for (name, contact), spring in zip(zip(self._rigid, self._contacts[b, i]), springs):
+                        if spring is None:
                             continue
-                        force, point = acting
-                        link_w[b, i, :3] -= force
-                        link_w[b, i, 3:] -= np.cross(point - spring.link.pose.p, force)
-                        if parent is not None:
-                            obj_w[parent][b, :3] += force
-                            obj_w[parent][b, 3:] += np.cross(point - spring.parent.pose.p, force)
+                        if not np.any(contact[:3]):
+                            spring.release()
+                            continue
+                        force = -contact[:3]  # on the object
+                        point = centre_of_pressure(contact[:3], contact[3:6], origin)
+                        if spring.update(force, point, contact[6]):
+                            obj_w[name][b, :3] -= force
+                            obj_w[name][b, 3:] -= np.cross(point - np.asarray(spring.body.pose.p, np.float64), force)
         for name, w in obj_w.items():
             _apply_wrench(self._rigid[name].actor, w)
         for i, link in enumerate(links):
@@ -627,6 +636,8 @@ class GaussTacEnv(BaseEnv):
         t0 = time.perf_counter()
         self.step_timing.update(mpm=0.0, tactile=0.0, render=0.0)
         out = super().step(action)
+        for hand in self._joint_contacts:  # the controller's drives again, as users and the next action see them
+            hand.restore()
         total = time.perf_counter() - t0
         self.step_timing["total"] = total
         self.step_timing["physics"] = total - sum(self.step_timing[k] for k in ("mpm", "tactile", "render"))

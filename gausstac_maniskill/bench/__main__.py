@@ -20,6 +20,7 @@ BENCHMARKS = {
     "patch": "gausstac_maniskill.bench.patch",
     "look": "gausstac_maniskill.bench.look",
     "close": "gausstac_maniskill.bench.close",
+    "drive_contact": "gausstac_maniskill.bench.drive_contact",
 }
 
 

@@ -10,8 +10,8 @@ the range of the particles' volume ratio J and principal stretches, the speed of
 fastest pad link [m/s] and the wall time.
 
 ``--reaction`` applies the pads' reaction to their links (``pad_reaction``: the MPM then
-steps after every SAPIEN step), through implicit contact springs (the default,
-``tasks/contact_spring.py``) or, with ``--reaction explicit``, as forces one SAPIEN step
+steps after every SAPIEN step), folded into the hand's joint drives (the default,
+``tasks/joint_contact.py``) or, with ``--reaction explicit``, as forces one SAPIEN step
 late; ``--sim-freq`` sets SAPIEN's rate [Hz]: each coupling's stability against the time
 step (BENCHMARKS.md, issue 11).
 A ``SimulationError`` ends the run and is printed (it is what the code did before the rigid
