@@ -565,14 +565,15 @@ class GaussTacEnv(BaseEnv):
             for name, w in self._wrench.items():
                 _apply_wrench(self._rigid[name].actor, w)
             return
-        links = [self.agent.robot.links_map[n] for n in self._pad_links]
-        link_w, obj_w = self._contacts[..., :6].sum(2), {n: w.copy() for n, w in self._wrench.items()}
-        if self.pad_coupling == "implicit":  # the links' share goes through their drives, the objects' through springs
-            link_w[:] = 0.0
+        obj_w = {n: w.copy() for n, w in self._wrench.items()}
+        if self.pad_coupling == "explicit":
+            link_w = self._contacts[..., :6].sum(2)
+            for i, name in enumerate(self._pad_links):
+                _apply_wrench(self.agent.robot.links_map[name], link_w[:, i])
+        else:  # the links' share goes through their drives, the two-way objects' through springs
             for b, (hand, per_link) in enumerate(zip(self._joint_contacts, self._object_springs)):
                 hand.fold(self._contacts[b])
                 for i, springs in enumerate(per_link):
-                    origin = np.asarray(hand.links[i].entity_pose.p, np.float64)
                     for (name, contact), spring in zip(zip(self._rigid, self._contacts[b, i]), springs):
                         if spring is None:
                             continue
@@ -580,14 +581,13 @@ class GaussTacEnv(BaseEnv):
                             spring.release()
                             continue
                         force = -contact[:3]  # on the object
+                        origin = np.asarray(hand.links[i].entity_pose.p, np.float64)
                         point = centre_of_pressure(contact[:3], contact[3:6], origin)
                         if spring.update(force, point, contact[6]):
                             obj_w[name][b, :3] -= force
                             obj_w[name][b, 3:] -= np.cross(point - np.asarray(spring.body.pose.p, np.float64), force)
         for name, w in obj_w.items():
             _apply_wrench(self._rigid[name].actor, w)
-        for i, link in enumerate(links):
-            _apply_wrench(link, link_w[:, i])
 
     @property
     def pad_links(self) -> list[str]:
