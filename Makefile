@@ -30,6 +30,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench drive_contact
 	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction --sim-freq 100
 	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction explicit --sim-freq 2000
+	$(PY) -m gausstac_maniskill.bench grasp --dx 2e-3 1e-3
 
 clean:
 	rm -rf .venv out build *.egg-info

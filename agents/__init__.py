@@ -1,5 +1,5 @@
 """GaussTac hand agents (registered with ManiSkill on import)."""
-from .allegro import ALLEGRO_PAD_NAMES, AllegroHandRightGaussTac
+from .allegro import ALLEGRO_PAD_NAMES, AllegroHandRightGaussTac, FloatingAllegroHandRightGaussTac  # noqa: F401
 from .ability import ABILITY_PAD_LINKS, FloatingAbilityHandRightGaussTac  # noqa: F401
 from .base import GaussTacAgent, add_gausstac_pads, load_hand_gaussians
 

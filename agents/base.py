@@ -20,7 +20,6 @@ import difflib
 import json
 import os
 from functools import lru_cache
-from pathlib import Path
 from typing import Mapping, Sequence
 
 from mani_skill.agents.base_agent import BaseAgent
@@ -81,7 +80,7 @@ def core_urdf(agent: type) -> str:
 def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
     import hashlib
 
-    from ..assets import cache_path
+    from ..assets import cache_dir
     from ..tactile import pad_mesh
     from ..tactile.pad import CORE_DEPTH
     from ..urdf import write_urdf_with_collisions
@@ -97,14 +96,7 @@ def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
     for link, specs in sorted(by_link.items()):
         key.update(repr([(s.link, s.axis, s.cone_deg, s.thickness, CORE_DEPTH) for s in specs]).encode())
         key.update(meshes[link].vertices.tobytes())
-    folder = cache_path("cores", key.hexdigest()[:16])
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:  # a read-only home: the temporary folder will do
-        import tempfile
-
-        folder = Path(tempfile.gettempdir(), "gausstac_maniskill", "cores", key.hexdigest()[:16])
-        folder.mkdir(parents=True, exist_ok=True)
+    folder = cache_dir("cores", key.hexdigest()[:16])
     out = folder / os.path.basename(urdf)
     if not out.is_file():
         files = {}

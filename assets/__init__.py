@@ -16,7 +16,7 @@ import os
 from importlib.resources import files
 from pathlib import Path
 
-__all__ = ["ASSET_ROOT", "asset_path", "cache_path"]
+__all__ = ["ASSET_ROOT", "asset_path", "cache_path", "cache_dir"]
 
 
 def _root() -> Path:
@@ -44,3 +44,17 @@ def cache_path(*parts: str) -> Path:
     root = os.environ.get("GAUSSTAC_CACHE") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "gausstac_maniskill")
     return Path(root).joinpath(*parts)
+
+
+def cache_dir(*parts: str) -> Path:
+    """The folder :func:`cache_path` ``(*parts)``, created; under the temporary folder
+    instead when the cache cannot be written (a read-only home)."""
+    folder = cache_path(*parts)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        import tempfile
+
+        folder = Path(tempfile.gettempdir(), "gausstac_maniskill", *parts)
+        folder.mkdir(parents=True, exist_ok=True)
+    return folder

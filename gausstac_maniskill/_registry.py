@@ -28,6 +28,7 @@ TASKS = {
     "GaussTac-PressCube-v1": 40,
     "GaussTac-SlideCube-v1": 60,
     "GaussTac-SqueezeSponge-v1": 40,
+    "GaussTac-GraspLiftCube-v1": 100,
 }
 
 

@@ -45,8 +45,9 @@ def joint_targets_to_action(base, q_target: torch.Tensor) -> torch.Tensor:
     if not getattr(cfg, "use_delta", False):
         return q_target
     ref = ctrl._target_qpos if getattr(cfg, "use_target", False) else base.qpos_in_action_order()
-    low, high = float(np.min(cfg.lower)), float(np.max(cfg.upper))
-    delta = (q_target - ref).clamp(low, high)
+    low = torch.as_tensor(np.broadcast_to(cfg.lower, q_target.shape[-1:]), dtype=torch.float32, device=base.device)
+    high = torch.as_tensor(np.broadcast_to(cfg.upper, q_target.shape[-1:]), dtype=torch.float32, device=base.device)
+    delta = torch.minimum(torch.maximum(q_target - ref, low), high)
     if getattr(cfg, "normalize_action", True):
         delta = (delta - low) / (high - low) * 2 - 1
     return delta
@@ -102,22 +103,35 @@ class TipIK:
         T = self.src.all_link_poses()[0, self.link].numpy()
         return T @ self.S
 
-    def solve(self, q: np.ndarray, target: np.ndarray, iters: int = 8, damping: float = 1e-3) -> np.ndarray:
-        """Joint angles (action order) close to ``q`` putting the apex at ``target``."""
+    def solve(self, q: np.ndarray, target: np.ndarray, normal: np.ndarray | None = None,
+              normal_weight: float = 0.02, stay: float = 1.0e-3) -> np.ndarray:
+        """Joint angles (action order) close to ``q``, within the joint limits, putting the
+        apex at ``target`` and, given ``normal`` (unit, root frame), the pad's outward normal
+        along it.
+
+        Bounded least squares (``scipy.optimize.least_squares``) on
+        ``[apex - target; normal_weight (n - normal); stay (q - q_start)]``: a pad normal off
+        by 1 rad weighs as much as ``normal_weight`` [m] of position, so a finger whose
+        joints cannot satisfy both (4 joints, 5 conditions) gives up a little of each; the
+        ``stay`` term [m/rad] picks, among equal fits, the posture nearest ``q``."""
+        from scipy.optimize import least_squares
+
         q = np.asarray(q, np.float64).copy()
-        for _ in range(iters):
-            x = self.frame(q)[:3, 3]
-            err = np.asarray(target, np.float64) - x
-            if np.linalg.norm(err) < 2e-5:
-                break
-            J = np.zeros((3, len(self.dofs)))
-            for k, j in enumerate(self.dofs):
-                dq = q.copy()
-                dq[j] += 1e-4
-                J[:, k] = (self.frame(dq)[:3, 3] - x) / 1e-4
-            step = J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(3), err)
-            q[self.dofs] += step
-            q = np.clip(q, self.limits[:, 0], self.limits[:, 1])
+        lo, hi = self.limits[self.dofs, 0], self.limits[self.dofs, 1]
+        start = np.clip(q[self.dofs], lo + 1e-9, hi - 1e-9)
+        target = np.asarray(target, np.float64)
+
+        def residual(x):
+            q[self.dofs] = x
+            F = self.frame(q)
+            r = [F[:3, 3] - target]
+            if normal is not None:
+                r.append(normal_weight * (F[:3, 2] - np.asarray(normal, np.float64)))
+            r.append(stay * (x - start))
+            return np.concatenate(r)
+
+        fit = least_squares(residual, start, bounds=(lo, hi), xtol=1e-10, ftol=1e-12, max_nfev=60)
+        q[self.dofs] = fit.x
         return q
 
 
@@ -226,3 +240,95 @@ class SqueezeExpert(_IndexFaceExpert):
             else:
                 self.s[b] += np.clip(0.8 * (target[b] - c[b]) * env.sponge_thickness, -0.5e-3, 0.75e-3)
         return self.command()
+
+
+@register_expert("GaussTac-GraspLiftCube-v1")
+class GraspLiftExpert(Expert):
+    """Pinch the cube between the thumb and index pads, lift it, hold it.
+
+    Phases per env: ``descend`` (root straight down until the pinch point is at the cube's
+    centre), ``close`` (each pad's apex aimed, by IK on position and pad normal, at the
+    middle of its cube face and moved in ``approach_step`` per step until it touches, then
+    servoed on its own normal force), ``lift`` (root up ``lift_step`` per step, still
+    servoing) and ``hold``. The grip force is physical, not tuned per resolution:
+    ``safety`` times what Coulomb friction on two pads needs to carry the cube,
+    ``m g / (2 μ)``, and at least ``min_grip`` [N].
+    """
+
+    descend_step = 5.0e-3   # m per control step
+    approach_step = 1.5e-3  # m per control step, before a pad touches
+    lift_step = 3.0e-3      # m per control step
+    gain = 2.0e-4           # m of commanded depth per N of force error (pad + finger compliance ~ 0.4 mm/N)
+    max_depth_step = 3.0e-4  # m per control step
+    safety = 2.0
+    min_grip = 1.0          # N
+    gap = 4.0e-3            # m: the pads start this far outside the faces
+    max_joint_step = 0.1    # rad per control step of a finger joint's target (no swinging fingers)
+
+    def reset(self):
+        env = self.env
+        self.thumb = TipIK(env, "thumb", ("joint_12.0", "joint_13.0", "joint_14.0", "joint_15.0"))
+        self.index = TipIK(env, "index", ("joint_0.0", "joint_1.0", "joint_2.0", "joint_3.0"))
+        self.q_cmd = env.qpos_in_action_order().detach().cpu().double().numpy()
+        B = len(self.q_cmd)
+        self.phase = np.array(["descend"] * B, dtype=object)
+        self.depth = np.full((B, 2), -self.gap)  # commanded depth of (thumb, index) into their faces [m]
+        self.touched = np.zeros((B, 2), bool)
+        self.centre = [None] * B  # the cube's centre in the hand's base frame when closing began [m]
+        g = float(np.linalg.norm(env.sim_config.scene_config.gravity))
+        self.grip = max(self.min_grip, self.safety * env.cube_mass * g / (2 * max(env.cube_friction, 1e-3)))
+
+    def act(self, obs=None):
+        from .agents.allegro import ALLEGRO_PINCH_AXIS, ALLEGRO_PINCH_CENTRE
+
+        env = self.env
+        agent = type(env.agent)
+        cube = env.cube.pose.p.detach().cpu().double().numpy()
+        forces = np.stack([env.pad_force("thumb").cpu().numpy(), env.pad_force("index").cpu().numpy()], axis=1)
+        h = env.cube_half_size
+        for b in range(len(self.q_cmd)):
+            base = agent.base_pose(self.q_cmd[b, :6])  # commanded: the root drives are stiff
+            pinch = base[:3, :3] @ np.asarray(ALLEGRO_PINCH_CENTRE) + base[:3, 3]
+            if self.phase[b] == "descend":
+                drop = pinch[2] - cube[b, 2]
+                self.q_cmd[b, 2] -= min(self.descend_step, max(drop, 0.0))
+                if drop <= 1e-4:
+                    self.phase[b] = "close"
+            else:
+                self._servo(b, forces[b])
+                if self.phase[b] == "close" and forces[b].mean() > 0.8 * self.grip and np.all(self.touched[b]):
+                    self.phase[b] = "lift"
+                if self.phase[b] == "lift":
+                    if cube[b, 2] - h < env.lift_height + 5.0e-3:
+                        self.q_cmd[b, 2] += self.lift_step
+                    else:
+                        self.phase[b] = "hold"
+                base = agent.base_pose(self.q_cmd[b, :6])
+            # the pads' targets on the cube's faces, base frame: around the pinch point while
+            # descending, then around where the cube was when closing began (fixed in the hand:
+            # targets that followed the cube would chase it between the pads)
+            u = np.asarray(ALLEGRO_PINCH_AXIS, np.float64)
+            if self.phase[b] == "descend":
+                centre = np.asarray(ALLEGRO_PINCH_CENTRE, np.float64)
+            else:
+                if self.centre[b] is None:
+                    to_base = np.linalg.inv(base)
+                    self.centre[b] = to_base[:3, :3] @ cube[b] + to_base[:3, 3]
+                centre = self.centre[b]
+            q = self.q_cmd[b].copy()
+            for k, (ik, sign) in enumerate(((self.thumb, -1.0), (self.index, 1.0))):
+                q = ik.solve(q, centre + sign * (h - self.depth[b, k]) * u, normal=-sign * u)
+            step = np.clip(q[6:] - self.q_cmd[b, 6:], -self.max_joint_step, self.max_joint_step)
+            self.q_cmd[b, 6:] += step
+        return joint_targets_to_action(env, torch.as_tensor(self.q_cmd, dtype=torch.float32))
+
+    def _servo(self, b: int, force: np.ndarray) -> None:
+        """Move each pad in until it touches; once both touch, servo their common depth on
+        the mean normal force (the cube, free between them, centres itself: servoing each
+        pad on its own force would push it back and forth)."""
+        self.touched[b] |= force > self.env.grasp_force
+        if not np.all(self.touched[b]):
+            self.depth[b, ~self.touched[b]] += self.approach_step
+        else:
+            self.depth[b] += np.clip(self.gain * (self.grip - force.mean()), -self.max_depth_step,
+                                     self.max_depth_step)

@@ -50,6 +50,8 @@ __all__ = [
     "resolve_mesh_path",
     "rpy_matrix",
     "write_urdf_with_collisions",
+    "write_floating_urdf",
+    "FLOATING_JOINTS",
 ]
 
 MOVABLE_JOINTS = ("revolute", "continuous", "prismatic")
@@ -437,13 +439,7 @@ def write_urdf_with_collisions(urdf: str | os.PathLike, out: str | os.PathLike,
     if missing:
         raise ConfigError(f"{urdf}: write_urdf_with_collisions: no links {missing} (links: {model.links})")
     tree = ET.parse(urdf)
-    for mesh in tree.getroot().iter("mesh"):
-        filename = mesh.get("filename")
-        if filename:
-            try:
-                mesh.set("filename", str(resolve_mesh_path(urdf, filename).resolve()))
-            except AssetError:
-                pass  # an absent visual mesh stays as written (SAPIEN then reports it)
+    _absolute_meshes(tree, urdf)
     for link in tree.getroot().findall("link"):
         name = link.get("name")
         if name not in collisions:
@@ -454,6 +450,77 @@ def write_urdf_with_collisions(urdf: str | os.PathLike, out: str | os.PathLike,
         for file in [files] if isinstance(files, (str, os.PathLike)) else files:
             col = ET.SubElement(link, "collision")
             ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=str(Path(file).resolve()))
+    return _write_atomic(tree, out)
+
+
+#: Root joints of :func:`write_floating_urdf`, parent to child: x, y, z translation [m] of the
+#: root, then rotations [rad] about the x, y and z axes of the frame they move
+#: (hand orientation R = Rx(a) Ry(b) Rz(c)).
+FLOATING_JOINTS = ("root_x_axis_joint", "root_y_axis_joint", "root_z_axis_joint",
+                   "root_x_rot_joint", "root_y_rot_joint", "root_z_rot_joint")
+
+
+def write_floating_urdf(urdf: str | os.PathLike, out: str | os.PathLike, travel: float = 2.0) -> Path:
+    """Write a copy of the fixed-base ``urdf`` whose root link hangs from a 6-DoF chain of
+    massless links: prismatic x, y, z and revolute x, y, z (:data:`FLOATING_JOINTS`), as
+    ManiSkill's floating hands are built, so that PD drives on those joints move the hand.
+
+    Mesh filenames are made absolute (as :func:`write_urdf_with_collisions`). The new
+    root link is ``root`` (at the world origin when the agent's pose is the identity).
+
+    Args:
+        urdf: a URDF with one root link.
+        out: the file to write (atomically).
+        travel: the prismatic joints' range is [-travel, travel] m (the revolute joints'
+            [-2π, 2π] rad).
+
+    Raises:
+        AssetError: ``urdf`` is missing or malformed, or has not exactly one root link.
+        ConfigError: ``urdf`` already has a link named ``root`` or ``root_arm_*``.
+    """
+    model = parse_urdf(urdf)
+    roots = [n for n in model.links if n not in {j.child for j in model.joints}]
+    if len(roots) != 1:
+        raise AssetError(f"{urdf}: write_floating_urdf needs exactly one root link, found {roots}")
+    chain = ["root"] + [f"root_arm_{i}" for i in range(1, len(FLOATING_JOINTS))] + roots[:1]
+    taken = sorted(set(chain[:-1]) & set(model.links))
+    if taken:
+        raise ConfigError(f"{urdf}: write_floating_urdf: the URDF already has links {taken}")
+    tree = ET.parse(urdf)
+    robot = tree.getroot()
+    _absolute_meshes(tree, urdf)
+    for i, name in enumerate(chain[:-1]):
+        link = ET.Element("link", name=name)
+        inertial = ET.SubElement(link, "inertial")
+        ET.SubElement(inertial, "mass", value="0")
+        ET.SubElement(inertial, "inertia", ixx="0", ixy="0", ixz="0", iyy="0", iyz="0", izz="0")
+        robot.insert(i, link)
+    for i, joint in enumerate(FLOATING_JOINTS):
+        prismatic = i < 3
+        el = ET.SubElement(robot, "joint", name=joint, type="prismatic" if prismatic else "revolute")
+        ET.SubElement(el, "parent", link=chain[i])
+        ET.SubElement(el, "child", link=chain[i + 1])
+        ET.SubElement(el, "axis", xyz=" ".join("1" if k == i % 3 else "0" for k in range(3)))
+        span = travel if prismatic else 2 * np.pi
+        ET.SubElement(el, "limit", effort="1000", lower=f"{-span:.9g}", upper=f"{span:.9g}", velocity="10")
+    return _write_atomic(tree, out)
+
+
+def _absolute_meshes(tree: ET.ElementTree, urdf) -> None:
+    """Make every ``<mesh filename>`` of ``tree`` (read from ``urdf``) absolute, so that a
+    copy loads from any folder; one that cannot be resolved is kept as written (SAPIEN
+    then reports it)."""
+    for mesh in tree.getroot().iter("mesh"):
+        filename = mesh.get("filename")
+        if filename:
+            try:
+                mesh.set("filename", str(resolve_mesh_path(urdf, filename).resolve()))
+            except AssetError:
+                pass
+
+
+def _write_atomic(tree: ET.ElementTree, out) -> Path:
+    """Write ``tree`` to ``out`` atomically (several processes may write the same file)."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")

@@ -350,8 +350,8 @@ class GaussTacEnv(BaseEnv):
                 links = [self.agent.robot.links_map[name]._objs[b] for name in self._pad_links]
                 self._joint_contacts.append(JointContact(self.agent.robot._objs[b], links))
                 # [pad link][two-way rigid object or None]
-                self._object_springs.append([[ContactSpring(sub, o.actor._objs[b]) if o.two_way else None
-                                              for o in self._rigid.values()] for _ in self._pad_links])
+                self._object_springs.append([[ContactSpring(sub, o.actor._objs[b], link.entity) if o.two_way else None
+                                              for o in self._rigid.values()] for link in links])
         self._pose_source = SapienPoseSource(self.agent)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
@@ -481,6 +481,9 @@ class GaussTacEnv(BaseEnv):
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
         self._contacts = np.zeros((self.num_envs, len(self._pad_links) if self.pad_reaction else 0,
                                    len(self._rigid) + 1, 7))
+        # Coulomb coefficient per column of _contacts: the rigid objects', then the soft objects'
+        self._contact_friction = np.array([o.collider.friction for o in self._rigid.values()]
+                                          + [self.mpm_settings.soft_friction])
         self._cosim_stale = False
         self.step_timing["cosim_build"] = time.perf_counter() - t0
 
@@ -572,7 +575,7 @@ class GaussTacEnv(BaseEnv):
                 _apply_wrench(self.agent.robot.links_map[name], link_w[:, i])
         else:  # the links' share goes through their drives, the two-way objects' through springs
             for b, (hand, per_link) in enumerate(zip(self._joint_contacts, self._object_springs)):
-                hand.fold(self._contacts[b])
+                hand.fold(self._contacts[b], self._contact_friction)
                 for i, springs in enumerate(per_link):
                     for (name, contact), spring in zip(zip(self._rigid, self._contacts[b, i]), springs):
                         if spring is None:
@@ -583,9 +586,13 @@ class GaussTacEnv(BaseEnv):
                         force = -contact[:3]  # on the object
                         origin = np.asarray(hand.links[i].entity_pose.p, np.float64)
                         point = centre_of_pressure(contact[:3], contact[3:6], origin)
-                        if spring.update(force, point, contact[6]):
+                        n = force / np.linalg.norm(force)
+                        # the couple left about the line of action (the pad's twist), on the object
+                        twist = -float((contact[3:6] - np.cross(point - origin, contact[:3])) @ n)
+                        if spring.update(force, point, contact[6], self._rigid[name].collider.friction, twist):
                             obj_w[name][b, :3] -= force
-                            obj_w[name][b, 3:] -= np.cross(point - np.asarray(spring.body.pose.p, np.float64), force)
+                            obj_w[name][b, 3:] -= np.cross(point - np.asarray(spring.body.pose.p, np.float64), force) \
+                                + twist * n
         for name, w in obj_w.items():
             _apply_wrench(self._rigid[name].actor, w)
 

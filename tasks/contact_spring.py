@@ -12,9 +12,18 @@ soft limit that PhysX's solver treats implicitly, like a joint drive:
 * at the pose the MPM force was computed at, the spring pushes with exactly ``|F|`` along
   ``n = F/|F|``, through the centre of pressure;
 * when the object moves by ``s`` along ``-n`` during the SAPIEN step (further into the pad),
-  the force grows by ``K s`` within that same step, with ``K = GAIN |F| / δ`` (δ the pad's
-  indentation): the secant stiffness of the contact times :data:`GAIN`;
-* it never pulls: past the limit the joint is free.
+  the force grows by ``K s`` within that same step, with ``K = OBJECT_GAIN |F| / δ`` (δ the
+  pad's indentation): the secant stiffness of the contact times :data:`OBJECT_GAIN`;
+* it never pulls: past the limit the joint is free;
+* across ``n``, a stuck contact resists slip within the step: a drive of the same stiffness
+  ``K`` holds the object where F was computed relative to the pad's link, up to ``μ |F|``
+  (friction's response, which an explicit force would give one step late: a 50 g cube
+  pinched by two pads and lifted at 100 Hz chattered and slid out, 2-5 cm/s, without it);
+* about ``n``, the pad's twist couple is preloaded in a twist spring of stiffness ``K r²``
+  (explicit, a 50 g cube pinched between two pads rocked about the pinch axis at ±8 mm/s,
+  flipping every SAPIEN step);
+* the spring rides on the pad's link, so the object follows the finger's motion within the
+  step (a world-anchored spring held the cube back while the hand lifted it).
 
 Each SAPIEN step the MPM recomputes F at the new pose, so the spring only has to predict how
 F changes within one step. For a power-law contact F ∝ δ^p the tangent stiffness is
@@ -35,27 +44,43 @@ import sapien
 
 from ..transforms import matrix_to_quat
 
-__all__ = ["ContactSpring", "GAIN", "MIN_DEPTH", "centre_of_pressure"]
+__all__ = ["ContactSpring", "GAIN", "OBJECT_GAIN", "MIN_DEPTH", "TWIST_RADIUS", "centre_of_pressure", "frame_along"]
 
 #: spring stiffness over the contact's secant stiffness |F|/δ (see the module docstring)
 GAIN = 3.0
+#: the object springs' stiffness over the contact's secant stiffness: a light object held
+#: between two pads needs more than GAIN (a 10 g cube pinched by the thumb and index pads at
+#: dx = 2 mm, 100 Hz: GAIN 3 chattered at ±11 mm/s, flipping every SAPIEN step; 12 settled
+#: first, then grew back to 1.0 mm/s; 24 settles under 0.05 mm/s; a stiffer spring only
+#: slows the settling)
+OBJECT_GAIN = 24.0
 #: smallest indentation [m] used for the stiffness (a graze with no measured depth)
 MIN_DEPTH = 1.0e-5
+#: radius [m] of a pad's contact patch for the twist spring (stiffness K r², friction μ|F| r):
+#: about the half width of a fingertip's contact; larger only stiffens the twist
+TWIST_RADIUS = 1.0e-2
 
 
 class ContactSpring:
     """One pad link's contact with one two-way object, as a one-sided spring along the MPM
-    force's line of action that PhysX integrates with the object's motion (the other end
-    is the world).
+    force's line of action that PhysX integrates with the object's motion.
 
     Args:
         sub_scene: the SAPIEN scene of one env.
         body: the object's entity.
+        parent: the pad link's entity, or ``None`` (the world). The spring rides on the link
+            and moves the object only (PhysX sees the link as infinitely heavy for it:
+            inverse mass and inertia scale 0), so the object follows the finger within the
+            step, while the link's side of the contact goes through its drives
+            (:mod:`.joint_contact`).
     """
 
-    def __init__(self, sub_scene, body):
-        self.body = body
-        self.drive = sub_scene.create_drive(None, sapien.Pose(), body, sapien.Pose())
+    def __init__(self, sub_scene, body, parent=None):
+        self.body, self.parent = body, parent
+        self.drive = sub_scene.create_drive(parent, sapien.Pose(), body, sapien.Pose())
+        if parent is not None:
+            self.drive.set_inv_mass_scales(0.0, 1.0)
+            self.drive.set_inv_inertia_scales(0.0, 1.0)
         self._free = self.drive.get_limit_x()  # unlimited, as created
         self.active = False
 
@@ -63,9 +88,13 @@ class ContactSpring:
         """No force until the next :meth:`update` with contact."""
         if self.active:
             self.drive.set_limit_x(*self._free)
+            for axis in (self.drive.set_drive_property_y, self.drive.set_drive_property_z,
+                         self.drive.set_drive_property_twist):
+                axis(0.0, 0.0)
             self.active = False
 
-    def update(self, force: np.ndarray, point: np.ndarray, depth: float) -> bool:
+    def update(self, force: np.ndarray, point: np.ndarray, depth: float, friction: float = 0.0,
+               twist: float = 0.0) -> bool:
         """Set the spring for the coming SAPIEN step from a contact of the last MPM step,
         computed at the object's pose now.
 
@@ -73,6 +102,13 @@ class ContactSpring:
             force: [3] force [N] the pad exerted on the object (world frame).
             point: [3] a world point [m] on its line of action.
             depth: the pad's indentation [m].
+            friction: the contact's Coulomb coefficient μ: across the line of action the
+                object is held where it is by a spring of the same stiffness, up to
+                ``μ |F|`` (a stuck contact resists slip within the step; 0: free).
+            twist: the pad's couple [N·m] on the object about ``n`` (the moment left about
+                the line of action): applied by a twist spring of stiffness ``K r²``
+                (r = :data:`TWIST_RADIUS`), which also resists the object's turning about
+                ``n`` within the step, up to ``|twist| + μ |F| r``.
 
         Returns:
             whether the spring acts (``False``: no force, spring released).
@@ -81,12 +117,20 @@ class ContactSpring:
         if f <= 0.0 or not np.isfinite(f):
             self.release()
             return False
-        stiffness = GAIN * f / max(float(depth), MIN_DEPTH)
-        frame = sapien.Pose(np.asarray(point, np.float32), matrix_to_quat(_frame_along(force / f)).astype(np.float32))
+        stiffness = OBJECT_GAIN * f / max(float(depth), MIN_DEPTH)
+        frame = sapien.Pose(np.asarray(point, np.float32), matrix_to_quat(frame_along(force / f)).astype(np.float32))
         self.drive.set_pose_in_child(self.body.pose.inv() * frame)
-        self.drive.set_pose_in_parent(frame)
+        self.drive.set_pose_in_parent(frame if self.parent is None else self.parent.pose.inv() * frame)
         # x: the body's offset along n from where F was computed; pushed while x < f / K
         self.drive.set_limit_x(f / stiffness, float(self._free[1]), stiffness, 0.0)
+        cap = float(friction) * f
+        for axis in (self.drive.set_drive_property_y, self.drive.set_drive_property_z):
+            axis(stiffness if cap > 0.0 else 0.0, 0.0, max(cap, 0.0), "force")
+        k_twist = stiffness * TWIST_RADIUS ** 2
+        self.drive.set_drive_property_twist(k_twist, 0.0, abs(float(twist)) + cap * TWIST_RADIUS, "force")
+        # across n: held at the pose F was computed at; about n: turned by the twist's preload angle
+        angle = float(twist) / k_twist
+        self.drive.set_drive_target(sapien.Pose(q=[np.cos(angle / 2), np.sin(angle / 2), 0.0, 0.0]))
         self.active = True
         return True
 
@@ -97,7 +141,7 @@ def centre_of_pressure(force: np.ndarray, moment: np.ndarray, origin: np.ndarray
     return origin + np.cross(force, moment) / float(force @ force)
 
 
-def _frame_along(n: np.ndarray) -> np.ndarray:
+def frame_along(n: np.ndarray) -> np.ndarray:
     """A rotation matrix whose x axis is the unit vector ``n``."""
     helper = np.array([0.0, 0.0, 1.0]) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     y = np.cross(helper, n)

@@ -37,7 +37,7 @@ The drives' own force limit is kept: the target is clamped to within ``force_lim
 import numpy as np
 
 from ..errors import ConfigError
-from .contact_spring import GAIN, MIN_DEPTH, centre_of_pressure
+from .contact_spring import GAIN, MIN_DEPTH, frame_along, centre_of_pressure
 
 __all__ = ["JointContact"]
 
@@ -88,7 +88,7 @@ class JointContact:
         rot = self.links[i].entity_pose.to_transformation_matrix()[:3, :3].astype(np.float64)
         return np.vstack([rot @ local[:3], rot @ local[3:]])
 
-    def fold(self, contacts: np.ndarray) -> bool:
+    def fold(self, contacts: np.ndarray, friction=None) -> bool:
         """Set the drives for the coming SAPIEN step from the pad links' contacts of the last
         MPM step (computed at the joints' positions now).
 
@@ -96,6 +96,9 @@ class JointContact:
             contacts: [links, objects, 7] per pad link and object touched: force [N] and
                 torque [N·m] about the link origin (world frame) on the link, indentation [m]
                 (:meth:`~gausstac_maniskill.cosim.GaussTacSim.link_contacts`).
+            friction: [objects] Coulomb coefficients of the contacts, or ``None`` (0): a
+                contact with friction also stiffens the joints that slide the pad across
+                the force, with the same ``K`` (a stuck contact resists slip both ways).
 
         Returns:
             whether any drive was changed.
@@ -110,7 +113,7 @@ class JointContact:
         stiffness = np.zeros_like(q)  # D, the diagonal bound of Σ K a aᵀ
         for i in touched:
             J = self.jacobian(q, i)
-            for row in contacts[i]:
+            for o, row in enumerate(contacts[i]):
                 force, moment, depth = row[:3], row[3:6], float(row[6])
                 f = float(np.linalg.norm(force))
                 if not np.isfinite(f) or not np.all(np.isfinite(moment)):
@@ -120,8 +123,12 @@ class JointContact:
                     continue
                 n = force / f
                 arm = centre_of_pressure(force, moment, np.zeros(3))  # from the link origin
-                a = (J[:3] - _skew(arm) @ J[3:]).T @ n  # velocity of that point along n, per joint velocity
-                stiffness += GAIN * f / max(depth, MIN_DEPTH) * np.abs(a) * np.abs(a).sum()
+                Jc = J[:3] - _skew(arm) @ J[3:]  # velocity of that point, per joint velocity
+                k = GAIN * f / max(depth, MIN_DEPTH)
+                stuck = friction is not None and friction[o] > 0.0
+                for d in (frame_along(n).T if stuck else n[None]):  # along n (and across it, if stuck)
+                    a = Jc.T @ d
+                    stiffness += k * np.abs(a) * np.abs(a).sum()
         for j in np.flatnonzero((torque != 0.0) | (stiffness > 0.0)):
             joint = self.joints[j]
             kp, limit, target = float(joint.stiffness), float(joint.force_limit), float(joint.drive_target[0])

@@ -21,6 +21,7 @@ BENCHMARKS = {
     "look": "gausstac_maniskill.bench.look",
     "close": "gausstac_maniskill.bench.close",
     "drive_contact": "gausstac_maniskill.bench.drive_contact",
+    "grasp": "gausstac_maniskill.bench.grasp",
 }
 
 

@@ -32,7 +32,7 @@ def press(scheme: str, tgs: bool, iterations: int, stiffness: float, sim_freq: i
     import mani_skill.envs  # noqa: F401
     import sapien
 
-    from ..tasks.contact_spring import GAIN, _frame_along
+    from ..tasks.contact_spring import GAIN, frame_along
     from ..tasks.joint_contact import JointContact
     from ..transforms import matrix_to_quat
 
@@ -65,7 +65,7 @@ def press(scheme: str, tgs: bool, iterations: int, stiffness: float, sim_freq: i
         for j, t in zip(joints, target):
             j.set_drive_target(float(t))
         if scheme == "d6":
-            frame = sapien.Pose(anchor.astype(np.float32), matrix_to_quat(_frame_along(n)).astype(np.float32))
+            frame = sapien.Pose(anchor.astype(np.float32), matrix_to_quat(frame_along(n)).astype(np.float32))
             spring = scene.create_drive(None, frame, tip.entity, tip.entity_pose.inv() * frame)
             spring.set_limit_x(0.0, 1.0e30, stiffness, 0.0)
         kp = np.array([j.stiffness for j in joints])
