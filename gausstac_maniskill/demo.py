@@ -14,8 +14,9 @@ with shear arrows, the middle pad's depth map, and the normal force per pad)
 and ``out/demo/demo_strip.png`` (four key frames), and prints timings.
 
 Part 2 runs the ManiSkill plugin: one scripted-expert episode of each registered
-task (``GaussTac-Gesture/PressCube/SlideCube/SqueezeSponge-v1``) with the splat
-render camera and the four pads' depth maps, to ``out/demo/tasks/<task>.mp4/.png``.
+task (``GaussTac-Gesture/PressCube/SlideCube/SqueezeSponge/GraspLiftCube-v1``: the last
+one a floating hand that pinches a free cube, lifts it and holds it) with the splat render
+camera and the four pads' depth maps, to ``out/demo/tasks/<task>.mp4/.png``.
 """
 from __future__ import annotations
 
@@ -224,7 +225,11 @@ def _write_outputs(out, frames, log):
         json.dump(log, f, indent=1)
 
 
-TASKS = ("GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1")
+#: task -> its gym.make arguments in part 2 (the grasp runs its expert with absolute joint
+#: targets on a 2 mm grid: the contact loop steps the MPM after every SAPIEN step)
+TASKS = {"GaussTac-Gesture-v1": {}, "GaussTac-PressCube-v1": {}, "GaussTac-SlideCube-v1": {},
+         "GaussTac-SqueezeSponge-v1": {},
+         "GaussTac-GraspLiftCube-v1": dict(control_mode="pd_joint_pos", mpm_dx=2e-3)}
 
 
 def run_tasks(out: str = "out/demo/tasks", seed: int = 0) -> list[dict]:
@@ -233,20 +238,21 @@ def run_tasks(out: str = "out/demo/tasks", seed: int = 0) -> list[dict]:
     pads' depth maps beside it, and a PNG of its last frame. Returns one summary per task."""
     import gymnasium as gym
     import imageio.v2 as imageio
+    from mani_skill.utils.registration import REGISTERED_ENVS
 
     from .experts import make_expert
 
     os.makedirs(out, exist_ok=True)
     results = []
-    for env_id in TASKS:
+    for env_id, kwargs in TASKS.items():
         t0 = time.perf_counter()
         env = gym.make(env_id, obs_mode="state_dict", render_mode="rgb_array", sim_backend="physx_cpu",
-                       control_mode="pd_joint_delta_pos")
+                       **{"control_mode": "pd_joint_delta_pos", **kwargs})
         obs, _ = env.reset(seed=seed)
         expert = make_expert(env)
         expert.reset()
         frames, steps, info, done_at = [], 0, {}, None
-        for k in range(1, 61):
+        for k in range(1, REGISTERED_ENVS[env_id].max_episode_steps + 6):
             obs, _, terminated, truncated, step_info = env.step(expert.act(obs))
             frames.append(_task_frame(env.render()[0].numpy(), obs["tactile"]))
             if done_at is None:

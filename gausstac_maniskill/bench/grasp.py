@@ -26,11 +26,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/bench_grasp", help="folder for the report")
     args = ap.parse_args(argv)
     import gymnasium as gym
+    from mani_skill.utils.registration import REGISTERED_ENVS
     from tqdm import tqdm
 
-    import gausstac_maniskill  # noqa: F401  (registers the tasks)
+    import gausstac_maniskill.tasks  # noqa: F401  (registers the tasks with ManiSkill)
     from ..experts import make_expert
 
+    max_steps = REGISTERED_ENVS["GaussTac-GraspLiftCube-v1"].max_episode_steps
     lines = [f"GaussTac-GraspLiftCube-v1, scripted expert, seed {args.seed}, pd_joint_pos, SAPIEN 100 Hz, "
              f"obs_mode {args.obs_mode}", "",
              "| dx [mm] | mass [g] | success at step | height [mm] | max speed, last 1 s [mm/s] | thumb / index "
@@ -45,9 +47,8 @@ def main(argv: list[str] | None = None) -> int:
                 u = env.unwrapped
                 expert = make_expert(env)
                 expert.reset()
-                need = u.hold_steps_needed
                 speeds, forces, timing, done = [], [], [], None
-                for k in tqdm(range(u.spec.max_episode_steps), desc=f"grasp {mass * 1e3:g} g", leave=False):
+                for k in tqdm(range(max_steps), desc=f"grasp {mass * 1e3:g} g", leave=False):
                     t0 = time.perf_counter()
                     obs, _, _, _, info = env.step(expert.act(obs))
                     timing.append({**u.step_timing, "total": time.perf_counter() - t0})
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
                     if done is None and bool(info["success"][0]):
                         done = k
                         break
-                last = slice(-min(need, len(speeds)), None)
+                last = slice(-min(int(round(u.control_freq)), len(speeds)), None)  # the last second
                 split = {key: 1e3 * np.mean([t.get(key, 0.0) for t in timing])
                          for key in ("physics", "mpm", "tactile", "render", "total")}
                 f = np.mean(forces[last], axis=0)
