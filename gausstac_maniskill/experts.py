@@ -248,9 +248,9 @@ class GraspLiftExpert(Expert):
 
     Phases per env: ``descend`` (root straight down until the pinch point is at the cube's
     centre), ``close`` (each pad's apex aimed, by IK on position and pad normal, at the
-    middle of its cube face and moved in ``approach_step`` per step until it touches, then
-    servoed on its own normal force), ``lift`` (root up ``lift_step`` per step, still
-    servoing) and ``hold``. The grip force is physical, not tuned per resolution:
+    middle of its cube face and moved in ``approach_step`` per step until it touches; once
+    both touch, their common depth is servoed on the mean normal force), ``lift`` (root up
+    ``lift_step`` per step, still servoing) and ``hold``. The grip force is physical, not tuned per resolution:
     ``safety`` times what Coulomb friction on two pads needs to carry the cube,
     ``m g / (2 μ)``, and at least ``min_grip`` [N].
     """

@@ -69,7 +69,7 @@ from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
 from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
                        TactileSensorConfig, stack_tactile)
-from .contact_spring import ContactSpring, centre_of_pressure
+from .contact_spring import ContactSpring
 from .joint_contact import JointContact
 
 __all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND",
@@ -574,25 +574,13 @@ class GaussTacEnv(BaseEnv):
             for i, name in enumerate(self._pad_links):
                 _apply_wrench(self.agent.robot.links_map[name], link_w[:, i])
         else:  # the links' share goes through their drives, the two-way objects' through springs
+            names = list(self._rigid)
             for b, (hand, per_link) in enumerate(zip(self._joint_contacts, self._object_springs)):
                 hand.fold(self._contacts[b], self._contact_friction)
-                for i, springs in enumerate(per_link):
-                    for (name, contact), spring in zip(zip(self._rigid, self._contacts[b, i]), springs):
-                        if spring is None:
-                            continue
-                        if not np.any(contact[:3]):
-                            spring.release()
-                            continue
-                        force = -contact[:3]  # on the object
-                        origin = np.asarray(hand.links[i].entity_pose.p, np.float64)
-                        point = centre_of_pressure(contact[:3], contact[3:6], origin)
-                        n = force / np.linalg.norm(force)
-                        # the couple left about the line of action (the pad's twist), on the object
-                        twist = -float((contact[3:6] - np.cross(point - origin, contact[:3])) @ n)
-                        if spring.update(force, point, contact[6], self._rigid[name].collider.friction, twist):
-                            obj_w[name][b, :3] -= force
-                            obj_w[name][b, 3:] -= np.cross(point - np.asarray(spring.body.pose.p, np.float64), force) \
-                                + twist * n
+                for springs, contacts in zip(per_link, self._contacts[b]):
+                    for j, (spring, contact) in enumerate(zip(springs, contacts)):
+                        if spring is not None:
+                            obj_w[names[j]][b] -= spring.take(contact, self._contact_friction[j])
         for name, w in obj_w.items():
             _apply_wrench(self._rigid[name].actor, w)
 

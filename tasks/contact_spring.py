@@ -6,8 +6,9 @@ external force, one SAPIEN step late, that is an explicit spring: with a light o
 steps below about 2 sqrt(m/k).
 
 :class:`ContactSpring` hands the same force to PhysX as a one-sided spring instead: a D6
-joint between the world and the object, limited along the force's line of action with a
-soft limit that PhysX's solver treats implicitly, like a joint drive:
+joint from the pad's link to the object (the link takes none of it), limited along the
+force's line of action with a soft limit that PhysX's solver treats implicitly, like a
+joint drive:
 
 * at the pose the MPM force was computed at, the spring pushes with exactly ``|F|`` along
   ``n = F/|F|``, through the centre of pressure;
@@ -65,24 +66,52 @@ class ContactSpring:
     """One pad link's contact with one two-way object, as a one-sided spring along the MPM
     force's line of action that PhysX integrates with the object's motion.
 
+    The spring rides on the pad's link and moves the object only (PhysX sees the link as
+    infinitely heavy for it: inverse mass and inertia scale 0), so the object follows the
+    finger within the step, while the link's side of the contact goes through its drives
+    (:mod:`.joint_contact`).
+
     Args:
         sub_scene: the SAPIEN scene of one env.
         body: the object's entity.
-        parent: the pad link's entity, or ``None`` (the world). The spring rides on the link
-            and moves the object only (PhysX sees the link as infinitely heavy for it:
-            inverse mass and inertia scale 0), so the object follows the finger within the
-            step, while the link's side of the contact goes through its drives
-            (:mod:`.joint_contact`).
+        link: the pad link's entity.
     """
 
-    def __init__(self, sub_scene, body, parent=None):
-        self.body, self.parent = body, parent
-        self.drive = sub_scene.create_drive(parent, sapien.Pose(), body, sapien.Pose())
-        if parent is not None:
-            self.drive.set_inv_mass_scales(0.0, 1.0)
-            self.drive.set_inv_inertia_scales(0.0, 1.0)
+    def __init__(self, sub_scene, body, link):
+        self.body, self.link = body, link
+        self.drive = sub_scene.create_drive(link, sapien.Pose(), body, sapien.Pose())
+        self.drive.set_inv_mass_scales(0.0, 1.0)
+        self.drive.set_inv_inertia_scales(0.0, 1.0)
         self._free = self.drive.get_limit_x()  # unlimited, as created
         self.active = False
+
+    def take(self, contact: np.ndarray, friction: float) -> np.ndarray:
+        """Set the spring from the link's side of a contact of the last MPM step and return
+        the wrench it now carries on the object.
+
+        Args:
+            contact: [7] force [N] and torque [N·m] about the link origin (world frame) that
+                the object passed to the link, and the pad's indentation [m] (a row of
+                :meth:`~gausstac_maniskill.cosim.GaussTacSim.link_contacts`).
+            friction: the contact's Coulomb coefficient (see :meth:`update`).
+
+        Returns:
+            [6] force [N] and torque [N·m] about the object's origin (world frame) on the
+            object that the spring applies; zero when it is released.
+        """
+        if not np.any(contact[:3]):
+            self.release()
+            return np.zeros(6)
+        force = -contact[:3]  # on the object
+        origin = np.asarray(self.link.pose.p, np.float64)
+        point = centre_of_pressure(contact[:3], contact[3:6], origin)
+        n = force / np.linalg.norm(force)
+        # the couple left about the line of action (the pad's twist), on the object
+        twist = -float((contact[3:6] - np.cross(point - origin, contact[:3])) @ n)
+        if not self.update(force, point, contact[6], friction, twist):
+            return np.zeros(6)
+        arm = point - np.asarray(self.body.pose.p, np.float64)
+        return np.concatenate([force, np.cross(arm, force) + twist * n])
 
     def release(self) -> None:
         """No force until the next :meth:`update` with contact."""
@@ -120,7 +149,7 @@ class ContactSpring:
         stiffness = OBJECT_GAIN * f / max(float(depth), MIN_DEPTH)
         frame = sapien.Pose(np.asarray(point, np.float32), matrix_to_quat(frame_along(force / f)).astype(np.float32))
         self.drive.set_pose_in_child(self.body.pose.inv() * frame)
-        self.drive.set_pose_in_parent(frame if self.parent is None else self.parent.pose.inv() * frame)
+        self.drive.set_pose_in_parent(self.link.pose.inv() * frame)
         # x: the body's offset along n from where F was computed; pushed while x < f / K
         self.drive.set_limit_x(f / stiffness, float(self._free[1]), stiffness, 0.0)
         cap = float(friction) * f
