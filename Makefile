@@ -31,6 +31,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction --sim-freq 100
 	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction explicit --sim-freq 2000
 	$(PY) -m gausstac_maniskill.bench grasp --dx 2e-3 1e-3
+	$(PY) -m gausstac_maniskill.bench sponge --dx 2e-3 --nu 0.2 0.45
 
 clean:
 	rm -rf .venv out build *.egg-info

@@ -29,6 +29,7 @@ TASKS = {
     "GaussTac-SlideCube-v1": 60,
     "GaussTac-SqueezeSponge-v1": 40,
     "GaussTac-GraspLiftCube-v1": 100,
+    "GaussTac-GraspSqueezeSponge-v1": 80,
 }
 
 

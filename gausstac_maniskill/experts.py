@@ -244,15 +244,16 @@ class SqueezeExpert(_IndexFaceExpert):
 
 @register_expert("GaussTac-GraspLiftCube-v1")
 class GraspLiftExpert(Expert):
-    """Pinch the cube between the thumb and index pads, lift it, hold it.
+    """Pinch the object between the thumb and index pads, lift it, hold it.
 
-    Phases per env: ``descend`` (root straight down until the pinch point is at the cube's
+    Phases per env: ``descend`` (root straight down until the pinch point is at the object's
     centre), ``close`` (each pad's apex aimed, by IK on position and pad normal, at the
-    middle of its cube face and moved in ``approach_step`` per step until it touches; once
-    both touch, their common depth is servoed on the mean normal force), ``lift`` (root up
-    ``lift_step`` per step, still servoing) and ``hold``. The grip force is physical, not tuned per resolution:
-    ``safety`` times what Coulomb friction on two pads needs to carry the cube,
-    ``m g / (2 μ)``, and at least ``min_grip`` [N].
+    middle of its face of the object and moved in ``approach_step`` per step until it
+    touches; once both touch, their common depth is servoed: :meth:`_squeeze`), ``lift``
+    (root up ``lift_step`` per step, still servoing) and ``hold``. The cube's grip force
+    is physical, not tuned per resolution: ``safety`` times what Coulomb friction on two
+    pads needs to carry the object, ``m g / (2 μ)``, and at least ``min_grip`` [N].
+    Works on any :class:`~gausstac_maniskill.tasks.pinch_grasp.PinchGraspEnv`.
     """
 
     descend_step = 5.0e-3   # m per control step
@@ -264,6 +265,7 @@ class GraspLiftExpert(Expert):
     min_grip = 1.0          # N
     gap = 4.0e-3            # m: the pads start this far outside the faces
     max_joint_step = 0.1    # rad per control step of a finger joint's target (no swinging fingers)
+    min_pinch_height = 0.02  # m above the ground: lower, the fingertips drag on the ground
 
     def reset(self):
         env = self.env
@@ -274,46 +276,52 @@ class GraspLiftExpert(Expert):
         self.phase = np.array(["descend"] * B, dtype=object)
         self.depth = np.full((B, 2), -self.gap)  # commanded depth of (thumb, index) into their faces [m]
         self.touched = np.zeros((B, 2), bool)
-        self.centre = [None] * B  # the cube's centre in the hand's base frame when closing began [m]
+        self.centre = [None] * B  # where the pads close, in the hand's base frame, fixed when closing began [m]
         g = float(np.linalg.norm(env.sim_config.scene_config.gravity))
-        self.grip = max(self.min_grip, self.safety * env.cube_mass * g / (2 * max(env.cube_friction, 1e-3)))
+        self.grip = max(self.min_grip, self.safety * env.object_mass * g / (2 * max(env.object_friction, 1e-3)))
 
     def act(self, obs=None):
         from .agents.allegro import ALLEGRO_PINCH_AXIS, ALLEGRO_PINCH_CENTRE
 
         env = self.env
         agent = type(env.agent)
-        cube = env.cube.pose.p.detach().cpu().double().numpy()
-        forces = np.stack([env.pad_force("thumb").cpu().numpy(), env.pad_force("index").cpu().numpy()], axis=1)
-        h = env.cube_half_size
+        obj = env.object_centre().detach().cpu().double().numpy()
+        forces = np.stack([env.touch_force("thumb").cpu().numpy(), env.touch_force("index").cpu().numpy()], axis=1)
+        self._observe()
+        h = env.pinch_half_width
         for b in range(len(self.q_cmd)):
             base = agent.base_pose(self.q_cmd[b, :6])  # commanded: the root drives are stiff
             pinch = base[:3, :3] @ np.asarray(ALLEGRO_PINCH_CENTRE) + base[:3, 3]
             if self.phase[b] == "descend":
-                drop = pinch[2] - cube[b, 2]
+                drop = pinch[2] - max(obj[b, 2], self.min_pinch_height)
                 self.q_cmd[b, 2] -= min(self.descend_step, max(drop, 0.0))
                 if drop <= 1e-4:
                     self.phase[b] = "close"
             else:
-                self._servo(b, forces[b])
-                if self.phase[b] == "close" and forces[b].mean() > 0.8 * self.grip and np.all(self.touched[b]):
+                self.touched[b] |= forces[b] > env.grasp_force
+                if not np.all(self.touched[b]):  # move each pad in until it touches
+                    self.depth[b, ~self.touched[b]] += self.approach_step
+                else:  # then one common depth (the object, free between them, centres itself)
+                    self.depth[b] += np.clip(self._squeeze(b, forces[b]), -self.max_depth_step, self.max_depth_step)
+                if self.phase[b] == "close" and np.all(self.touched[b]) and self._ready_to_lift(b, forces[b]):
                     self.phase[b] = "lift"
                 if self.phase[b] == "lift":
-                    if cube[b, 2] - h < env.lift_height + 5.0e-3:
+                    if obj[b, 2] - env.object_rest_height < env.lift_height + 5.0e-3:
                         self.q_cmd[b, 2] += self.lift_step
                     else:
                         self.phase[b] = "hold"
                 base = agent.base_pose(self.q_cmd[b, :6])
-            # the pads' targets on the cube's faces, base frame: around the pinch point while
-            # descending, then around where the cube was when closing began (fixed in the hand:
-            # targets that followed the cube would chase it between the pads)
+            # the pads' targets on the object's faces, base frame: around the pinch point while
+            # descending, then around where the object was when closing began (fixed in the
+            # hand: targets that followed the object would chase it between the pads)
             u = np.asarray(ALLEGRO_PINCH_AXIS, np.float64)
             if self.phase[b] == "descend":
                 centre = np.asarray(ALLEGRO_PINCH_CENTRE, np.float64)
             else:
                 if self.centre[b] is None:
                     to_base = np.linalg.inv(base)
-                    self.centre[b] = to_base[:3, :3] @ cube[b] + to_base[:3, 3]
+                    grip_at = [obj[b, 0], obj[b, 1], max(obj[b, 2], self.min_pinch_height)]
+                    self.centre[b] = to_base[:3, :3] @ grip_at + to_base[:3, 3]
                 centre = self.centre[b]
             q = self.q_cmd[b].copy()
             for k, (ik, sign) in enumerate(((self.thumb, -1.0), (self.index, 1.0))):
@@ -322,13 +330,33 @@ class GraspLiftExpert(Expert):
             self.q_cmd[b, 6:] += step
         return joint_targets_to_action(env, torch.as_tensor(self.q_cmd, dtype=torch.float32))
 
-    def _servo(self, b: int, force: np.ndarray) -> None:
-        """Move each pad in until it touches; once both touch, servo their common depth on
-        the mean normal force (the cube, free between them, centres itself: servoing each
-        pad on its own force would push it back and forth)."""
-        self.touched[b] |= force > self.env.grasp_force
-        if not np.all(self.touched[b]):
-            self.depth[b, ~self.touched[b]] += self.approach_step
-        else:
-            self.depth[b] += np.clip(self.gain * (self.grip - force.mean()), -self.max_depth_step,
-                                     self.max_depth_step)
+    def _observe(self) -> None:
+        """Read what :meth:`_squeeze` needs for this step (all envs at once)."""
+
+    def _squeeze(self, b: int, force: np.ndarray) -> float:
+        """Change [m] of the pads' common depth once both touch: servo the mean normal force
+        on the grip (servoing each pad on its own force would push the object back and forth)."""
+        return self.gain * (self.grip - force.mean())
+
+    def _ready_to_lift(self, b: int, force: np.ndarray) -> bool:
+        return force.mean() > 0.8 * self.grip
+
+
+@register_expert("GaussTac-GraspSqueezeSponge-v1")
+class GraspSqueezeExpert(GraspLiftExpert):
+    """The pinch-and-lift of :class:`GraspLiftExpert` with the pads' common depth servoed
+    on the sponge's measured compression instead of a force: each pad moves in
+    ``squeeze_gain`` of the compression error times the sponge's half width per step.
+    Lifts once the compression is within half the task's tolerance."""
+
+    squeeze_gain = 0.8
+    max_depth_step = 6.0e-4  # m per control step
+
+    def _observe(self) -> None:
+        self.error = (self.env.target_compression - self.env.compression()).numpy()
+
+    def _squeeze(self, b: int, force: np.ndarray) -> float:
+        return self.squeeze_gain * self.error[b] * self.env.pinch_half_width
+
+    def _ready_to_lift(self, b: int, force: np.ndarray) -> bool:
+        return abs(self.error[b]) < 0.5 * self.env.tolerance

@@ -11,6 +11,8 @@ from .press_cube import PressCubeEnv  # noqa: E402
 from .slide_cube import SlideCubeEnv  # noqa: E402
 from .squeeze_sponge import SqueezeSpongeEnv  # noqa: E402
 from .grasp_lift import GraspLiftCubeEnv  # noqa: E402
+from .grasp_sponge import GraspSqueezeSpongeEnv  # noqa: E402
 
 del drop_light
-__all__ = ["GaussTacEnv", "GestureEnv", "GESTURES", "PressCubeEnv", "SlideCubeEnv", "SqueezeSpongeEnv", "GraspLiftCubeEnv"]
+__all__ = ["GaussTacEnv", "GestureEnv", "GESTURES", "PressCubeEnv", "SlideCubeEnv", "SqueezeSpongeEnv", "GraspLiftCubeEnv",
+           "GraspSqueezeSpongeEnv"]

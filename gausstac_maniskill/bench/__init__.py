@@ -25,3 +25,18 @@ def write_report(out_dir: str, filename: str, text: str) -> str:
     with open(path, "w") as f:
         f.write(text + "\n")
     return path
+
+
+#: the parts of an env step that ``GaussTacEnv.step_timing`` times, and their sum
+STEP_PARTS = ("physics", "mpm", "tactile", "render", "total")
+
+
+def step_split_ms(timing: list[dict]) -> dict[str, float]:
+    """Mean wall time [ms] per step of each of :data:`STEP_PARTS` over ``timing`` (one
+    ``{**env.step_timing, "total": seconds}`` dict per step; a missing part counts 0)."""
+    return {key: 1e3 * sum(t.get(key, 0.0) for t in timing) / max(len(timing), 1) for key in STEP_PARTS}
+
+
+def split_cells(split: dict[str, float]) -> str:
+    """``"physics | mpm | tactile | render | total"`` table cells [ms] of :func:`step_split_ms`."""
+    return " | ".join(f"{split[key]:.0f}" for key in STEP_PARTS)

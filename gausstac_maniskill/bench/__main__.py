@@ -22,6 +22,7 @@ BENCHMARKS = {
     "close": "gausstac_maniskill.bench.close",
     "drive_contact": "gausstac_maniskill.bench.drive_contact",
     "grasp": "gausstac_maniskill.bench.grasp",
+    "sponge": "gausstac_maniskill.bench.sponge",
 }
 
 

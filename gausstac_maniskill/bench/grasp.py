@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import cli, write_report
+from . import cli, split_cells, step_split_ms, write_report
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,14 +58,11 @@ def main(argv: list[str] | None = None) -> int:
                         done = k
                         break
                 last = slice(-min(int(round(u.control_freq)), len(speeds)), None)  # the last second
-                split = {key: 1e3 * np.mean([t.get(key, 0.0) for t in timing])
-                         for key in ("physics", "mpm", "tactile", "render", "total")}
                 f = np.mean(forces[last], axis=0)
                 lines.append(f"| {dx * 1e3:g} | {mass * 1e3:g} | {'-' if done is None else done} "
                              f"| {float(info['height'][0]) * 1e3:.1f} | {1e3 * max(speeds[last]):.3f} "
-                             f"| {f[0]:.2f} / {f[1]:.2f} | {expert.grip:.2f} | {split['physics']:.0f} "
-                             f"| {split['mpm']:.0f} | {split['tactile']:.0f} | {split['render']:.0f} "
-                             f"| {split['total']:.0f} |")
+                             f"| {f[0]:.2f} / {f[1]:.2f} | {expert.grip:.2f} | {split_cells(step_split_ms(timing))} |")
+
             finally:
                 env.close()
     text = "\n".join(lines)

@@ -44,7 +44,6 @@ Example::
 """
 from __future__ import annotations
 
-import atexit
 import math
 import os
 import time
@@ -69,7 +68,7 @@ __all__ = ["MPMWorld", "StepInfo", "Group"]
 _WORLDS: "weakref.WeakSet[MPMWorld]" = weakref.WeakSet()
 
 
-@atexit.register
+@backend.before_shutdown
 def _release_packs() -> None:
     """Free every world's kernel argument packs while Taichi still runs: a pack left to the
     interpreter's teardown prints a TypeError from Taichi's ArgPack.__del__ at exit."""
