@@ -286,6 +286,9 @@ class GraspLiftExpert(Expert):
         env = self.env
         agent = type(env.agent)
         obj = env.object_centre().detach().cpu().double().numpy()
+        # where the pads close: the object's centre, at least min_pinch_height above the ground
+        grip_at = obj.copy()
+        grip_at[:, 2] = np.maximum(grip_at[:, 2], self.min_pinch_height)
         forces = np.stack([env.touch_force("thumb").cpu().numpy(), env.touch_force("index").cpu().numpy()], axis=1)
         self._observe()
         h = env.pinch_half_width
@@ -293,7 +296,7 @@ class GraspLiftExpert(Expert):
             base = agent.base_pose(self.q_cmd[b, :6])  # commanded: the root drives are stiff
             pinch = base[:3, :3] @ np.asarray(ALLEGRO_PINCH_CENTRE) + base[:3, 3]
             if self.phase[b] == "descend":
-                drop = pinch[2] - max(obj[b, 2], self.min_pinch_height)
+                drop = pinch[2] - grip_at[b, 2]
                 self.q_cmd[b, 2] -= min(self.descend_step, max(drop, 0.0))
                 if drop <= 1e-4:
                     self.phase[b] = "close"
@@ -320,8 +323,7 @@ class GraspLiftExpert(Expert):
             else:
                 if self.centre[b] is None:
                     to_base = np.linalg.inv(base)
-                    grip_at = [obj[b, 0], obj[b, 1], max(obj[b, 2], self.min_pinch_height)]
-                    self.centre[b] = to_base[:3, :3] @ grip_at + to_base[:3, 3]
+                    self.centre[b] = to_base[:3, :3] @ grip_at[b] + to_base[:3, 3]
                 centre = self.centre[b]
             q = self.q_cmd[b].copy()
             for k, (ik, sign) in enumerate(((self.thumb, -1.0), (self.index, 1.0))):

@@ -49,7 +49,6 @@ class GraspLiftCubeEnv(PinchGraspEnv):
         self.check_range("cube_half_size", cube_half_size, 0.01, 0.04, "m")
         self.check_range("cube_friction", cube_friction, 0.0, 3.0, "")
         self.cube_mass, self.cube_half_size, self.cube_friction = float(cube_mass), float(cube_half_size), float(cube_friction)
-        self.object_mass, self.object_friction = self.cube_mass, self.cube_friction
         super().__init__(*args, **kwargs)
 
     # ------------------------------------------------------------------ scene
@@ -67,6 +66,14 @@ class GraspLiftCubeEnv(PinchGraspEnv):
 
         self.add_mpm_rigid("cube", self.cube, Box(half_extents=(h, h, h), friction=self.cube_friction),
                            gaussians=box_gaussians((h, h, h), 2.5e-3), two_way=True)
+
+    @property
+    def object_mass(self) -> float:
+        return self.cube_mass
+
+    @property
+    def object_friction(self) -> float:
+        return self.cube_friction
 
     @property
     def pinch_half_width(self) -> float:

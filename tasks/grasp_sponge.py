@@ -23,6 +23,7 @@ from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
 
 from ..config import Material
+from ..errors import ConfigError
 from ..mpm import box_particles
 from ..mpm.colliders import HalfSpace
 from .pinch_grasp import PinchGraspEnv
@@ -71,8 +72,6 @@ class GraspSqueezeSpongeEnv(PinchGraspEnv):
         self.sponge_size = tuple(float(v) for v in size)
         self.sponge_friction = float(sponge_friction)
         self.compression_range, self.tolerance = (float(lo), float(hi)), float(tolerance)
-        self.object_mass = float(np.prod(self.sponge_size) * sponge_density)
-        self.object_friction = None  # set in _load_scene: the pads' soft friction at this resolution
         super().__init__(*args, lift_height=lift_height, hold_time=hold_time, **kwargs)
 
     @classmethod
@@ -83,27 +82,38 @@ class GraspSqueezeSpongeEnv(PinchGraspEnv):
         except TypeError:
             out = ()
         if len(out) != n:
-            from ..errors import ConfigError
-
             raise ConfigError(f"{cls._env_id()}: {name}={value!r} must be {n} numbers")
         return out
 
     # ------------------------------------------------------------------ scene
     def _load_scene(self, options: dict):
         super()._load_scene(options)
-        self.object_friction = self.mpm_settings.soft_friction
         self.add_mpm_rigid("table", self.ground, HalfSpace(friction=self.sponge_friction))
         self.add_mpm_soft("sponge", self._sponge_particles, self.sponge_material)
         B = self.num_envs
         self.sponge_origin = np.zeros((B, 3))  # where each env's sponge centre was drawn [m]
         self.target_compression = torch.full((B,), float(np.mean(self.compression_range)))
-        self._rest_width = None
+        #: the sponge's width [m] across the pinch at rest, measured as :meth:`compression` does
+        self.rest_width = _width_along(self._rest_particles(), np.zeros(3), np.array([0.0, 1.0, 0.0]),
+                                       self.probe_radius)
+
+    def _rest_particles(self) -> np.ndarray:
+        """[N, 3] the sponge's particles at rest, about its centre [m]."""
+        half = np.asarray(self.sponge_size) / 2
+        return box_particles(-half, half, self.mpm_settings.particle_spacing)
 
     def _sponge_particles(self, b: int):
         """World particles of env ``b``'s sponge at rest (free: no kinematic particles)."""
-        half = np.asarray(self.sponge_size) / 2
-        local = box_particles(-half, half, self.mpm_settings.particle_spacing)
-        return local + self.sponge_origin[b], None, None
+        return self._rest_particles() + self.sponge_origin[b], None, None
+
+    @property
+    def object_mass(self) -> float:
+        return float(np.prod(self.sponge_size) * self.sponge_material.density)
+
+    @property
+    def object_friction(self) -> float:
+        """The pads' grid friction with soft objects (``SolverSettings.soft_friction``)."""
+        return self.mpm_settings.soft_friction
 
     @property
     def pinch_half_width(self) -> float:
@@ -158,15 +168,6 @@ class GraspSqueezeSpongeEnv(PinchGraspEnv):
             width = _width_along(self.sponge_positions(b), thumb[b], u, self.probe_radius)
             out[b] = 0.0 if width is None else 1.0 - width / self.rest_width
         return torch.as_tensor(out, dtype=torch.float32)
-
-    @property
-    def rest_width(self) -> float:
-        """The sponge's width [m] across the pinch at rest, measured as :meth:`compression` does."""
-        if self._rest_width is None:
-            half = np.asarray(self.sponge_size) / 2
-            x = box_particles(-half, half, self.mpm_settings.particle_spacing)
-            self._rest_width = _width_along(x, np.zeros(3), np.array([0.0, 1.0, 0.0]), self.probe_radius)
-        return self._rest_width
 
     def _hold_condition(self) -> torch.Tensor:
         return (self.compression() - self.target_compression).abs() < self.tolerance

@@ -39,9 +39,6 @@ class PinchGraspEnv(GaussTacEnv):
 
     SUPPORTED_ROBOTS = ["floating_allegro_hand_right_gausstac"]
     ground_altitude = 0.0
-    #: object's mass [kg] and its Coulomb friction with the pads (set by the subclass)
-    object_mass: float
-    object_friction: float
 
     def __init__(self, *args, robot_uids="floating_allegro_hand_right_gausstac", lift_height: float = 0.05,
                  hold_time: float = 2.0, grasp_force: float = 0.05, approach_height: float = 0.04,
@@ -72,6 +69,16 @@ class PinchGraspEnv(GaussTacEnv):
         return sapien_utils.look_at(eye=[0.3, -0.25, 0.25], target=[0.0, 0.0, 0.06])
 
     # ------------------------------------------------------------------ object (subclass)
+    @property
+    def object_mass(self) -> float:
+        """The object's mass [kg]."""
+        raise NotImplementedError
+
+    @property
+    def object_friction(self) -> float:
+        """Coulomb friction between the pads and the object."""
+        raise NotImplementedError
+
     @property
     def pinch_half_width(self) -> float:
         """Half the object's rest extent [m] along the pinch axis."""

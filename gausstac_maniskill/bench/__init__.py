@@ -40,3 +40,39 @@ def step_split_ms(timing: list[dict]) -> dict[str, float]:
 def split_cells(split: dict[str, float]) -> str:
     """``"physics | mpm | tactile | render | total"`` table cells [ms] of :func:`step_split_ms`."""
     return " | ".join(f"{split[key]:.0f}" for key in STEP_PARTS)
+
+
+def run_expert_episode(env, seed: int, desc: str, each_step=None):
+    """Reset ``env`` with ``seed`` and step it with its scripted expert until success or the
+    task's time limit, timing every step.
+
+    Args:
+        each_step: called as ``each_step(info)`` after every step (per-step records).
+
+    Returns:
+        ``(obs, info, done, timing, expert)``: the last observation and info, the control
+        step at which the task succeeded (None: never), one ``{**env.step_timing, "total": s}``
+        per step (for :func:`step_split_ms`), and the expert.
+    """
+    import time
+
+    from mani_skill.utils.registration import REGISTERED_ENVS
+    from tqdm import tqdm
+
+    from ..experts import make_expert
+
+    u = env.unwrapped
+    obs, info = env.reset(seed=seed)
+    expert = make_expert(env)
+    expert.reset()
+    timing, done = [], None
+    for k in tqdm(range(REGISTERED_ENVS[u.spec.id].max_episode_steps), desc=desc, leave=False):
+        t0 = time.perf_counter()
+        obs, _, _, _, info = env.step(expert.act(obs))
+        timing.append({**u.step_timing, "total": time.perf_counter() - t0})
+        if each_step is not None:
+            each_step(info)
+        if bool(info["success"][0]):
+            done = k
+            break
+    return obs, info, done, timing, expert

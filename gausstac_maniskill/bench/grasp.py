@@ -10,11 +10,9 @@ coupling), MPM, tactile and render (the splat camera, ``--obs-mode rgb``).
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
-from . import cli, split_cells, step_split_ms, write_report
+from . import cli, run_expert_episode, split_cells, step_split_ms, write_report
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,13 +24,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/bench_grasp", help="folder for the report")
     args = ap.parse_args(argv)
     import gymnasium as gym
-    from mani_skill.utils.registration import REGISTERED_ENVS
-    from tqdm import tqdm
 
     import gausstac_maniskill.tasks  # noqa: F401  (registers the tasks with ManiSkill)
-    from ..experts import make_expert
 
-    max_steps = REGISTERED_ENVS["GaussTac-GraspLiftCube-v1"].max_episode_steps
     lines = [f"GaussTac-GraspLiftCube-v1, scripted expert, seed {args.seed}, pd_joint_pos, SAPIEN 100 Hz, "
              f"obs_mode {args.obs_mode}", "",
              "| dx [mm] | mass [g] | success at step | height [mm] | max speed, last 1 s [mm/s] | thumb / index "
@@ -43,26 +37,19 @@ def main(argv: list[str] | None = None) -> int:
             env = gym.make("GaussTac-GraspLiftCube-v1", sim_backend="physx_cpu", obs_mode=args.obs_mode,
                            control_mode="pd_joint_pos", mpm_dx=dx, cube_mass=mass)
             try:
-                obs, _ = env.reset(seed=args.seed)
                 u = env.unwrapped
-                expert = make_expert(env)
-                expert.reset()
-                speeds, forces, timing, done = [], [], [], None
-                for k in tqdm(range(max_steps), desc=f"grasp {mass * 1e3:g} g", leave=False):
-                    t0 = time.perf_counter()
-                    obs, _, _, _, info = env.step(expert.act(obs))
-                    timing.append({**u.step_timing, "total": time.perf_counter() - t0})
+                speeds, forces = [], []
+
+                def record(info):
                     speeds.append(float(info["cube_speed"][0]))
                     forces.append((u.pad_force("thumb").item(), u.pad_force("index").item()))
-                    if done is None and bool(info["success"][0]):
-                        done = k
-                        break
+
+                obs, info, done, timing, expert = run_expert_episode(env, args.seed, f"grasp {mass * 1e3:g} g", record)
                 last = slice(-min(int(round(u.control_freq)), len(speeds)), None)  # the last second
                 f = np.mean(forces[last], axis=0)
                 lines.append(f"| {dx * 1e3:g} | {mass * 1e3:g} | {'-' if done is None else done} "
                              f"| {float(info['height'][0]) * 1e3:.1f} | {1e3 * max(speeds[last]):.3f} "
                              f"| {f[0]:.2f} / {f[1]:.2f} | {expert.grip:.2f} | {split_cells(step_split_ms(timing))} |")
-
             finally:
                 env.close()
     text = "\n".join(lines)

@@ -14,11 +14,10 @@ written to ``sponge_<dx>_<nu>.png``).
 from __future__ import annotations
 
 import os
-import time
 
 import numpy as np
 
-from . import cli, split_cells, step_split_ms, write_report
+from . import cli, run_expert_episode, split_cells, step_split_ms, write_report
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,14 +30,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     import gymnasium as gym
     import imageio.v3 as iio
-    from mani_skill.utils.registration import REGISTERED_ENVS
-    from tqdm import tqdm
 
     import gausstac_maniskill.tasks  # noqa: F401  (registers the tasks with ManiSkill)
-    from ..experts import make_expert
 
     env_id = "GaussTac-GraspSqueezeSponge-v1"
-    max_steps = REGISTERED_ENVS[env_id].max_episode_steps
     os.makedirs(args.out, exist_ok=True)
     lines = [f"{env_id}, scripted expert, seed {args.seed}, pd_joint_pos, SAPIEN 100 Hz, obs_mode {args.obs_mode}",
              "", "| dx [mm] | nu | particles | success at step | compression / target | height [mm] "
@@ -50,20 +45,12 @@ def main(argv: list[str] | None = None) -> int:
             env = gym.make(env_id, sim_backend="physx_cpu", obs_mode=args.obs_mode, control_mode="pd_joint_pos",
                            mpm_dx=dx, sponge_nu=nu)
             try:
-                obs, _ = env.reset(seed=args.seed)
                 u = env.unwrapped
+                substeps = []
+                obs, info, done, timing, _ = run_expert_episode(
+                    env, args.seed, f"sponge dx {dx * 1e3:g} mm nu {nu:g}",
+                    lambda info: substeps.append(u.cosims[0].world.last_step.substeps))
                 sim = u.cosims[0]
-                expert = make_expert(env)
-                expert.reset()
-                timing, substeps, done = [], [], None
-                for k in tqdm(range(max_steps), desc=f"sponge dx {dx * 1e3:g} mm nu {nu:g}", leave=False):
-                    t0 = time.perf_counter()
-                    obs, _, _, _, info = env.step(expert.act(obs))
-                    timing.append({**u.step_timing, "total": time.perf_counter() - t0})
-                    substeps.append(sim.world.last_step.substeps)
-                    if bool(info["success"][0]):
-                        done = k
-                        break
                 c = float(info["compression"][0])
                 J = np.linalg.det(sim.world.deformation_gradients("sponge"))
                 f = (u.touch_force("thumb").item(), u.touch_force("index").item())
@@ -72,7 +59,6 @@ def main(argv: list[str] | None = None) -> int:
                              f"| {float(info['height'][0]) * 1e3:.1f} | {f[0]:.3f} / {f[1]:.3f} "
                              f"| {J.mean() - 1:+.4f} | {(1 - 2 * nu) * c:.4f} | {J.min():.3f} "
                              f"| {np.median(substeps):.0f} | {split_cells(step_split_ms(timing))} |")
-
                 rgb = obs.get("sensor_data", {}).get("splat_camera", {}).get("rgb") if isinstance(obs, dict) else None
                 if rgb is not None:
                     iio.imwrite(os.path.join(args.out, f"sponge_{dx * 1e3:g}mm_nu{nu:g}.png"),
