@@ -42,17 +42,20 @@ def split_cells(split: dict[str, float]) -> str:
     return " | ".join(f"{split[key]:.0f}" for key in STEP_PARTS)
 
 
-def run_expert_episode(env, seed: int, desc: str, each_step=None):
-    """Reset ``env`` with ``seed`` and step it with its scripted expert until success or the
-    task's time limit, timing every step.
+def run_expert_episode(env, seed: int, desc: str, each_step=None, settle: int = 0, replay=None):
+    """Reset ``env`` with ``seed`` and step it with its scripted expert until success (and
+    ``settle`` more steps) or the task's time limit, timing every step.
 
     Args:
-        each_step: called as ``each_step(info)`` after every step (per-step records).
+        each_step: called as ``each_step(info, action)`` after every step (per-step records).
+        settle: control steps the expert goes on after the first success.
+        replay: a list of actions to play instead of the expert's (open loop, every one of
+            them, whatever the success).
 
     Returns:
         ``(obs, info, done, timing, expert)``: the last observation and info, the control
-        step at which the task succeeded (None: never), one ``{**env.step_timing, "total": s}``
-        per step (for :func:`step_split_ms`), and the expert.
+        step at which the task first succeeded (None: never), one ``{**env.step_timing,
+        "total": s}`` per step (for :func:`step_split_ms`), and the expert.
     """
     import time
 
@@ -66,13 +69,16 @@ def run_expert_episode(env, seed: int, desc: str, each_step=None):
     expert = make_expert(env)
     expert.reset()
     timing, done = [], None
-    for k in tqdm(range(REGISTERED_ENVS[u.spec.id].max_episode_steps), desc=desc, leave=False):
+    steps = len(replay) if replay is not None else REGISTERED_ENVS[u.spec.id].max_episode_steps
+    for k in tqdm(range(steps), desc=desc, leave=False):
         t0 = time.perf_counter()
-        obs, _, _, _, info = env.step(expert.act(obs))
+        action = replay[k] if replay is not None else expert.act(obs)
+        obs, _, _, _, info = env.step(action)
         timing.append({**u.step_timing, "total": time.perf_counter() - t0})
         if each_step is not None:
-            each_step(info)
-        if bool(info["success"][0]):
+            each_step(info, action)
+        if done is None and bool(info["success"][0]):
             done = k
+        if replay is None and done is not None and k >= done + settle:
             break
     return obs, info, done, timing, expert

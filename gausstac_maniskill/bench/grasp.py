@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
                 u = env.unwrapped
                 speeds, forces = [], []
 
-                def record(info):
+                def record(info, action):
                     speeds.append(float(info["cube_speed"][0]))
                     forces.append((u.pad_force("thumb").item(), u.pad_force("index").item()))
 

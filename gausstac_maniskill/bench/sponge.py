@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
                 substeps = []
                 obs, info, done, timing, _ = run_expert_episode(
                     env, args.seed, f"sponge dx {dx * 1e3:g} mm nu {nu:g}",
-                    lambda info: substeps.append(u.cosims[0].world.last_step.substeps))
+                    lambda info, action: substeps.append(u.cosims[0].world.last_step.substeps))
                 sim = u.cosims[0]
                 c = float(info["compression"][0])
                 J = np.linalg.det(sim.world.deformation_gradients("sponge"))
