@@ -2,14 +2,17 @@
 tactile / render, reset time, and the task outcome, against SAPIEN's own camera and
 ManiSkill's FSR-tactile Allegro task.
 
-``python -m gausstac_maniskill.bench envs [--steps N] [--dx 2e-3 1.5e-3] [--tasks ID ...] [--no-fsr]
-[--out DIR]``
+``python -m gausstac_maniskill.bench envs [--steps N] [--settle N] [--dx 2e-3 1.5e-3] [--tasks ID ...]
+[--no-fsr] [--out DIR]``
 
 Rows:
 
-* every GaussTac task with the splat camera (``obs_mode="rgb"``, 128×128), driven by
-  its scripted expert; PressCube also at finer MPM grids (``--dx``), where the
-  "outcome" column is the force error at the end (speed vs accuracy);
+* every GaussTac task with the splat camera (``obs_mode="rgb"``, 128×128, ``pd_joint_pos``),
+  driven by its scripted expert through a whole episode: until it succeeds and ``--settle``
+  more steps, or the task's time limit (``--steps N``: at most N timed steps). The mean
+  step is therefore one of the episode as a user records it, approach included. PressCube
+  also runs at finer MPM grids (``--dx``), where the "outcome" column is the force error at
+  the end (speed vs accuracy);
 * the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
   CPU machine: rigid meshes only, no pad deformation), made in the same process and stepped
   in turn with the splat run, so that both see the same machine load (the "camera side by
@@ -32,7 +35,8 @@ import time
 
 import numpy as np
 
-TASKS = ["GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1"]
+TASKS = ["GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1",
+         "GaussTac-GraspLiftCube-v1", "GaussTac-GraspSqueezeSponge-v1"]
 PARTS = ("physics", "mpm", "tactile", "render")
 
 
@@ -41,8 +45,11 @@ def _outcome(env_id, info) -> str:
         return f"success={bool(info['success'][0])}, |F-F*|={float(info['force_error'][0]):.3f} N"
     if env_id == "GaussTac-SlideCube-v1":
         return f"success={bool(info['success'][0])}, slid={1e3 * float(info['slid'][0]):.1f} mm"
-    if env_id == "GaussTac-SqueezeSponge-v1":
+    if env_id in ("GaussTac-SqueezeSponge-v1", "GaussTac-GraspSqueezeSponge-v1"):
         return f"success={bool(info['success'][0])}, |c-c*|={float(info['compression_error'][0]):.3f}"
+    if env_id == "GaussTac-GraspLiftCube-v1":
+        return (f"success={bool(info['success'][0])}, height={1e3 * float(info['height'][0]):.1f} mm, "
+                f"held {float(info['hold_time'][0]):.2f} s")
     if "success" in info:
         return f"success={bool(info['success'][0])}"
     return "-"
@@ -51,13 +58,15 @@ def _outcome(env_id, info) -> str:
 class _Run:
     """One GaussTac env driven by its scripted expert, with the step timings it recorded."""
 
-    def __init__(self, env_id: str, camera: str = "splat", dx: float = 2e-3, resets: int = 3):
+    def __init__(self, env_id: str, camera: str = "splat", dx: float = 2e-3, resets: int = 3,
+                 steps: int | None = None, settle: int = 5):
         import gymnasium as gym
+        from mani_skill.utils.registration import REGISTERED_ENVS
 
         from ..experts import make_expert
 
         self.env_id = env_id
-        self.env = gym.make(env_id, obs_mode="rgb", sim_backend="physx_cpu", control_mode="pd_joint_delta_pos",
+        self.env = gym.make(env_id, obs_mode="rgb", sim_backend="physx_cpu", control_mode="pd_joint_pos",
                             camera=camera, mpm_dx=dx, splat_size=(128, 128))
         self.base = self.env.unwrapped
         reset_s = []
@@ -71,9 +80,19 @@ class _Run:
         self.expert.reset()
         self.cam = self.base._sensors.get("splat_camera")
         self.rows, self.info, self.particles, self.k, self.pictures = [], {}, 0, 0, None
+        limit = REGISTERED_ENVS[env_id].max_episode_steps
+        self.max_steps = limit if steps is None else min(steps + 1, limit)
+        self.settle, self.success_at = settle, None
+
+    @property
+    def finished(self) -> bool:
+        """The episode is over: success and ``settle`` steps after it, or the step budget."""
+        return self.k >= self.max_steps or (self.success_at is not None and self.k > self.success_at + self.settle)
 
     def step(self) -> None:
         """One control step; from the second on (the first compiles Taichi kernels) it is timed."""
+        if self.finished:
+            return
         if self.k == 1 and hasattr(self.cam, "background_renders"):
             self.pictures = self.cam.background_renders
         self.obs, _, _, _, self.info = self.env.step(self.expert.act(self.obs))
@@ -81,6 +100,8 @@ class _Run:
                                                  if g.awake))
         if self.k > 0:
             self.rows.append({p: self.base.step_timing[p] for p in PARTS + ("total",)})
+        if self.success_at is None and "success" in self.info and bool(self.info["success"][0]):
+            self.success_at = self.k
         self.k += 1
 
     def close(self) -> dict:
@@ -89,29 +110,35 @@ class _Run:
         self.env.close()
         out = {p: 1e3 * float(np.mean([r[p] for r in self.rows])) for p in PARTS + ("total",)}
         out.update(reset=self.reset_ms, outcome=_outcome(self.env_id, self.info), particles=self.particles,
-                   bg_pictures=pictures, render_median=1e3 * float(np.median([r["render"] for r in self.rows])))
+                   bg_pictures=pictures, render_median=1e3 * float(np.median([r["render"] for r in self.rows])),
+                   steps=len(self.rows))
         return out
 
 
-def run_gausstac(env_id: str, steps: int, camera: str = "splat", dx: float = 2e-3, resets: int = 3) -> dict:
-    run = _Run(env_id, camera, dx, resets)
-    for _ in range(steps + 1):
+def run_gausstac(env_id: str, steps: int | None = None, camera: str = "splat", dx: float = 2e-3,
+                 resets: int = 3, settle: int = 5) -> dict:
+    """One expert episode of ``env_id`` (see the module docstring); its timings and outcome."""
+    run = _Run(env_id, camera, dx, resets, steps, settle)
+    while not run.finished:
         run.step()
     return run.close()
 
 
-def run_side_by_side(env_id: str, steps: int, dx: float = 2e-3) -> tuple[dict, dict]:
+def run_side_by_side(env_id: str, steps: int | None = None, dx: float = 2e-3, settle: int = 5) -> tuple[dict, dict]:
     """The task with the splat camera and with SAPIEN's camera in one process, stepped in
     turn (which one goes first alternates), so that both see the same machine load; returns
     (splat, sapien) results as :func:`run_gausstac`."""
-    runs = {"splat": _Run(env_id, "splat", dx), "sapien": _Run(env_id, "sapien", dx)}
-    for k in range(steps + 1):
+    runs = {"splat": _Run(env_id, "splat", dx, steps=steps, settle=settle),
+            "sapien": _Run(env_id, "sapien", dx, steps=steps, settle=settle)}
+    k = 0
+    while not all(r.finished for r in runs.values()):
         for cam in (("splat", "sapien") if k % 2 else ("sapien", "splat")):
             runs[cam].step()
+        k += 1
     return runs["splat"].close(), runs["sapien"].close()
 
 
-def run_fsr(steps: int) -> dict:
+def run_fsr(steps: int = 15) -> dict:
     import gymnasium as gym
     import mani_skill.envs  # noqa: F401
 
@@ -142,13 +169,16 @@ def run_fsr(steps: int) -> dict:
     total, rend = 1e3 * float(np.mean(times)), 1e3 * float(np.mean(render[1:]))
     return dict(physics=total - rend, mpm=0.0, tactile=0.0, render=rend, total=total,
                 reset=1e3 * float(np.mean(reset_s[1:])), outcome="FSR impulses (16 links)", particles=0,
-                bg_pictures=None, render_median=1e3 * float(np.median(render[1:])))
+                bg_pictures=None, render_median=1e3 * float(np.median(render[1:])), steps=steps)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench envs", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--steps", type=int, default=15, help="timed control steps per run")
+    ap.add_argument("--steps", type=int, default=None,
+                    help="at most this many timed control steps per run (default: the whole expert episode; "
+                         "the FSR row: 15)")
+    ap.add_argument("--settle", type=int, default=5, help="expert steps after the first success")
     ap.add_argument("--dx", type=float, nargs="+", default=[2e-3, 1.5e-3],
                     help="MPM grid spacings [m] for the PressCube resolution sweep")
     ap.add_argument("--out", default="out/bench", help="folder for envs.json")
@@ -162,22 +192,22 @@ def main(argv=None) -> int:
           f"machine: {platform.machine()}, {os.cpu_count()} cores")
     runs = []
     for env_id in args.tasks:
-        splat, sapien = run_side_by_side(env_id, args.steps)
+        splat, sapien = run_side_by_side(env_id, args.steps, settle=args.settle)
         runs.append((env_id, "splat", 2e-3, splat))
         runs.append((env_id, "sapien", 2e-3, sapien))
     for dx in args.dx:
         if dx != 2e-3:
             runs.append(("GaussTac-PressCube-v1", "splat", dx, run_gausstac("GaussTac-PressCube-v1", args.steps,
-                                                                             "splat", dx)))
+                                                                             "splat", dx, settle=args.settle)))
     if not args.no_fsr:
         runs.append(("RotateSingleObjectInHandLevel0-v1 (allegro_hand_right_touch)", "sapien", None,
-                     run_fsr(args.steps)))
-    print("\n| task | camera | MPM dx [mm] | active particles | reset [ms] | step [ms] | physics | MPM | "
-          "tactile | render | background pictures | outcome |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+                     run_fsr(args.steps or 15)))
+    print("\n| task | camera | MPM dx [mm] | active particles | timed steps | reset [ms] | step [ms] | physics | "
+          "MPM | tactile | render | background pictures | outcome |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for env_id, cam, dx, r in runs:
-        bg = "-" if r["bg_pictures"] is None else f"{r['bg_pictures']}/{args.steps}"
-        print(f"| {env_id} | {cam} | {'-' if dx is None else f'{1e3 * dx:g}'} | {r['particles']} | "
+        bg = "-" if r["bg_pictures"] is None else f"{r['bg_pictures']}/{r['steps']}"
+        print(f"| {env_id} | {cam} | {'-' if dx is None else f'{1e3 * dx:g}'} | {r['particles']} | {r['steps']} | "
               f"{r['reset']:.0f} | {r['total']:.0f} | {r['physics']:.0f} | {r['mpm']:.0f} | {r['tactile']:.1f} | "
               f"{r['render']:.1f} | {bg} | {r['outcome']} |")
     print("\nCamera side by side (same process, steps in turn; median render time per step, ms: SAPIEN's "
