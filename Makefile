@@ -32,6 +32,9 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench close --dx 2e-3 --steps 20 --reaction explicit --sim-freq 2000
 	$(PY) -m gausstac_maniskill.bench grasp --dx 2e-3 1e-3
 	$(PY) -m gausstac_maniskill.bench sponge --dx 2e-3 --nu 0.2 0.45
+	$(PY) -m gausstac_maniskill.bench resolution --tasks GaussTac-PressCube-v1 --dx 2e-3 1.5e-3 1e-3
+	$(PY) -m gausstac_maniskill.bench resolution --tasks GaussTac-GraspSqueezeSponge-v1 --dx 2e-3 1.5e-3 --settle 5 --out out/bench_resolution_sponge
+	$(PY) -m gausstac_maniskill.bench hold
 
 clean:
 	rm -rf .venv out build *.egg-info

@@ -23,6 +23,8 @@ BENCHMARKS = {
     "drive_contact": "gausstac_maniskill.bench.drive_contact",
     "grasp": "gausstac_maniskill.bench.grasp",
     "sponge": "gausstac_maniskill.bench.sponge",
+    "resolution": "gausstac_maniskill.bench.resolution",
+    "hold": "gausstac_maniskill.bench.hold",
 }
 
 
