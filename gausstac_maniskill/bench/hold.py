@@ -14,6 +14,7 @@ finger drives), then:
   without gravity, the two limits alone should settle the cube where they balance, at
   (|F_index| - |F_thumb|) / (K_index + K_thumb) toward the thumb (the "two limits" line);
 * ``friction caps x s``: the friction drives' force limits μ|F| scaled by s;
+* ``twist drives off``: the springs' twist drives (about each force's line) off;
 * ``<pad> limit alone, no gravity``: only that pad's one-sided limit (no friction, no twist,
   the other springs released), the cube weightless for the step (a falling cube opens one
   pad's gap and closes the other's). An implicit spring of stiffness K preloaded by a gap
@@ -81,6 +82,10 @@ def _spring_variants(u, springs: dict):
     out = {"env": env_then(), "no friction drives": env_then(no_friction),
            "no friction drives, no gravity": env_then(no_friction, gravity=False)}
     out.update({f"friction caps x {s:g}": env_then(caps(s)) for s in (0.01, 1e-4)})
+    out["friction caps x 0.001, no gravity"] = env_then(caps(1e-3), gravity=False)
+    out["twist drives off, no gravity"] = env_then(
+        lambda: [s.drive.set_drive_property_twist(0.0, 0.0, 0.0, "force") for s in springs.values() if s.active],
+        gravity=False)
     out.update({f"{pad} limit alone, no gravity": env_then(alone(pad), gravity=False) for pad in springs})
     out["all released, no gravity"] = env_then(released, gravity=False)
     out["all released"] = env_then(released)
