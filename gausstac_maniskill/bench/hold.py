@@ -92,6 +92,49 @@ def _spring_variants(u, springs: dict):
     return out
 
 
+#: the pads of the pinch and their links (Allegro)
+PADS = {"thumb": "link_15.0_tip", "index": "link_3.0_tip"}
+
+
+def _springs(u) -> dict:
+    """pad -> the ContactSpring between its link and the cube (env 0)."""
+    return {p: u._object_springs[0][u.pad_links.index(link)][0] for p, link in PADS.items()}
+
+
+def _pinch_axis(u) -> np.ndarray:
+    """Unit vector from the thumb tip link to the index tip link (world frame)."""
+    links = u.agent.robot.links_map
+    axis = np.asarray(links[PADS["index"]].pose.p[0] - links[PADS["thumb"]].pose.p[0], np.float64)
+    return axis / np.linalg.norm(axis)
+
+
+def _pad_rows(u, axis: np.ndarray, mass: float) -> tuple[list[str], dict]:
+    """The MPM force of each pad on the cube and its spring's constants (table lines), and the
+    motion [µm] an implicit spring would give in the rows where it is predictable."""
+    dt, springs = u.sim_timestep, _springs(u)
+    lines = ["| pad | MPM force on the cube [N] | along the pinch axis [N] | indentation [mm] | K [N/m] "
+             "| δ = abs(F)/K [µm] | r = K dt²/m | implicit spring alone: δ r/(1+r) [µm] |", "|---|---|---|---|---|---|---|---|"]
+    net, stiffness, expected = np.zeros(3), 0.0, {}
+    for p, link in PADS.items():
+        row = u.cosims[0].link_contacts(link).get("cube", np.zeros(7))
+        f = -row[:3]
+        net += f
+        k = springs[p].drive.get_limit_x()[2] if springs[p].active else 0.0
+        stiffness += k
+        delta = float(np.linalg.norm(f)) / k if k else 0.0
+        r = k * dt ** 2 / mass
+        alone = delta * r / (1 + r) * 1e6
+        expected[f"{p} limit alone, no gravity"] = f"{alone:.1f} along the pad's force"
+        lines.append(f"| {p} | {np.round(f, 3).tolist()} | {f @ axis:+.3f} | {row[6] * 1e3:.2f} | {k:.0f} "
+                     f"| {delta * 1e6:.1f} | {r:.0f} | {alone:.1f} |")
+    lines.append(f"| net | {np.round(net, 3).tolist()} | {net @ axis:+.3f} | | | | | |")
+    balance = (net @ axis) / max(stiffness, 1e-12) * 1e6
+    lines.append(f"\nTwo limits alone balance the cube at {balance:+.1f} µm along the axis.")
+    expected["no friction drives, no gravity"] = f"{balance:+.1f} along the axis (two limits)"
+    expected["all released"] = f"{-9.81 * dt ** 2 * 1e6:.0f} vertical (free fall)"
+    return lines, expected
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = cli("hold", __doc__)
     ap.add_argument("--mass", type=float, default=0.01, help="cube mass [kg]")
@@ -121,41 +164,18 @@ def main(argv: list[str] | None = None) -> int:
     try:
         u = env.unwrapped
         expert, info = replay()
-        cube = u.cube._objs[0]
-        dt = u.sim_timestep
-        pads = {"thumb": "link_15.0_tip", "index": "link_3.0_tip"}
-        springs = {p: u._object_springs[0][u.pad_links.index(link)][0] for p, link in pads.items()}
-        contacts = {p: u.cosims[0].link_contacts(link).get("cube", np.zeros(7)) for p, link in pads.items()}
-        axis = np.asarray(u.agent.robot.links_map[pads["index"]].pose.p[0] - u.agent.robot.links_map[pads["thumb"]].pose.p[0],
-                          np.float64)
-        axis /= np.linalg.norm(axis)
         lines = [f"GraspLiftCube, {args.mass * 1e3:g} g cube, dx {args.dx * 1e3:g} mm, after {args.steps} expert steps "
-                 f"(phase {expert.phase[0]}, cube speed {float(info['cube_speed'][0]) * 1e3:.3f} mm/s), SAPIEN dt {dt:g} s",
-                 "", "| pad | MPM force on the cube [N] | along the pinch axis [N] | indentation [mm] | K [N/m] "
-                 "| δ = abs(F)/K [µm] | r = K dt²/m | implicit spring alone: δ r/(1+r) [µm] |", "|---|---|---|---|---|---|---|---|"]
-        net = np.zeros(3)
-        expected = {}
-        for p, row in contacts.items():
-            f = -row[:3]
-            net += f
-            s = springs[p]
-            k = s.drive.get_limit_x()[2] if s.active else 0.0
-            delta = float(np.linalg.norm(f)) / k if k else 0.0
-            r = k * dt ** 2 / args.mass
-            expected[f"{p} limit alone"] = delta * r / (1 + r) * 1e6
-            lines.append(f"| {p} | {np.round(f, 3).tolist()} | {f @ axis:+.3f} | {row[6] * 1e3:.2f} | {k:.0f} "
-                         f"| {delta * 1e6:.1f} | {r:.0f} | {expected[f'{p} limit alone']:.1f} |")
-        lines.append(f"| net | {np.round(net, 3).tolist()} | {net @ axis:+.3f} | | | | | |")
-        stiff = [springs[p].drive.get_limit_x()[2] if springs[p].active else 0.0 for p in ("thumb", "index")]
-        expected["no friction drives"] = (net @ axis) / max(sum(stiff), 1e-12) * 1e6
-        lines.append(f"\nTwo limits alone balance the cube at {expected['no friction drives']:+.1f} µm along the axis.")
+                 f"(phase {expert.phase[0]}, cube speed {float(info['cube_speed'][0]) * 1e3:.3f} mm/s), "
+                 f"SAPIEN dt {u.sim_timestep:g} s", ""]
+        axis = _pinch_axis(u)
+        pad_lines, expected = _pad_rows(u, axis, args.mass)
+        lines += pad_lines
         lines += ["", "One SAPIEN step after the same episode:", "",
                   "| springs | cube along the pinch axis [µm] | cube vertical [µm] | thumb tip along the axis [µm] "
-                  "| index tip along the axis [µm] | implicit spring alone [µm] |",
-                  "|---|---|---|---|---|---|"]
-        for name in list(_spring_variants(u, springs)):
+                  "| index tip along the axis [µm] | expected [µm] |", "|---|---|---|---|---|---|"]
+        for name in list(_spring_variants(u, _springs(u))):
             replay()
-            springs = {p: u._object_springs[0][u.pad_links.index(link)][0] for p, link in pads.items()}
+            springs = _springs(u)
             cube = u.cube._objs[0]
             tips = [springs[p].link for p in ("thumb", "index")]
             p0 = np.asarray(cube.pose.p, np.float64).copy()
@@ -164,12 +184,9 @@ def main(argv: list[str] | None = None) -> int:
             u.scene.step()
             dp = (np.asarray(cube.pose.p, np.float64) - p0) * 1e6
             cube.find_component_by_type(sapien.physx.PhysxRigidDynamicComponent).disable_gravity = False  # for the next replay
-            key = name.replace(", no gravity", "")
-            hint = (f"{expected[key]:+.1f} along the axis (two limits)" if key == "no friction drives" else
-                    f"{expected[key]:.1f} along the pad's force") if key in expected else (
-                f"{-9.81 * dt ** 2 * 1e6:.0f} vertical (free fall)" if name == "all released" else "")
             moved = [(np.asarray(t.pose.p, np.float64) - q0) @ axis * 1e6 for t, q0 in zip(tips, t0)]
-            lines.append(f"| {name} | {dp @ axis:+.2f} | {dp[2]:+.2f} | {moved[0]:+.2f} | {moved[1]:+.2f} | {hint} |")
+            lines.append(f"| {name} | {dp @ axis:+.2f} | {dp[2]:+.2f} | {moved[0]:+.2f} | {moved[1]:+.2f} "
+                         f"| {expected.get(name, '')} |")
     finally:
         env.close()
     text = "\n".join(lines)
