@@ -19,7 +19,11 @@ joint drive:
 * across ``n``, a stuck contact resists slip within the step: a drive of the same stiffness
   ``K`` holds the object where F was computed relative to the pad's link, up to ``μ |F|``
   (friction's response, which an explicit force would give one step late: a 50 g cube
-  pinched by two pads and lifted at 100 Hz chattered and slid out, 2-5 cm/s, without it);
+  pinched by two pads and lifted at 100 Hz chattered and slid out, 2-5 cm/s, without it).
+  Measured, not as designed: on a light object pinched by two pads (10 g, K dt²/m of
+  300-800) these drives also block its motion along the pinch axis, even with their caps at
+  0.1 % of ``μ |F|``, so the object stays where it is although the pads' MPM forces do not
+  balance (``python -m gausstac_maniskill.bench hold``; cause not found);
 * about ``n``, the pad's twist couple is preloaded in a twist spring of stiffness ``K r²``
   (explicit, a 50 g cube pinched between two pads rocked about the pinch axis at ±8 mm/s,
   flipping every SAPIEN step);

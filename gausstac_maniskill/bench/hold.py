@@ -28,7 +28,6 @@ Each row: the cube's displacement [µm] along the pinch axis (thumb to index) an
 from __future__ import annotations
 
 import numpy as np
-
 import sapien
 
 from . import cli, write_report
@@ -55,14 +54,18 @@ def _spring_variants(u, springs: dict):
                 s.drive.set_drive_property_y(0.0, 0.0, 0.0, "force")
                 s.drive.set_drive_property_z(0.0, 0.0, 0.0, "force")
 
+    def no_twist():
+        for s in springs.values():
+            if s.active:
+                s.drive.set_drive_property_twist(0.0, 0.0, 0.0, "force")
+
     def alone(keep):
         def fn():
             no_friction()
+            no_twist()
             for name, s in springs.items():
-                if s.active:
-                    s.drive.set_drive_property_twist(0.0, 0.0, 0.0, "force")
-                    if name != keep:
-                        s.release()
+                if name != keep:
+                    s.release()
         return fn
 
     def caps(scale):
@@ -83,9 +86,7 @@ def _spring_variants(u, springs: dict):
            "no friction drives, no gravity": env_then(no_friction, gravity=False)}
     out.update({f"friction caps x {s:g}": env_then(caps(s)) for s in (0.01, 1e-4)})
     out["friction caps x 0.001, no gravity"] = env_then(caps(1e-3), gravity=False)
-    out["twist drives off, no gravity"] = env_then(
-        lambda: [s.drive.set_drive_property_twist(0.0, 0.0, 0.0, "force") for s in springs.values() if s.active],
-        gravity=False)
+    out["twist drives off, no gravity"] = env_then(no_twist, gravity=False)
     out.update({f"{pad} limit alone, no gravity": env_then(alone(pad), gravity=False) for pad in springs})
     out["all released, no gravity"] = env_then(released, gravity=False)
     out["all released"] = env_then(released)
@@ -173,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["", "One SAPIEN step after the same episode:", "",
                   "| springs | cube along the pinch axis [µm] | cube vertical [µm] | thumb tip along the axis [µm] "
                   "| index tip along the axis [µm] | expected [µm] |", "|---|---|---|---|---|---|"]
-        for name in list(_spring_variants(u, _springs(u))):
+        names = list(_spring_variants(u, _springs(u)))  # the row names (each row rebuilds its springs)
+        for name in names:
             replay()
             springs = _springs(u)
             cube = u.cube._objs[0]
