@@ -306,8 +306,8 @@ class GraspLiftExpert(Expert):
                 self.touched[b] |= forces[b] > env.grasp_force
                 if not np.all(self.touched[b]):  # move each pad in until it touches
                     self.depth[b, ~self.touched[b]] += self.approach_step
-                else:  # then one common depth (the object between them is meant to centre itself;
-                    # a light held cube does not: the object springs pin it, `bench hold`)
+                else:  # then one common depth (the object between them centres itself, where
+                    # the pads' forces balance: `bench hold`)
                     self.depth[b] += np.clip(self._squeeze(b, forces[b]), -self.max_depth_step, self.max_depth_step)
                 if self.phase[b] == "close" and np.all(self.touched[b]) and self._ready_to_lift(b, forces[b]):
                     self.phase[b] = "lift"

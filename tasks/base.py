@@ -30,8 +30,8 @@ objects and, with ``pad_reaction``, equal and opposite on the pad links (the MPM
 steps after every SAPIEN step instead of once per control step). By default the links'
 share is folded into the hand's joint drives, which PhysX integrates implicitly
 (:mod:`.joint_contact`: the finger settles where its drives balance the pad, at ManiSkill's
-100 Hz), and a two-way object's share acts through a one-sided contact spring
-(:mod:`.contact_spring`); ``pad_reaction="explicit"`` applies it as forces one SAPIEN
+100 Hz), and a two-way object's share acts through one implicit spring per object
+(:mod:`.contact_spring`: the pads' summed wrench, never pulling along a one-sided push); ``pad_reaction="explicit"`` applies it as forces one SAPIEN
 step late (stable from :data:`PAD_REACTION_MIN_FREQ`). The pad is
 massless on the SAPIEN side: what its particles take from an object in a step, its link
 takes back, so the impulses on the two bodies cancel.
@@ -69,7 +69,7 @@ from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
 from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
                        TactileSensorConfig, stack_tactile)
-from .contact_spring import ContactSpring
+from .contact_spring import ObjectSpring
 from .joint_contact import JointContact
 
 __all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND",
@@ -162,7 +162,7 @@ class GaussTacEnv(BaseEnv):
             joint drives for each SAPIEN step
             (:mod:`~gausstac_maniskill.tasks.joint_contact`; at rest the drives' torques
             balance the pad's wrench through the finger's Jacobian), and on two-way objects
-            through one-sided contact springs (:mod:`~gausstac_maniskill.tasks.contact_spring`);
+            through one implicit spring per object (:mod:`~gausstac_maniskill.tasks.contact_spring`);
             stable at ManiSkill's 100 Hz. It runs SAPIEN with PhysX's PGS solver
             (``enable_tgs=False``; TGS raises a ``ConfigError``) and needs ``"force"``-mode
             drives. ``"explicit"``: as forces one SAPIEN step late, stable only
@@ -212,7 +212,7 @@ class GaussTacEnv(BaseEnv):
         # [B, pad links, rigid objects + soft, 7] pad contacts of the last MPM step (pad_reaction)
         self._contacts = np.zeros((0, 0, 1, 7))
         self._joint_contacts: list = []  # [B] the pads' reaction folded into the hand's drives (pad_reaction)
-        self._object_springs: list = []  # [B][pad link][rigid object]: springs on two-way objects (pad_reaction)
+        self._object_springs: list = []  # [B][rigid object]: springs on two-way objects, else None (pad_reaction)
         self._pad_geometry: dict = {}  # pad name -> Pad at this env's resolution
         self._cosim_stale = True
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
@@ -240,7 +240,7 @@ class GaussTacEnv(BaseEnv):
     @property
     def _default_sim_config(self):
         cfg = super()._default_sim_config
-        if self.pad_coupling == "implicit":  # the objects' contact springs need PGS (tasks/contact_spring.py)
+        if self.pad_coupling == "implicit":  # the object springs need PGS (tasks/contact_spring.py)
             cfg.scene_config.enable_tgs = False
         return cfg
 
@@ -349,9 +349,8 @@ class GaussTacEnv(BaseEnv):
             for b, sub in enumerate(self.scene.sub_scenes):
                 links = [self.agent.robot.links_map[name]._objs[b] for name in self._pad_links]
                 self._joint_contacts.append(JointContact(self.agent.robot._objs[b], links))
-                # [pad link][two-way rigid object or None]
-                self._object_springs.append([[ContactSpring(sub, o.actor._objs[b], link.entity) if o.two_way else None
-                                              for o in self._rigid.values()] for link in links])
+                self._object_springs.append([ObjectSpring(sub, o.actor._objs[b]) if o.two_way else None
+                                             for o in self._rigid.values()])
         self._pose_source = SapienPoseSource(self.agent)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
@@ -575,12 +574,12 @@ class GaussTacEnv(BaseEnv):
                 _apply_wrench(self.agent.robot.links_map[name], link_w[:, i])
         else:  # the links' share goes through their drives, the two-way objects' through springs
             names = list(self._rigid)
-            for b, (hand, per_link) in enumerate(zip(self._joint_contacts, self._object_springs)):
+            for b, (hand, springs) in enumerate(zip(self._joint_contacts, self._object_springs)):
                 hand.fold(self._contacts[b], self._contact_friction)
-                for springs, contacts in zip(per_link, self._contacts[b]):
-                    for j, (spring, contact) in enumerate(zip(springs, contacts)):
-                        if spring is not None:
-                            obj_w[names[j]][b] -= spring.take(contact, self._contact_friction[j])
+                for j, spring in enumerate(springs):
+                    if spring is not None:
+                        rows = list(zip(self._contacts[b][:, j], hand.links))
+                        obj_w[names[j]][b] -= spring.take(rows, self._contact_friction[j])
         for name, w in obj_w.items():
             _apply_wrench(self._rigid[name].actor, w)
 

@@ -5,30 +5,37 @@ external force, one SAPIEN step late, that is an explicit spring: with a light o
 (10-50 g) and a crushed pad's contact stiffness (1e4-1e5 N/m) it is stable only for SAPIEN
 steps below about 2 sqrt(m/k).
 
-:class:`ContactSpring` hands the same force to PhysX as a one-sided spring instead: a D6
-joint from the pad's link to the object (the link takes none of it), limited along the
-force's line of action with a soft limit that PhysX's solver treats implicitly, like a
-joint drive:
+:class:`ObjectSpring` hands the pads' forces on one object to PhysX as one implicit spring
+instead: a D6 joint from the world to the object's centre of mass, with linear drives along
+three axes and angular drives about them, which PhysX's solver integrates with the object's
+motion like a joint drive:
 
-* at the pose the MPM force was computed at, the spring pushes with exactly ``|F|`` along
-  ``n = F/|F|``, through the centre of pressure;
-* when the object moves by ``s`` along ``-n`` during the SAPIEN step (further into the pad),
-  the force grows by ``K s`` within that same step, with ``K = OBJECT_GAIN |F| / δ`` (δ the
-  pad's indentation): the secant stiffness of the contact times :data:`OBJECT_GAIN`;
-* it never pulls: past the limit the joint is free;
-* across ``n``, a stuck contact resists slip within the step: a drive of the same stiffness
-  ``K`` holds the object where F was computed relative to the pad's link, up to ``μ |F|``
-  (friction's response, which an explicit force would give one step late: a 50 g cube
-  pinched by two pads and lifted at 100 Hz chattered and slid out, 2-5 cm/s, without it).
-  Measured, not as designed: on a light object pinched by two pads (10 g, K dt²/m of
-  300-800) these drives also block its motion along the pinch axis, even with their caps at
-  0.1 % of ``μ |F|``, so the object stays where it is although the pads' MPM forces do not
-  balance (``python -m gausstac_maniskill.bench hold``; cause not found);
-* about ``n``, the pad's twist couple is preloaded in a twist spring of stiffness ``K r²``
-  (explicit, a 50 g cube pinched between two pads rocked about the pinch axis at ±8 mm/s,
-  flipping every SAPIEN step);
-* the spring rides on the pad's link, so the object follows the finger's motion within the
-  step (a world-anchored spring held the cube back while the hand lifted it).
+* at the pose the MPM forces were computed at, the spring pushes with exactly the pads'
+  summed force and moment (each pad's force through its centre of pressure, plus its twist
+  couple about its force);
+* when the object moves during the SAPIEN step, the push changes by the contacts' stiffness:
+  ``K = OBJECT_GAIN |F| / δ`` per contact (δ the pad's indentation; the secant stiffness of
+  the contact times :data:`OBJECT_GAIN`) along the contact's force, as much across it when
+  the contact has friction (a stuck contact resists slip within the step, up to what
+  ``μ |F|`` can carry), ``K r²`` about it (r = :data:`TWIST_RADIUS`); summed over the
+  contacts and bounded from above per axis (Gershgorin, as :mod:`.joint_contact` does);
+* the axes are the principal directions of the pads' normal forces, x along the strongest
+  push: when every pad pushes along +x, x is a one-sided limit that never pulls; when pads
+  push from both sides (a pinch) it is a drive, which keeps every pad compressed as long as
+  the object moves less than the pads' gaps;
+* the spring's target moves with the pads (the stiffness-weighted velocity of the contact
+  points on their links), so the object follows the fingers within the step (a spring fixed
+  in the world held the cube back while the hand lifted it).
+
+Why one joint per object, not one per pad: PhysX's PGS solver settles two soft constraints
+acting along the same direction of one body at a wrong balance. A 10 g box between two
+one-sided D6 soft limits preloaded with the held cube's pad forces (0.115 N at 9.2e3 N/m and
+1.897 N at 2.7e4 N/m, 100 Hz) moves +4.08 µm in one step where their implicit Euler step is
+-49.60 µm (each limit alone is exact: +12.36 and -70.98 µm; at three times the stiffness,
++2.66 µm for -16.5, and -3.8 µm with 100 solver iterations instead of 15). One soft row per
+direction is exact: the joint of this class moves it -49.60 µm. With one spring per pad a pinched 10 g cube hung still while its pads'
+MPM forces differed by 1.8 N (0.115 and 1.897 N at dx = 2 mm); with one spring per object
+they add up to the cube's weight within 0.2 % (``python -m gausstac_maniskill.bench hold``).
 
 Each SAPIEN step the MPM recomputes F at the new pose, so the spring only has to predict how
 F changes within one step. For a power-law contact F ∝ δ^p the tangent stiffness is
@@ -49,123 +56,184 @@ import sapien
 
 from ..transforms import matrix_to_quat
 
-__all__ = ["ContactSpring", "GAIN", "OBJECT_GAIN", "MIN_DEPTH", "TWIST_RADIUS", "centre_of_pressure", "frame_along"]
+__all__ = ["ObjectSpring", "GAIN", "OBJECT_GAIN", "MIN_DEPTH", "TWIST_RADIUS", "centre_of_pressure", "frame_along", "skew"]
 
 #: spring stiffness over the contact's secant stiffness |F|/δ (see the module docstring)
 GAIN = 3.0
-#: the object springs' stiffness over the contact's secant stiffness: a light object held
+#: the object spring's stiffness over each contact's secant stiffness: a light object held
 #: between two pads needs more than GAIN (a 10 g cube pinched by the thumb and index pads at
-#: dx = 2 mm, 100 Hz: GAIN 3 chattered at ±11 mm/s, flipping every SAPIEN step; 12 settled
-#: first, then grew back to 1.0 mm/s; 24 settles under 0.05 mm/s; a stiffer spring only
-#: slows the settling)
-OBJECT_GAIN = 24.0
+#: dx = 2 mm, 100 Hz: 3 flips the pads' forces between 0.5 and 1.5 N every step, the cube at
+#: 7.7 mm/s; 8 settles in 0.3 s to 0.001 mm/s with the pads balanced; 24 settles too, in
+#: over 2 s: a stiffer spring only slows the settling)
+OBJECT_GAIN = 8.0
 #: smallest indentation [m] used for the stiffness (a graze with no measured depth)
 MIN_DEPTH = 1.0e-5
+#: pads push the object from both sides along the spring's x axis when the weaker side pushes
+#: more than this fraction of the stronger (a pinch); below, the weaker is a graze and x a
+#: one-sided limit that never pulls
+OPPOSED = 0.1
+#: a drive force limit that never binds [N]
+_NO_CAP = 1.0e30
 #: radius [m] of a pad's contact patch for the twist spring (stiffness K r², friction μ|F| r):
 #: about the half width of a fingertip's contact; larger only stiffens the twist
 TWIST_RADIUS = 1.0e-2
 
 
-class ContactSpring:
-    """One pad link's contact with one two-way object, as a one-sided spring along the MPM
-    force's line of action that PhysX integrates with the object's motion.
+class ObjectSpring:
+    """All pads' contacts with one two-way object of one env, as one spring that PhysX
+    integrates implicitly with the object's motion (module docstring).
 
-    The spring rides on the pad's link and moves the object only (PhysX sees the link as
-    infinitely heavy for it: inverse mass and inertia scale 0), so the object follows the
-    finger within the step, while the link's side of the contact goes through its drives
-    (:mod:`.joint_contact`).
+    One D6 joint from the world to the object's centre of mass carries the pads' summed
+    wrench: linear drives (or a one-sided limit) along three axes and twist/swing drives
+    about them, each preloaded so that it pushes exactly the MPM's wrench at the pose it was
+    computed at, with the contacts' summed stiffness for the motion within the step. Its
+    target moves with the pads (their links' velocity at the contacts), so the object
+    follows the fingers within the step.
 
     Args:
         sub_scene: the SAPIEN scene of one env.
-        body: the object's entity.
-        link: the pad link's entity.
+        body: the object's entity (a free rigid body).
     """
 
-    def __init__(self, sub_scene, body, link):
-        self.body, self.link = body, link
-        self.drive = sub_scene.create_drive(link, sapien.Pose(), body, sapien.Pose())
-        self.drive.set_inv_mass_scales(0.0, 1.0)
-        self.drive.set_inv_inertia_scales(0.0, 1.0)
+    def __init__(self, sub_scene, body):
+        self.body = body
+        self.rigid = body.find_component_by_type(sapien.physx.PhysxRigidDynamicComponent)
+        self.drive = sub_scene.create_drive(None, sapien.Pose(), body, sapien.Pose())
         self._free = self.drive.get_limit_x()  # unlimited, as created
         self.active = False
 
-    def take(self, contact: np.ndarray, friction: float) -> np.ndarray:
-        """Set the spring from the link's side of a contact of the last MPM step and return
-        the wrench it now carries on the object.
-
-        Args:
-            contact: [7] force [N] and torque [N·m] about the link origin (world frame) that
-                the object passed to the link, and the pad's indentation [m] (a row of
-                :meth:`~gausstac_maniskill.cosim.GaussTacSim.link_contacts`).
-            friction: the contact's Coulomb coefficient (see :meth:`update`).
-
-        Returns:
-            [6] force [N] and torque [N·m] about the object's origin (world frame) on the
-            object that the spring applies; zero when it is released.
-        """
-        if not np.any(contact[:3]):
-            self.release()
-            return np.zeros(6)
-        force = -contact[:3]  # on the object
-        origin = np.asarray(self.link.pose.p, np.float64)
-        point = centre_of_pressure(contact[:3], contact[3:6], origin)
-        n = force / np.linalg.norm(force)
-        # the couple left about the line of action (the pad's twist), on the object
-        twist = -float((contact[3:6] - np.cross(point - origin, contact[:3])) @ n)
-        if not self.update(force, point, contact[6], friction, twist):
-            return np.zeros(6)
-        arm = point - np.asarray(self.body.pose.p, np.float64)
-        return np.concatenate([force, np.cross(arm, force) + twist * n])
-
     def release(self) -> None:
-        """No force until the next :meth:`update` with contact."""
+        """No force until the next :meth:`take` with contact."""
         if self.active:
             self.drive.set_limit_x(*self._free)
-            for axis in (self.drive.set_drive_property_y, self.drive.set_drive_property_z,
-                         self.drive.set_drive_property_twist):
-                axis(0.0, 0.0)
+            for axis in (self.drive.set_drive_property_x, self.drive.set_drive_property_y,
+                         self.drive.set_drive_property_z, self.drive.set_drive_property_twist,
+                         self.drive.set_drive_property_swing):
+                axis(0.0, 0.0, 0.0, "force")
             self.active = False
 
-    def update(self, force: np.ndarray, point: np.ndarray, depth: float, friction: float = 0.0,
-               twist: float = 0.0) -> bool:
-        """Set the spring for the coming SAPIEN step from a contact of the last MPM step,
-        computed at the object's pose now.
+    def take(self, contacts: list, friction: float) -> np.ndarray:
+        """Set the spring for the coming SAPIEN step from the pads' contacts of the last MPM
+        step with this object (computed at its pose now) and return the wrench it carries.
 
         Args:
-            force: [3] force [N] the pad exerted on the object (world frame).
-            point: [3] a world point [m] on its line of action.
-            depth: the pad's indentation [m].
-            friction: the contact's Coulomb coefficient μ: across the line of action the
-                object is held where it is by a spring of the same stiffness, up to
-                ``μ |F|`` (a stuck contact resists slip within the step; 0: free).
-            twist: the pad's couple [N·m] on the object about ``n`` (the moment left about
-                the line of action): applied by a twist spring of stiffness ``K r²``
-                (r = :data:`TWIST_RADIUS`), which also resists the object's turning about
-                ``n`` within the step, up to ``|twist| + μ |F| r``.
+            contacts: ``(row, link)`` per pad link: ``row`` [7] the force [N] and torque
+                [N·m] about the link origin (world frame) the object passed to the link and
+                the pad's indentation [m] (a row of
+                :meth:`~gausstac_maniskill.cosim.GaussTacSim.link_contacts`); ``link`` the
+                link's rigid body (``PhysxArticulationLinkComponent``: its pose and velocity). Rows without force are skipped.
+            friction: the contacts' Coulomb coefficient μ: with μ > 0 a contact is taken as
+                stuck within the step (as stiff across its force as along it), and the
+                drives across the contacts' forces stop at what friction can carry.
 
         Returns:
-            whether the spring acts (``False``: no force, spring released).
+            [6] force [N] and torque [N·m] about the object's origin (world frame) that the
+            spring applies to the object; zero when released.
         """
-        f = float(np.linalg.norm(force))
-        if f <= 0.0 or not np.isfinite(f):
+        parts = [_contact_part(row, link, friction) for row, link in contacts if np.any(row[:3])]
+        parts = [c for c in parts if c is not None]
+        if not parts:
             self.release()
-            return False
-        stiffness = OBJECT_GAIN * f / max(float(depth), MIN_DEPTH)
-        frame = sapien.Pose(np.asarray(point, np.float32), matrix_to_quat(frame_along(force / f)).astype(np.float32))
+            return np.zeros(6)
+        com = np.asarray((self.body.pose * self.rigid.cmass_local_pose).p, np.float64)
+        force = sum(c.force for c in parts)
+        torque = sum(np.cross(c.point - com, c.force) + c.couple for c in parts)  # about the centre of mass
+        # the joint's axes: principal directions of the normal forces, x along the strongest push
+        normals = sum(np.linalg.norm(c.force) * np.outer(c.n, c.n) for c in parts)
+        R = np.linalg.eigh(normals)[1][:, ::-1].copy()
+        if force @ R[:, 0] < 0.0:
+            R[:, 0] = -R[:, 0]
+        if np.linalg.det(R) < 0.0:
+            R[:, 2] = -R[:, 2]
+        k_lin, k_ang, cap_lin, cap_ang = _stiffness(parts, com, R, friction)
+        # where the pads move in the step (stiffness-weighted velocity of the contact points)
+        weight = np.array([c.k for c in parts])
+        v_pad = sum(w * c.velocity for w, c in zip(weight, parts)) / weight.sum()
+        w_pad = sum(w * c.spin for w, c in zip(weight, parts)) / weight.sum()
+        dt = float(self.body.scene.physx_system.timestep)
+        f_local, t_local = R.T @ force, R.T @ torque
+        carried_f = np.where(k_lin > 0.0, f_local, 0.0)
+        carried_t = np.where(k_ang > 0.0, t_local, 0.0)
+        frame = sapien.Pose(com.astype(np.float32), matrix_to_quat(R).astype(np.float32))
         self.drive.set_pose_in_child(self.body.pose.inv() * frame)
-        self.drive.set_pose_in_parent(self.link.pose.inv() * frame)
-        # x: the body's offset along n from where F was computed; pushed while x < f / K
-        self.drive.set_limit_x(f / stiffness, float(self._free[1]), stiffness, 0.0)
-        cap = float(friction) * f
-        for axis in (self.drive.set_drive_property_y, self.drive.set_drive_property_z):
-            axis(stiffness if cap > 0.0 else 0.0, 0.0, max(cap, 0.0), "force")
-        k_twist = stiffness * TWIST_RADIUS ** 2
-        self.drive.set_drive_property_twist(k_twist, 0.0, abs(float(twist)) + cap * TWIST_RADIUS, "force")
-        # across n: held at the pose F was computed at; about n: turned by the twist's preload angle
-        angle = float(twist) / k_twist
-        self.drive.set_drive_target(sapien.Pose(q=[np.cos(angle / 2), np.sin(angle / 2), 0.0, 0.0]))
+        self.drive.set_pose_in_parent(frame)
+        offset = np.divide(carried_f, k_lin, out=np.zeros(3), where=k_lin > 0.0) + R.T @ v_pad * dt
+        angle = np.divide(carried_t, k_ang, out=np.zeros(3), where=k_ang > 0.0) + R.T @ w_pad * dt
+        push = [float(c.force @ R[:, 0]) for c in parts]
+        if min(push) < -OPPOSED * max(push):  # pads push from both sides along x (a pinch): a two-sided spring
+            self.drive.set_limit_x(*self._free)
+            self.drive.set_drive_property_x(k_lin[0], 0.0, cap_lin[0], "force")
+        else:  # pushed along +x only: never pulls
+            self.drive.set_drive_property_x(0.0, 0.0, 0.0, "force")
+            self.drive.set_limit_x(float(offset[0]), float(self._free[1]), float(k_lin[0]), 0.0)
+        self.drive.set_drive_property_y(k_lin[1], 0.0, cap_lin[1], "force")
+        self.drive.set_drive_property_z(k_lin[2], 0.0, cap_lin[2], "force")
+        self.drive.set_drive_property_twist(k_ang[0], 0.0, cap_ang[0], "force")
+        self.drive.set_drive_property_swing(max(k_ang[1], k_ang[2]), 0.0, max(cap_ang[1], cap_ang[2]), "force")
+        self.drive.set_drive_target(sapien.Pose(offset.astype(np.float32), _rotation_quat(angle)))
         self.active = True
-        return True
+        torque_origin = R @ carried_t + np.cross(com - np.asarray(self.body.pose.p, np.float64), R @ carried_f)
+        return np.concatenate([R @ carried_f, torque_origin])
+
+
+class _Contact:
+    """One pad link's contact as the object feels it (world frame)."""
+
+    def __init__(self, force, point, n, couple, k, velocity, spin):
+        self.force, self.point, self.n, self.couple = force, point, n, couple
+        self.k, self.velocity, self.spin = k, velocity, spin
+
+
+def _contact_part(row: np.ndarray, link, friction: float):
+    """A :class:`_Contact` from a link's contact row (see :meth:`ObjectSpring.take`)."""
+    f = float(np.linalg.norm(row[:3]))
+    if not np.isfinite(f) or not np.all(np.isfinite(row[3:6])) or f <= 0.0:
+        return None
+    force = -row[:3]  # on the object
+    origin = np.asarray(link.entity_pose.p, np.float64)
+    point = centre_of_pressure(row[:3], row[3:6], origin)
+    n = force / f
+    couple = -float((row[3:6] - np.cross(point - origin, row[:3])) @ n) * n  # the pad's twist, on the object
+    k = OBJECT_GAIN * f / max(float(row[6]), MIN_DEPTH)
+    omega = np.asarray(link.angular_velocity, np.float64)
+    velocity = np.asarray(link.linear_velocity, np.float64) + np.cross(omega, point - origin)
+    return _Contact(force, point, n, couple, k, velocity, omega)
+
+
+def _stiffness(parts: list, com: np.ndarray, R: np.ndarray, friction: float):
+    """Per axis of the joint frame ``R``: the linear and angular stiffness [N/m, N·m/rad]
+    that bound the contacts' summed stiffness from above (row sums of its absolute values,
+    Gershgorin, like :mod:`.joint_contact`), and the force [N] and torque [N·m] the drives may
+    reach (what the contacts' forces and their friction can carry)."""
+    S_lin, S_ang = np.zeros((3, 3)), np.zeros((3, 3))
+    cap_lin, cap_ang = np.zeros(3), np.zeros(3)
+    for c in parts:
+        stuck = friction > 0.0
+        P = np.eye(3) if stuck else np.outer(c.n, c.n)  # directions the contact resists
+        r = c.point - com
+        X = skew(r)
+        S_lin += c.k * P
+        S_ang += c.k * (X @ P @ X.T) + c.k * TWIST_RADIUS ** 2 * np.outer(c.n, c.n)
+        f = float(np.linalg.norm(c.force))
+        cap_lin += np.abs(R.T @ c.force) + friction * f
+        cap_ang += np.abs(R.T @ (np.cross(r, c.force) + c.couple)) + friction * f * (np.linalg.norm(r) + TWIST_RADIUS)
+    k_lin = np.abs(R.T @ S_lin @ R).sum(axis=1)
+    k_ang = np.abs(R.T @ S_ang @ R).sum(axis=1)
+    cap_lin[0] = _NO_CAP  # x: along the pads' pushes, which grow as the object moves in
+    return k_lin, k_ang, cap_lin, cap_ang
+
+
+def _rotation_quat(angle: np.ndarray) -> np.ndarray:
+    """wxyz quaternion of the rotation vector ``angle`` [rad]."""
+    a = float(np.linalg.norm(angle))
+    if a < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0], np.float32)
+    return np.concatenate([[np.cos(a / 2)], np.sin(a / 2) * angle / a]).astype(np.float32)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """The matrix of ``v ×``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def centre_of_pressure(force: np.ndarray, moment: np.ndarray, origin: np.ndarray) -> np.ndarray:

@@ -37,7 +37,7 @@ The drives' own force limit is kept: the target is clamped to within ``force_lim
 import numpy as np
 
 from ..errors import ConfigError
-from .contact_spring import GAIN, MIN_DEPTH, frame_along, centre_of_pressure
+from .contact_spring import GAIN, MIN_DEPTH, centre_of_pressure, frame_along, skew
 
 __all__ = ["JointContact"]
 
@@ -123,7 +123,7 @@ class JointContact:
                     continue
                 n = force / f
                 arm = centre_of_pressure(force, moment, np.zeros(3))  # from the link origin
-                Jc = J[:3] - _skew(arm) @ J[3:]  # velocity of that point, per joint velocity
+                Jc = J[:3] - skew(arm) @ J[3:]  # velocity of that point, per joint velocity
                 k = GAIN * f / max(depth, MIN_DEPTH)
                 stuck = friction is not None and friction[o] > 0.0
                 for d in (frame_along(n).T if stuck else n[None]):  # along n (and across it, if stuck)
@@ -140,7 +140,3 @@ class JointContact:
             joint.set_drive_target((kp * target + (k - kp) * q[j] + torque[j]) / k)
         return True
 
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """The matrix of ``v ×``."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

@@ -4,8 +4,10 @@ random actions stay finite; replay by env states is exact; bad settings are refu
 
 What these guard: the grasp is held by the MPM pads' friction alone (no SAPIEN contact
 touches the cube while it is held), through the coupling of tasks/joint_contact.py and
-tasks/contact_spring.py; the speed bound is the issue's stability requirement. The grip
-force is the expert's own target (safety x m g / 2 mu), so it is not a physics check."""
+tasks/contact_spring.py; the speed bound is the issue's stability requirement. The physics
+check is the hold's statics: the pads' MPM forces on the still cube add up to its weight
+(with one PhysX spring per pad they differed by 1.8 N on the 10 g cube). The grip force is
+the expert's own target (safety x m g / 2 mu), so it is not a physics check."""
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -60,6 +62,10 @@ def test_expert_lifts_and_holds_the_cube_still(mass):
         assert float(info["height"][0]) >= 0.05
         # the last second of the hold: the cube is still (the issue's 1 mm/s)
         assert max(speeds[-20:]) < 1e-3, speeds[-20:]
+        # statics: the pads' MPM forces on the still cube carry its weight, and nothing else
+        weight = np.array([0.0, 0.0, mass * 9.81])
+        net = base.object_wrench("cube")[0, :3].numpy()
+        assert np.linalg.norm(net - weight) < 0.05 * weight[2], (net, weight)
         # replay by env states is exact: the recorded state gives back the pose and the maps
         end_state = base.get_state_dict()
         end = base.cube.pose.raw_pose.clone()
