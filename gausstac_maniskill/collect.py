@@ -9,6 +9,10 @@ writes its own ``.h5`` + ``.json``; the parent shows one progress bar over all e
 and at the end merges the worker files into one (traj ids renumbered in seed order),
 gzip-compressing the large uncompressed datasets (mostly the MPM state).
 
+With ``--ray [ADDRESS]`` the workers are Ray tasks (one CPU each) on a local Ray instance
+or on a cluster; each records on its node and sends its files back through Ray's object
+store, and the merged file is the one a local collection of the same seeds writes.
+
 Episode ``i`` (0-based) is reset with seed ``seed + i`` and runs on worker ``i % num_procs``,
 so the recorded seeds do not depend on the number of processes. With ``--only-success``
 failed episodes are dropped and the worker goes on with further seeds (``i + num_procs``,
@@ -71,6 +75,10 @@ class CollectConfig:
     arch: str | None = None
     progress: bool = True
     env_kwargs: dict = field(default_factory=dict)
+    #: run the workers as Ray tasks: ``"local"`` starts a Ray instance on this machine (or
+    #: uses the one this process already joined), any other string is a cluster's address
+    #: (``ray.init(address=...)``, e.g. ``"auto"`` or ``"ray://head:10001"``); None: processes
+    ray: str | None = None
 
     def validate(self) -> None:
         if not isinstance(self.env_id, str) or not self.env_id:
@@ -301,7 +309,9 @@ def collect(cfg: CollectConfig) -> dict:
         bar.set_postfix(success=f"{sum(r[4] for r in records)}/{len(records)}", refresh=False)
 
     try:
-        if procs == 1:  # in this process: no start-up cost, easier to debug
+        if cfg.ray is not None:
+            _run_ray(cfg, paths, on_episode)
+        elif procs == 1:  # in this process: no start-up cost, easier to debug
             _run_worker(cfg, 0, paths[0], on_episode)
         else:
             _run_processes(cfg, paths, on_episode)
@@ -326,7 +336,7 @@ def collect(cfg: CollectConfig) -> dict:
         # without each worker's first episode (Taichi compiles kernels on first use)
         seconds_per_episode_warm=float(np.mean(warm)) if (warm := _warm_times(records)) else float("nan"),
         seconds_per_step=sum(r[7] for r in records) / max(1, sum(r[6] for r in records)),
-        wall_seconds=wall, num_procs=procs, file_bytes=size, bytes_per_step=size / max(1, steps),
+        wall_seconds=wall, num_procs=procs, ray=cfg.ray, file_bytes=size, bytes_per_step=size / max(1, steps),
     )
     return summary
 
@@ -370,6 +380,75 @@ def _run_processes(cfg: CollectConfig, paths: list[str], on_episode) -> None:
                 p.join(5)
 
 
+def _ray_worker(cfg: CollectConfig, worker: int, queue) -> tuple[bytes, bytes] | None:
+    """Ray task: record worker ``worker``'s episodes in a temporary folder of the node it runs
+    on and return the ``.h5`` and ``.json`` bytes (the parent may be on another machine)."""
+    import tempfile
+
+    import torch
+
+    os.environ.setdefault("GAUSSTAC_CPU_THREADS", "1")  # one Ray CPU per worker
+    torch.set_num_threads(1)
+    with tempfile.TemporaryDirectory(prefix="gausstac_collect_") as tmp:
+        h5_path = Path(tmp) / f"worker{worker}.h5"
+        _run_worker(cfg, worker, str(h5_path), queue.put)
+        if not h5_path.exists():
+            return None
+        return h5_path.read_bytes(), h5_path.with_suffix(".json").read_bytes()
+
+
+def _run_ray(cfg: CollectConfig, paths: list[str], on_episode) -> None:
+    """Run the workers as Ray tasks (one CPU each) on a local Ray instance or a cluster
+    (``cfg.ray``); their episodes reach ``on_episode`` through a Ray queue, their files come
+    back through Ray's object store and are written to ``paths``."""
+    try:
+        import ray
+        from ray.util.queue import Empty, Queue
+    except ImportError as exc:
+        raise ConfigError("--ray needs Ray: pip install -e '.[ray]' (or pip install 'ray[default]')") from exc
+    started = not ray.is_initialized()  # else: the Ray instance this process already joined
+    if started:
+        address = None if cfg.ray == "local" else cfg.ray
+        try:  # the workers' own output (Taichi's banner, warnings) stays in Ray's logs
+            ray.init(address=address, include_dashboard=False, log_to_driver=False, logging_level="WARNING")
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise ConfigError(f"--ray {cfg.ray}: could not reach a Ray cluster there ({exc})") from exc
+    queue = Queue()
+    task = ray.remote(num_cpus=1, max_retries=0)(_ray_worker)
+    refs = {task.remote(cfg, k, queue): k for k in range(len(paths))}
+
+    def drain(block: bool) -> None:
+        while True:
+            try:
+                msg = queue.get(block=block, timeout=0.5 if block else None)
+            except Empty:
+                return
+            on_episode(msg)
+            block = False
+
+    pending = list(refs)
+    try:
+        while pending:
+            drain(block=True)
+            finished, pending = ray.wait(pending, num_returns=len(pending), timeout=0)
+            for ref in finished:
+                k = refs[ref]
+                try:
+                    files = ray.get(ref)
+                except ray.exceptions.RayError as exc:
+                    raise RuntimeError(f"collect worker {k} failed on Ray:\n{exc}") from None
+                if files is not None:
+                    Path(paths[k]).write_bytes(files[0])
+                    Path(paths[k]).with_suffix(".json").write_bytes(files[1])
+        drain(block=False)
+    finally:
+        for ref in pending:  # after a failure: stop the others
+            ray.cancel(ref, force=True)
+        ray.kill(queue.actor)
+        if started:
+            ray.shutdown()
+
+
 def _format_summary(s: dict) -> str:
     warm = s["seconds_per_episode_warm"]
     warm = "" if warm != warm else f" ({warm:.2f} s without each worker's first)"  # nan: one episode per worker
@@ -377,7 +456,8 @@ def _format_summary(s: dict) -> str:
             f"{100 * s['success_rate']:.0f}%), {s['steps']} steps, {s['mean_steps']:.1f} steps/episode\n"
             f"{s['seconds_per_episode']:.2f} s per episode per worker{warm}, "
             f"{1000 * s['seconds_per_step']:.0f} ms/step, "
-            f"{s['wall_seconds']:.1f} s wall with {s['num_procs']} process(es)\n"
+            f"{s['wall_seconds']:.1f} s wall with {s['num_procs']} "
+            f"{'process(es)' if s.get('ray') is None else 'Ray worker(s) at ' + s['ray']}\n"
             f"{s['path']}: {s['file_bytes'] / 1e6:.2f} MB ({s['bytes_per_step'] / 1e3:.1f} kB/step)")
 
 
@@ -423,6 +503,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env-kwarg", action="append", default=[], metavar="KEY=VALUE",
                    help="extra gym.make keyword (value parsed as JSON), repeatable")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="run the --num-procs workers as Ray tasks (pip install -e '.[ray]'): on a local Ray "
+                        "instance, or on the cluster at ADDRESS ('auto' when this machine is a cluster node, "
+                        "'ray://<head>:10001' from outside); every node needs this package installed")
     return p
 
 
@@ -434,7 +518,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         save_video=args.save_video, mpm_dx=args.mpm_dx, max_episode_steps=args.max_episode_steps,
                         record_mpm_state=not args.no_mpm_state, compress=not args.no_compress,
                         keep_worker_files=args.keep_worker_files, arch=args.arch,
-                        progress=not args.no_progress, env_kwargs=_parse_kv(args.env_kwarg))
+                        progress=not args.no_progress, env_kwargs=_parse_kv(args.env_kwarg), ray=args.ray)
     try:
         summary = collect(cfg)
     except ConfigError as exc:

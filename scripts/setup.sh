@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One-shot set-up for a fresh machine (idempotent; `make setup` calls it).
 #  1. a virtualenv in .venv
-#  2. torch 2.13.0 (CPU wheel on disk) first, then `pip install -e .[test]`
+#  2. torch 2.13.0 (CPU wheel on disk) first, then `pip install -e .[test,ray]`
 #  3. a Vulkan driver for SAPIEN when the machine has no usable Vulkan device
 #     (see docs/ARCHITECTURE.md "Set-up facts"): Debian 12 (bookworm) gets Mesa >= 25's
 #     lavapipe from bookworm-backports, added on the machine's own Debian mirror; any other
@@ -22,10 +22,10 @@ if [ ! -x "$VENV/bin/python" ]; then
     "$PY" -m venv "$VENV"
 fi
 if [ ! -f "$STAMP" ] || [ pyproject.toml -nt "$STAMP" ]; then
-    echo "[setup] installing torch==2.13.0 and gausstac_maniskill[test] (about 2 minutes on a fresh machine)"
+    echo "[setup] installing torch==2.13.0 and gausstac_maniskill[test,ray] (about 2 minutes on a fresh machine)"
     "${PIP[@]}" --upgrade pip
     "${PIP[@]}" "torch==2.13.0"
-    "${PIP[@]}" -e ".[test]"
+    "${PIP[@]}" -e ".[test,ray]"
     touch "$STAMP"
 fi
 

@@ -183,6 +183,7 @@ class GaussTacEnv(BaseEnv):
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
                  pad_reaction: bool = False, **kwargs):
         backend.ensure_init()
+        _check_num_envs(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
         self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
@@ -742,6 +743,21 @@ def _load_scene_capture(scene_ply, scene_pose, camera: str):
 
         scene_ply, scene_pose = EXAMPLE_SCENE, EXAMPLE_PLACEMENT if scene_pose is None else scene_pose
     return load_capture(scene_ply, Similarity.coerce(scene_pose, "scene_pose"))
+
+
+def _check_num_envs(num_envs, sim_backend) -> None:
+    """``ConfigError`` for ``num_envs > 1`` where ManiSkill would simulate on the CPU (it runs
+    one env per process there, and says only "failed to find device cuda")."""
+    if not isinstance(num_envs, int) or isinstance(num_envs, bool) or num_envs < 1:
+        raise ConfigError(f"num_envs={num_envs!r} must be a positive integer")
+    on_cpu = sim_backend in ("physx_cpu", "cpu") or (sim_backend == "auto" and not torch.cuda.is_available())
+    if num_envs > 1 and on_cpu:
+        raise ConfigError(
+            f"num_envs={num_envs} with sim_backend={sim_backend!r}: ManiSkill simulates several envs in one "
+            "process only on an NVIDIA GPU (sim_backend='physx_cuda'); on the CPU it runs one env per process. "
+            "Use gymnasium.vector.AsyncVectorEnv over gym.make(..., num_envs=1), or, to record demonstrations, "
+            "`python -m gausstac_maniskill.collect <env_id> --num-procs N` (add --ray [ADDRESS] to spread the "
+            "workers over a Ray cluster)")
 
 
 def _apply_wrench(entity, w: np.ndarray) -> None:

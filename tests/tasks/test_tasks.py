@@ -100,6 +100,15 @@ def test_invalid_gesture_name_is_a_clear_error():
         _make("GaussTac-Gesture-v1", gesture="wave")
 
 
+@pytest.mark.parametrize("sim_backend", ["physx_cpu", "cpu"] + ([] if torch.cuda.is_available() else ["auto"]))
+def test_several_envs_on_the_cpu_name_the_ways_that_work(sim_backend):
+    """ManiSkill's own error here is "failed to find device cuda"."""
+    with pytest.raises(ConfigError, match=r"num_envs=4 .*physx_cuda.*AsyncVectorEnv.*--ray"):
+        gym.make("GaussTac-Gesture-v1", num_envs=4, sim_backend=sim_backend, obs_mode="state_dict")
+    with pytest.raises(ConfigError, match="num_envs=0"):
+        gym.make("GaussTac-Gesture-v1", num_envs=0, sim_backend=sim_backend, obs_mode="state_dict")
+
+
 def test_non_gausstac_robot_is_refused():
     with pytest.raises(ConfigError, match="has no GaussTac pads"):
         _make("GaussTac-Gesture-v1", robot_uids="allegro_hand_right")
