@@ -147,7 +147,7 @@ def _mujoco_source(urdf: str):
 
 
 def _world_to_root(env) -> np.ndarray:
-    from .pose.sapien_source import vec7_to_matrix
+    from .transforms import vec7_to_matrix
 
     T = vec7_to_matrix(env.agent.robot.pose.raw_pose).detach().cpu().double().numpy()
     return np.linalg.inv(T)

@@ -65,7 +65,8 @@ from ..config import Material
 from ..cosim import GaussTacSim, default_hand_settings
 from ..errors import AssetWarning, ConfigError
 from ..mpm.colliders import Collider
-from ..pose.sapien_source import SapienPoseSource, vec7_to_matrix
+from ..pose.sapien_source import SapienPoseSource
+from ..transforms import vec7_to_matrix
 from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
                        TactileSensorConfig, stack_tactile)

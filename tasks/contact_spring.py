@@ -51,6 +51,8 @@ ManiSkill's 15 position iterations, on the wrong side at 4); hence
 the contact is not a spring but folded into its joint drives (:mod:`.joint_contact`): a
 PhysX joint on an articulation link does not converge against the link's drives.
 """
+from dataclasses import dataclass
+
 import numpy as np
 import sapien
 
@@ -121,7 +123,8 @@ class ObjectSpring:
                 [N·m] about the link origin (world frame) the object passed to the link and
                 the pad's indentation [m] (a row of
                 :meth:`~gausstac_maniskill.cosim.GaussTacSim.link_contacts`); ``link`` the
-                link's rigid body (``PhysxArticulationLinkComponent``: its pose and velocity). Rows without force are skipped.
+                link's rigid body (``PhysxArticulationLinkComponent``: its pose and
+                velocity). Rows without force are skipped.
             friction: the contacts' Coulomb coefficient μ: with μ > 0 a contact is taken as
                 stuck within the step (as stiff across its force as along it), and the
                 drives across the contacts' forces stop at what friction can carry.
@@ -169,19 +172,24 @@ class ObjectSpring:
         self.drive.set_drive_property_y(k_lin[1], 0.0, cap_lin[1], "force")
         self.drive.set_drive_property_z(k_lin[2], 0.0, cap_lin[2], "force")
         self.drive.set_drive_property_twist(k_ang[0], 0.0, cap_ang[0], "force")
-        self.drive.set_drive_property_swing(max(k_ang[1], k_ang[2]), 0.0, max(cap_ang[1], cap_ang[2]), "force")
+        self.drive.set_drive_property_swing(k_ang[1], 0.0, cap_ang[1], "force")  # k_ang[1] == k_ang[2]
         self.drive.set_drive_target(sapien.Pose(offset.astype(np.float32), _rotation_quat(angle)))
         self.active = True
         torque_origin = R @ carried_t + np.cross(com - np.asarray(self.body.pose.p, np.float64), R @ carried_f)
         return np.concatenate([R @ carried_f, torque_origin])
 
 
+@dataclass
 class _Contact:
-    """One pad link's contact as the object feels it (world frame)."""
+    """One pad link's contact as the object feels it (world frame, SI)."""
 
-    def __init__(self, force, point, n, couple, k, velocity, spin):
-        self.force, self.point, self.n, self.couple = force, point, n, couple
-        self.k, self.velocity, self.spin = k, velocity, spin
+    force: np.ndarray  # [3] on the object
+    point: np.ndarray  # [3] on its line of action (the centre of pressure)
+    n: np.ndarray  # [3] its direction
+    couple: np.ndarray  # [3] the pad's twist about n, on the object
+    k: float  # stiffness along n (and across it when stuck)
+    velocity: np.ndarray  # [3] of the link's material point at ``point``
+    spin: np.ndarray  # [3] the link's angular velocity
 
 
 def _contact_part(row: np.ndarray, link, friction: float):
@@ -207,8 +215,8 @@ def _stiffness(parts: list, com: np.ndarray, R: np.ndarray, friction: float):
     reach (what the contacts' forces and their friction can carry)."""
     S_lin, S_ang = np.zeros((3, 3)), np.zeros((3, 3))
     cap_lin, cap_ang = np.zeros(3), np.zeros(3)
+    stuck = friction > 0.0
     for c in parts:
-        stuck = friction > 0.0
         P = np.eye(3) if stuck else np.outer(c.n, c.n)  # directions the contact resists
         r = c.point - com
         X = skew(r)
@@ -219,6 +227,8 @@ def _stiffness(parts: list, com: np.ndarray, R: np.ndarray, friction: float):
         cap_ang += np.abs(R.T @ (np.cross(r, c.force) + c.couple)) + friction * f * (np.linalg.norm(r) + TWIST_RADIUS)
     k_lin = np.abs(R.T @ S_lin @ R).sum(axis=1)
     k_ang = np.abs(R.T @ S_ang @ R).sum(axis=1)
+    # PhysX's swing drive has one stiffness and one limit for both swing axes: the larger
+    k_ang[1:], cap_ang[1:] = k_ang[1:].max(), cap_ang[1:].max()
     cap_lin[0] = _NO_CAP  # x: along the pads' pushes, which grow as the object moves in
     return k_lin, k_ang, cap_lin, cap_ang
 

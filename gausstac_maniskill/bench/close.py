@@ -30,7 +30,7 @@ def core_depth_in_cube(env, link: str, vertices: np.ndarray) -> float:
     """How deep [m] the deepest of ``vertices`` ([N, 3], link ``link``'s frame: its rigid
     core) lies inside PressCube's cube now (<= 0: outside it). ``env``: the unwrapped
     ``GaussTac-PressCube-v1``, env 0."""
-    from ..pose.sapien_source import vec7_to_matrix
+    from ..transforms import vec7_to_matrix
     from ..tasks.press_cube import CUBE_HALF
 
     T = env._pose_source.all_link_poses()[0, env._pose_source.link_names.index(link)].double().numpy()

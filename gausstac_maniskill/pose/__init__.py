@@ -1,6 +1,6 @@
 """Pose sources: rigid hand link poses ``[B, L, 4, 4]`` from SAPIEN or MuJoCo."""
 from .base import PoseSource, resolve_names
-from .mujoco_source import ALLEGRO_CONTACT_EXCLUDES, MujocoPoseSource, default_allegro_urdf
+from .mujoco_source import ALLEGRO_CONTACT_EXCLUDES, MujocoPoseSource
 from .sapien_source import SapienPoseSource
 
 ALLEGRO_TIP_LINKS = ["link_15.0_tip", "link_3.0_tip", "link_7.0_tip", "link_11.0_tip"]
@@ -8,5 +8,5 @@ ALLEGRO_TIP_LINKS = ["link_15.0_tip", "link_3.0_tip", "link_7.0_tip", "link_11.0
 
 __all__ = [
     "PoseSource", "MujocoPoseSource", "SapienPoseSource", "resolve_names",
-    "default_allegro_urdf", "ALLEGRO_CONTACT_EXCLUDES", "ALLEGRO_TIP_LINKS",
+    "ALLEGRO_CONTACT_EXCLUDES", "ALLEGRO_TIP_LINKS",
 ]

@@ -18,17 +18,11 @@ import torch
 
 from ..errors import AssetError, ConfigError, SimulationError
 from ..transforms import as_pose_matrix, matrix_to_quat
+from ..urdf import default_hand_urdf
 from .base import PoseSource, resolve_names
 
 #: Palm <-> finger-base pairs whose collision boxes overlap at rest.
 ALLEGRO_CONTACT_EXCLUDES = tuple(("base_link", f"link_{i}.0") for i in (0, 4, 8, 12))
-
-
-def default_allegro_urdf() -> Path:
-    """ManiSkill's ``allegro_hand_right.urdf`` (the ``.obj`` meshes one)."""
-    from mani_skill import PACKAGE_ASSET_DIR
-
-    return Path(PACKAGE_ASSET_DIR) / "robots" / "allegro" / "allegro_hand_right.urdf"
 
 
 def load_urdf_spec(urdf_path) -> mujoco.MjSpec:
@@ -81,7 +75,7 @@ class MujocoPoseSource(PoseSource):
         for name, value in (("kp", kp), ("dampratio", dampratio), ("timestep", timestep)):
             if not (np.isfinite(value) and value > 0):
                 raise ConfigError(f"MujocoPoseSource.{name} must be a positive number, got {value}")
-        self.urdf_path = Path(urdf_path) if urdf_path is not None else default_allegro_urdf()
+        self.urdf_path = Path(urdf_path) if urdf_path is not None else Path(default_hand_urdf())
         spec = load_urdf_spec(self.urdf_path)
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.timestep = float(timestep)

@@ -5,26 +5,8 @@ import numpy as np
 import torch
 
 from ..errors import ConfigError
+from ..transforms import vec7_to_matrix
 from .base import PoseSource
-
-
-def vec7_to_matrix(raw_pose: torch.Tensor) -> torch.Tensor:
-    """``[..., 7]`` poses (px, py, pz, qw, qx, qy, qz) -> ``[..., 4, 4]`` transforms.
-
-    Torch twin of ``transforms.quat_to_matrix`` so that poses stay on the
-    simulator's device (GPU sims) and keep their dtype.
-    """
-    p, q = raw_pose[..., :3], raw_pose[..., 3:7]
-    w, x, y, z = (q / q.norm(dim=-1, keepdim=True)).unbind(-1)
-    R = torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], dim=-1)
-    T = torch.zeros(raw_pose.shape[:-1] + (4, 4), dtype=raw_pose.dtype, device=raw_pose.device)
-    T[..., :3, :3] = R.reshape(raw_pose.shape[:-1] + (3, 3))
-    T[..., :3, 3] = p
-    T[..., 3, 3] = 1
-    return T
 
 
 def _find_articulation(obj):

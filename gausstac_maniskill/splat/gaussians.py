@@ -49,6 +49,7 @@ import numpy as np
 import torch
 
 from ..errors import AssetError, ConfigError
+from ..transforms import quat_multiply, quat_to_rotmat, rotmat_to_quat
 # SH helpers live in .sh; re-exported here, where GaussianSet users have imported them from
 from .sh import SH_C0, num_sh_coeffs, rgb_to_sh_dc, sh_dc_to_rgb, sh_degree_from_coeffs
 
@@ -66,68 +67,6 @@ __all__ = [
     "load_ply",
     "save_ply",
 ]
-
-
-# --------------------------------------------------------------------------- rotations
-def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
-    """Unit quaternions (w, x, y, z) [..., 4] -> rotation matrices [..., 3, 3].
-
-    The quaternion is normalised first, so any non-zero quaternion is accepted.
-    """
-    q = q / q.norm(dim=-1, keepdim=True)
-    w, x, y, z = q.unbind(-1)
-    rows = (
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    )
-    return torch.stack(rows, dim=-1).reshape(q.shape[:-1] + (3, 3))
-
-
-def quat_multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Hamilton product a ⊗ b of quaternions (w, x, y, z) [..., 4] (broadcasting).
-
-    ``R(a ⊗ b) = R(a) R(b)``: rotate by b first, then by a.
-    """
-    aw, ax, ay, az = a.unbind(-1)
-    bw, bx, by, bz = b.unbind(-1)
-    return torch.stack((
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ), dim=-1)
-
-
-def rotmat_to_quat(R: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices [..., 3, 3] -> unit quaternions (w, x, y, z) [..., 4], w >= 0.
-
-    Shepperd's method: pick the largest of (trace, R00, R11, R22) for stability.
-    """
-    m = R.reshape(-1, 3, 3)
-    t = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
-    cand = torch.stack([t, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], dim=-1)
-    choice = cand.argmax(dim=-1)
-    q = torch.empty(m.shape[0], 4, dtype=R.dtype, device=R.device)
-    # case 0: trace largest
-    s = torch.sqrt(torch.clamp(1 + t, min=1e-12)) * 2
-    q0 = torch.stack([0.25 * s, (m[:, 2, 1] - m[:, 1, 2]) / s,
-                      (m[:, 0, 2] - m[:, 2, 0]) / s, (m[:, 1, 0] - m[:, 0, 1]) / s], -1)
-    s = torch.sqrt(torch.clamp(1 + m[:, 0, 0] - m[:, 1, 1] - m[:, 2, 2], min=1e-12)) * 2
-    q1 = torch.stack([(m[:, 2, 1] - m[:, 1, 2]) / s, 0.25 * s,
-                      (m[:, 0, 1] + m[:, 1, 0]) / s, (m[:, 0, 2] + m[:, 2, 0]) / s], -1)
-    s = torch.sqrt(torch.clamp(1 + m[:, 1, 1] - m[:, 0, 0] - m[:, 2, 2], min=1e-12)) * 2
-    q2 = torch.stack([(m[:, 0, 2] - m[:, 2, 0]) / s, (m[:, 0, 1] + m[:, 1, 0]) / s,
-                      0.25 * s, (m[:, 1, 2] + m[:, 2, 1]) / s], -1)
-    s = torch.sqrt(torch.clamp(1 + m[:, 2, 2] - m[:, 0, 0] - m[:, 1, 1], min=1e-12)) * 2
-    q3 = torch.stack([(m[:, 1, 0] - m[:, 0, 1]) / s, (m[:, 0, 2] + m[:, 2, 0]) / s,
-                      (m[:, 1, 2] + m[:, 2, 1]) / s, 0.25 * s], -1)
-    for k, qk in enumerate((q0, q1, q2, q3)):
-        sel = choice == k
-        q[sel] = qk[sel]
-    q = q * torch.where(q[:, :1] < 0, -1.0, 1.0).to(q.dtype)
-    q = q / q.norm(dim=-1, keepdim=True)
-    return q.reshape(R.shape[:-2] + (4,))
 
 
 def covariance_from_scale_rotation(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:

@@ -97,6 +97,7 @@ import torch
 
 from .. import backend
 from ..errors import ConfigError
+from ..mpm.kinematics import quat_to_mat
 from .gaussians import GaussianSet
 from .sh import SH_C0, SH_C1, SH_C2, SH_C3, sh_degree_from_coeffs
 
@@ -202,11 +203,7 @@ def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.mat
 @ti.func
 def _quat_scale_to_cov(q: ti.math.vec4, s: ti.math.vec3) -> ti.math.mat3:
     """Σ = R S Sᵀ Rᵀ from a quaternion (w, x, y, z) and standard deviations s."""
-    q = q.normalized()
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    R = ti.Matrix([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                   [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                   [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    R = quat_to_mat(q.normalized())
     M = R @ ti.Matrix([[s[0], 0.0, 0.0], [0.0, s[1], 0.0], [0.0, 0.0, s[2]]])
     return M @ M.transpose()
 

@@ -10,7 +10,7 @@ import gausstac_maniskill  # noqa: F401  (registers the agents and tasks)
 from gausstac_maniskill.agents.allegro import (ALLEGRO_PINCH_AXIS, ALLEGRO_PINCH_CENTRE,
                                                FloatingAllegroHandRightGaussTac, pinch_down_rotation)
 from gausstac_maniskill.experts import TipIK
-from gausstac_maniskill.pose.sapien_source import vec7_to_matrix
+from gausstac_maniskill.transforms import vec7_to_matrix
 from gausstac_maniskill.urdf import FLOATING_JOINTS, parse_urdf
 
 pytestmark = pytest.mark.sapien
