@@ -373,7 +373,7 @@ class MPMWorld:
         return self._n
 
     def _read(self, key: str, group: str | None):
-        self._pull()
+        self._pull((key,))  # only the field read comes back from the device
         arr = self._host[key]
         if group is None:
             return arr.copy()
@@ -625,6 +625,7 @@ class MPMWorld:
             ang = _angle(a[:3, :3].T @ b[:3, :3])
             r = _collider_radius(c)
             if not math.isfinite(r) and self._n:
+                self._pull(("x",))
                 x = h["x"]
                 r = float(np.linalg.norm(x - b[:3, 3], axis=1).max())
             speed = max(speed, (np.linalg.norm(b[:3, 3] - a[:3, 3]) + ang * r) / dt)
@@ -666,7 +667,7 @@ class MPMWorld:
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
         d["col_impulse"].from_numpy(np.zeros((max(len(self.colliders), 1), 6), np.float32))
         d["pair_impulse"].from_numpy(np.zeros(d["pair_impulse"].shape, np.float32))
-        self._host_stale = True  # from here on the device holds the newer state
+        self._stale = set(_STATE_FIELDS)  # from here on the device holds the newer state
         cells = 0
         for k in range(n_sub):
             if self._n_active == 0:
@@ -905,12 +906,15 @@ class MPMWorld:
                 f"The simulation is unstable: lower SolverSettings.cfl, check material parameters "
                 f"(E={g.material.E:g} Pa, nu={g.material.nu:g}) and link/collider motions.")
 
-    def _pull(self) -> None:
-        """Copy device state back to the host arrays (if the device is newer)."""
-        if getattr(self, "_host_stale", False) and self._dev:
-            for key in _STATE_FIELDS:
+    def _pull(self, keys=_STATE_FIELDS) -> None:
+        """Copy the state fields ``keys`` (all by default) back to the host arrays, those the
+        device holds newer: a read after a step copies only the field it reads, not the
+        whole particle state."""
+        stale = getattr(self, "_stale", None)
+        if stale and self._dev:
+            for key in [k for k in keys if k in stale]:
                 self._host[key] = self._dev[key].to_numpy()[: self._n]
-            self._host_stale = False
+                stale.discard(key)
 
     def _push(self) -> None:
         """(Re)build device arrays from the host after any structural change."""
@@ -1022,7 +1026,7 @@ class MPMWorld:
             mask = (h["link"] == i) & (h["kind"] == 1) if self._n else np.zeros(0, bool)
             self._link_radius.append(float(np.linalg.norm(h["X0"][mask], axis=1).max()) if mask.any() else 0.0)
         self._dirty = False
-        self._host_stale = False
+        self._stale = set()
 
     def _build_packs(self) -> None:
         """Group the device arrays into the kernels' argument packs (kernels.Particles, Scene,
