@@ -187,13 +187,18 @@ def _record(cfg: CollectConfig, worker: int, share: int, tries: int, h5_path: Pa
         env.close()
 
 
+def _limit_threads(n: int) -> None:
+    """A worker's share of the CPU: ``n`` threads for Taichi (before it starts) and torch."""
+    import torch
+
+    os.environ.setdefault("GAUSSTAC_CPU_THREADS", str(n))
+    torch.set_num_threads(n)
+
+
 def _worker_entry(cfg: CollectConfig, worker: int, h5_path: str, q) -> None:
     """Process target: run the worker and report through the queue ``q``."""
-    os.environ.setdefault("GAUSSTAC_CPU_THREADS", str(max(1, (os.cpu_count() or 1) // cfg.num_procs)))
     try:
-        import torch
-
-        torch.set_num_threads(max(1, (os.cpu_count() or 1) // cfg.num_procs))
+        _limit_threads(max(1, (os.cpu_count() or 1) // cfg.num_procs))
         _run_worker(cfg, worker, h5_path, q.put)
         q.put(("done", worker, h5_path))
     except BaseException:  # noqa: BLE001 - the parent prints it and stops the others
@@ -385,10 +390,7 @@ def _ray_worker(cfg: CollectConfig, worker: int, queue) -> tuple[bytes, bytes] |
     on and return the ``.h5`` and ``.json`` bytes (the parent may be on another machine)."""
     import tempfile
 
-    import torch
-
-    os.environ.setdefault("GAUSSTAC_CPU_THREADS", "1")  # one Ray CPU per worker
-    torch.set_num_threads(1)
+    _limit_threads(1)  # one Ray CPU per worker
     with tempfile.TemporaryDirectory(prefix="gausstac_collect_") as tmp:
         h5_path = Path(tmp) / f"worker{worker}.h5"
         _run_worker(cfg, worker, str(h5_path), queue.put)

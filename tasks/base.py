@@ -31,8 +31,9 @@ steps after every SAPIEN step instead of once per control step). By default the 
 share is folded into the hand's joint drives, which PhysX integrates implicitly
 (:mod:`.joint_contact`: the finger settles where its drives balance the pad, at ManiSkill's
 100 Hz), and a two-way object's share acts through one implicit spring per object
-(:mod:`.contact_spring`: the pads' summed wrench, never pulling along a one-sided push); ``pad_reaction="explicit"`` applies it as forces one SAPIEN
-step late (stable from :data:`PAD_REACTION_MIN_FREQ`). The pad is
+(:mod:`.contact_spring`: the pads' summed wrench, never pulling along a one-sided push);
+``pad_reaction="explicit"`` applies it as forces one SAPIEN step late (stable from
+:data:`PAD_REACTION_MIN_FREQ`). The pad is
 massless on the SAPIEN side: what its particles take from an object in a step, its link
 takes back, so the impulses on the two bodies cancel.
 

@@ -33,9 +33,10 @@ one-sided D6 soft limits preloaded with the held cube's pad forces (0.115 N at 9
 1.897 N at 2.7e4 N/m, 100 Hz) moves +4.08 µm in one step where their implicit Euler step is
 -49.60 µm (each limit alone is exact: +12.36 and -70.98 µm; at three times the stiffness,
 +2.66 µm for -16.5, and -3.8 µm with 100 solver iterations instead of 15). One soft row per
-direction is exact: the joint of this class moves it -49.60 µm. With one spring per pad a pinched 10 g cube hung still while its pads'
-MPM forces differed by 1.8 N (0.115 and 1.897 N at dx = 2 mm); with one spring per object
-they add up to the cube's weight within 0.3 % (``python -m gausstac_maniskill.bench hold``).
+direction is exact: the joint of this class moves it -49.60 µm. With one spring per pad a
+pinched 10 g cube hung still while its pads' MPM forces differed by 1.8 N (0.115 and
+1.897 N at dx = 2 mm); with one spring per object they add up to the cube's weight within
+0.3 % (``python -m gausstac_maniskill.bench hold``).
 
 Each SAPIEN step the MPM recomputes F at the new pose, so the spring only has to predict how
 F changes within one step. For a power-law contact F ∝ δ^p the tangent stiffness is
@@ -58,7 +59,8 @@ import sapien
 
 from ..transforms import matrix_to_quat
 
-__all__ = ["ObjectSpring", "GAIN", "OBJECT_GAIN", "MIN_DEPTH", "TWIST_RADIUS", "centre_of_pressure", "frame_along", "skew"]
+__all__ = ["ObjectSpring", "GAIN", "OBJECT_GAIN", "MIN_DEPTH", "TWIST_RADIUS", "centre_of_pressure", "frame_along",
+           "skew"]
 
 #: spring stiffness over the contact's secant stiffness |F|/δ (see the module docstring)
 GAIN = 3.0
