@@ -15,6 +15,11 @@ bounded on its own, so a pad and a sponge are two bodies, not one continuum; whe
 both meet, :func:`field_contact` exchanges momentum by a frictional non-penetration
 rule. With one field (``two_field`` off) nothing of this is compiled in.
 
+Several envs (independent scenes of a batched world) share the launches: every group and
+collider has an env, and the grid arrays hold one copy of the box per env and field, copy
+``field * n_env + env`` at offset ``copy * ncell`` (``Scene.group_copy``). Envs may overlap in
+space; they never share a node, and a particle tests only its own env's colliders.
+
 Particle-to-grid without atomics (the CPU's way): particles are counting-sorted into
 *slabs* two cells thick along the grid's longest axis. A particle whose stencil base
 cell is b touches nodes b..b+2, so slabs s and s+2 never write the same node; the even
@@ -167,12 +172,10 @@ def add_to(a: ti.template(), idx, value, atomic: ti.template()):
 
 
 @ti.func
-def field_offset(two_field: ti.template(), group_field: ti.template(), group: ti.template(), p, ncell):
-    """Offset of particle p's velocity field in the grid arrays (0 with one field)."""
-    off = 0
-    if ti.static(two_field):
-        off = group_field[group[p]] * ncell
-    return off
+def field_offset(group_copy: ti.template(), group: ti.template(), p, ncell):
+    """Offset of particle p's box copy in the grid arrays: its env's box of its velocity
+    field (``Scene.group_copy``; 0 with one env and one field)."""
+    return group_copy[group[p]] * ncell
 
 
 @ti.func
@@ -204,7 +207,7 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
         grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(),
         grid_vol: ti.template(), fbar: ti.template(), nh_only: ti.template(),
-        group_field: ti.template(), ncell: ti.template(), two_field: ti.template(), grid_vc: ti.template(),
+        group_copy: ti.template(), ncell: ti.template(), two_field: ti.template(), grid_vc: ti.template(),
         bond: ti.template(), link_frames: ti.template(), grid_bond: ti.template(), atomic: ti.template(),
         cellp: ti.template(), cell_slot: ti.template(), cell_a: ti.template(), cell_G: ti.template()):
     """Scatter mass and APIC momentum (with the stress impulse) to the grid (to the
@@ -232,7 +235,7 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
             for ii in range(lo, hi):
                 p = order[ii]
                 base, fx, w = stencil(x[p], inv_dx, origin)
-                off = field_offset(two_field, group_field, group, p, ncell)
+                off = field_offset(group_copy, group, p, ncell)
                 if ti.static(fbar or cellp):
                     tau[p] = stress_at(nh_only, fbar, cellp, False, F[p], Jp[p], matid[p], mat_table, grid_vol,
                                        base, w, ny, nz, off)
@@ -289,13 +292,14 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
 @ti.func
 def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
-        dt: ti.template(), damping: ti.template(), relax: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        dt: ti.template(), damping: ti.template(), env_relax: ti.template(), n_env: ti.template(),
+        grid_v: ti.template(), grid_m: ti.template(),
         grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(), link_frames: ti.template(),
         walls: ti.template(),
         n_walls: ti.template(), grid_contact: ti.template(), n_col: ti.template(),
         col_kind: ti.template(), col_prm: ti.template(), col_frames: ti.template(),
         col_mu: ti.template(), col_sticky: ti.template(), sdf: ti.template(),
-        sdf_info: ti.template(), col_impulse: ti.template()):
+        sdf_info: ti.template(), col_impulse: ti.template(), col_env: ti.template()):
     """Momentum -> velocity, damping, then boundary conditions per node (gravity is in P2G).
 
     * Nodes where kinematic mass is at least PIN_FRACTION of the node mass move exactly with
@@ -304,17 +308,21 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
       surface so that the layer is held at that surface).
     * Nodes where most mass belongs to quasi-static groups (pads) relax towards
       equilibrium: their velocity *relative to the link's rigid motion* is scaled by
-      ``relax`` = exp(-ζ Δt) (dynamic relaxation; a pad carried by a moving hand is
-      not dragged, only its elastic ringing decays).
+      exp(-ζ Δt), ζ = ``env_relax`` of the node's env (dynamic relaxation; a pad carried by
+      a moving hand is not dragged, only its elastic ringing decays).
     * Slip walls (symmetry planes): the normal velocity of nodes on or beyond the
       wall is zeroed (bilateral).
     * With ``grid_contact`` set, colliders are enforced here on nodes with φ < 0
-      (unilateral, Coulomb friction) and their reaction impulse is accumulated.
-    With two velocity fields each field's nodes (``ntot`` = 2 ``ncell``) are updated alike.
+      (unilateral, Coulomb friction; only the node's own env's) and their reaction impulse
+      is accumulated.
+    Every box copy (``ntot`` = fields × envs × ``ncell``; copy = field · n_env + env) is
+    updated alike.
     """
     for idx in range(ntot):
         m = grid_m[idx]
         if m > 0.0:
+            env = (idx // ncell) % n_env
+            relax = ti.exp(-env_relax[env] * dt)
             xi = node_position(idx, ncell, ox, oy, oz, ny, nz, dx)
             vel = grid_v[idx] / m
             vel *= damping
@@ -330,6 +338,8 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
                 vel = slip_walls(walls, n_walls, xi, vel)
                 if grid_contact:
                     for c in range(n_col):
+                        if col_env[c] != env:
+                            continue
                         phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, xi, dt)
                         if phi < 0.0:
                             vrel = vel - vc
@@ -395,7 +405,7 @@ def mass_gradient(grid_m: ti.template(), idx, ny: ti.template(), nz: ti.template
 
 
 @ti.func
-def field_contact(ncell: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
+def field_contact(stride: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
         mu: ti.template(), grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
         grid_vc: ti.template(), grid_ds: ti.template()):
     """Contact between the two velocity fields (multi-field MPM, Bardenhagen et al. 2000).
@@ -415,9 +425,11 @@ def field_contact(ncell: ti.template(), ny: ti.template(), nz: ti.template(), dx
     link (it is then rigid). Body 0 takes +P, body 1 -P: momentum is conserved, and no
     pulling (adhesive) force can arise. Field 0's velocity change P/m0 is kept in
     ``grid_ds``: :func:`g2p` turns it into the pad particles' contact impulses.
+    Field 1's copy of node i0 is node i0 + ``stride`` (``stride`` = envs × ncell: every env's
+    box of field 0, then every env's box of field 1).
     """
-    for i0 in range(ncell):
-        i1 = i0 + ncell
+    for i0 in range(stride):
+        i1 = i0 + stride
         m0 = grid_m[i0]
         m1 = grid_m[i1]
         V0, V1, cell = grid_vc[i0], grid_vc[i1], dx * dx * dx
@@ -485,7 +497,8 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
         group: ti.template(), group_frames: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(),
         inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), fbar: ti.template(), group_field: ti.template(), ncell: ti.template(),
+        grid_mk: ti.template(), fbar: ti.template(), group_copy: ti.template(), group_field: ti.template(),
+        ncell: ti.template(),
         two_field: ti.template(), grid_ds: ti.template(), mass: ti.template(), impulse: ti.template(),
         contact_id: ti.template(), cellp: ti.template()):
     """Gather velocity and its gradient, update F (and plasticity) and stress, advect.
@@ -507,7 +520,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
         p = order[ii]
         is_kin = kind[p] == KINEMATIC
         base, fx, w = stencil(x[p], inv_dx, origin)
-        off = field_offset(two_field, group_field, group, p, ncell)
+        off = field_offset(group_copy, group, p, ncell)
         new_v = vec3(0.0)
         new_C = ti.Matrix.zero(ti.f32, 3, 3)
         soft_dv = vec3(0.0)
@@ -525,7 +538,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
                 all_pinned = all_pinned and pinned(grid_m, grid_mk, idx)
         mi = matid[p]
         if ti.static(two_field):
-            if off == 0 and not is_kin and soft_dv.norm_sqr() > 0.0:
+            if group_field[group[p]] == 0 and not is_kin and soft_dv.norm_sqr() > 0.0:
                 impulse[p] += mass[p] * soft_dv
                 if contact_id[p] == -1:
                     contact_id[p] = SOFT_CONTACT
@@ -589,7 +602,7 @@ def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.
         x: ti.template(), F: ti.template(), vol: ti.template(), kind: ti.template(), matid: ti.template(),
         mat_table: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(), inv_dx: ti.template(),
-        grid_vol: ti.template(), group: ti.template(), group_field: ti.template(), ncell: ti.template(),
+        grid_vol: ti.template(), group: ti.template(), group_copy: ti.template(), ncell: ti.template(),
         two_field: ti.template(), atomic: ti.template()):
     """F-bar, step 1: each node gathers the rest volume Σ w V0 and the deformed volume
     Σ w V0 J of the particles around it (slab-ordered like :func:`p2g`; per field, so
@@ -604,7 +617,7 @@ def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.
                 p = order[ii]
                 if kind[p] == DYNAMIC and mat_table[matid[p], mat.CELL_P] <= 0.0:
                     base, fx, w = stencil(x[p], inv_dx, origin)
-                    off = field_offset(two_field, group_field, group, p, ncell)
+                    off = field_offset(group_copy, group, p, ncell)
                     vj = vol[p] * ti.Vector([1.0, F[p].determinant()])
                     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                         idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
@@ -666,13 +679,13 @@ def report_stress(nh_only: ti.template(), fbar: ti.template(), cellp: ti.templat
         F: ti.template(), tau: ti.template(), Jp: ti.template(), matid: ti.template(),
         mat_table: ti.template(), ox: ti.template(), oy: ti.template(), oz: ti.template(),
         ny: ti.template(), nz: ti.template(), inv_dx: ti.template(), grid_vol: ti.template(),
-        group: ti.template(), group_field: ti.template(), ncell: ti.template(), two_field: ti.template()):
+        group: ti.template(), group_copy: ti.template(), ncell: ti.template(), two_field: ti.template()):
     """:func:`stress_at` (whole, with ``report``) for every particle: the stress reported after a step."""
     origin = ti.Vector([ox, oy, oz])
     for ii in range(n):
         p = order[ii]
         base, _fx, w = stencil(x[p], inv_dx, origin)
-        off = field_offset(two_field, group_field, group, p, ncell)
+        off = field_offset(group_copy, group, p, ncell)
         tau[p] = stress_at(nh_only, fbar, cellp, True, F[p], Jp[p], matid[p], mat_table, grid_vol, base, w, ny,
                            nz, off)
 
@@ -687,8 +700,9 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         grid_dp: ti.template(), n_col: ti.template(), col_kind: ti.template(),
         col_prm: ti.template(), col_frames: ti.template(), col_mu: ti.template(),
         col_sticky: ti.template(), sdf: ti.template(), sdf_info: ti.template(),
-        max_push: ti.template(), reach: ti.template(), group: ti.template(), group_field: ti.template(),
-        ncell: ti.template(), two_field: ti.template(), atomic: ti.template(), anchor: ti.template()):
+        max_push: ti.template(), reach: ti.template(), group: ti.template(), group_copy: ti.template(),
+        ncell: ti.template(), two_field: ti.template(), atomic: ti.template(), anchor: ti.template(),
+        group_env: ti.template(), col_env: ti.template()):
     """Particle-detected contact, applied as momentum on the grid (of the particle's field).
 
     For each dynamic particle near a collider, its free velocity v* is gathered
@@ -728,22 +742,27 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
             for ii in range(lo, hi):
                 p = order[ii]
                 if kind[p] == DYNAMIC:
+                    env = group_env[group[p]]  # a particle touches only its own env's colliders
                     near = False
                     for c in range(n_col):
-                        phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, x[p], dt)
-                        if phi - radius[p] < reach:
-                            near = True
+                        if col_env[c] == env:
+                            phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, x[p],
+                                                            dt)
+                            if phi - radius[p] < reach:
+                                near = True
                     stuck_to = -1  # collider whose anchor the particle keeps after this substep
                     slid = False
                     if near:
                         base, fx, w = stencil(x[p], inv_dx, origin)
-                        off = field_offset(two_field, group_field, group, p, ncell)
+                        off = field_offset(group_copy, group, p, ncell)
                         v0 = vec3(0.0)
                         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                             v0 += w[i][0] * w[j][1] * w[k][2] * grid_v[off + ((base[0] + i) * ny + base[1] + j) * nz
                                                                         + base[2] + k]
                         vp = v0
                         for c in range(n_col):
+                            if col_env[c] != env:
+                                continue
                             phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info,
                                                             c, x[p] + dt * vp, dt)
                             gap = phi - radius[p]
@@ -892,7 +911,7 @@ def number_cells(P: ti.template(), S: ti.template(), G: ti.template(), O: ti.tem
     for ii in range(S.counts[N_ACTIVE]):  # mark (every particle of a cell writes the same 1)
         p = O.order[ii]
         if S.mat_table[P.matid[p], mat.CELL_P] > 0.0:
-            off = field_offset(two_field, S.group_field, P.group, p, ncell)
+            off = field_offset(S.group_copy, P.group, p, ncell)
             cell = ti.cast(ti.floor(P.x[p] * inv_dx - origin), ti.i32)
             G.cell_slot[off + (cell[0] * ny + cell[1]) * nz + cell[2]] = 1
     G.cell_count[0] = 0
@@ -1202,8 +1221,8 @@ NDV2 = ti.types.ndarray(dtype=ti.math.vec2, ndim=1)
 BOX = 8  # active box layout: origin xyz, dims xyz (nodes), number of slabs, slab axis
 SLAB_CAP = 1 << 16  # slabs are 2 cells: the active box may span 131072 cells along one axis
 # rows of Scene.counts and Scene.consts
-N_LINKS, N_GROUPS, N_COL, N_WALLS, N_ACTIVE, N_KIN = range(6)
-DX, GX, GY, GZ, DAMPING, RELAXATION, REACH, MARGIN, FIELD_MU, BOND = range(10)
+N_LINKS, N_GROUPS, N_COL, N_WALLS, N_ACTIVE, N_KIN, N_ENVS = range(7)
+DX, GX, GY, GZ, DAMPING, REACH, MARGIN, FIELD_MU, BOND = range(9)
 
 Particles = ti.types.argpack(  # member names are unique over the packs (Taichi flattens them)
     x=NDV, v=NDV, C=NDM, F=NDM, tau=NDM, Jp=NDF,  # state: position [m], velocity, APIC C, F, τ [Pa], plastic J
@@ -1223,12 +1242,14 @@ Grid = ti.types.argpack(
     cell_a=NDV4, cell_b=NDV4,  # per slot: (Σ V0, Σ V0 ln J, Σ V0 λ, CG diagonal); CG (π, r, p, Ap)
     cell_G=NDV, grid_t=NDV, cg_sum=NDF)  # Σ V0 ∇w per slot and node (64 rows); M⁻¹Gq per node; CG sums
 Scene = ti.types.argpack(
-    counts=NDI, consts=NDF,  # rows N_LINKS.., and DX.. [m, m/s², 1/s, 1/s, m, cells, -]
+    counts=NDI, consts=NDF,  # rows N_LINKS.., and DX.. [m, m/s², 1/s, m, cells, -]
     mat_table=NDF2,  # materials.material_table rows
     group_qs=NDI, group_frames=NDF2, group_field=NDI,  # per group: quasi-static?, binding frames, field
+    group_env=NDI, group_copy=NDI,  # ... its env, its box copy in the grid arrays (field · N_ENVS + env)
+    env_relax=NDF,  # per env: relaxation rate ζ [1/s] of its quasi-static nodes (the largest of its awake groups)
     link_frames=NDF2, walls=NDF2,  # kinematics frame rows of links; slip walls (axis, position, side)
     col_kind=NDI, col_prm=NDF2, col_frames=NDF2, col_mu=NDF, col_sticky=NDI,
-    sdf=NDF, sdf_info=NDI2, col_impulse=NDF2)
+    sdf=NDF, sdf_info=NDI2, col_impulse=NDF2, col_env=NDI)  # ... and each collider's env
 Order = ti.types.argpack(
     order=NDI, slab_start=NDI,  # awake particles sorted by slab, first index of each slab
     active_box=NDI)  # the active box of the substep (BOX layout), written by prepare
@@ -1318,30 +1339,29 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     inv_dx = 1.0 / dx
     gravity = ti.Vector([S.consts[GX], S.consts[GY], S.consts[GZ]])
     damping = ti.exp(-S.consts[DAMPING] * dt)  # global velocity damping factor
-    relax = ti.exp(-S.consts[RELAXATION] * dt)  # quasi-static relaxation factor exp(-ζ Δt)
     max_push = 0.3 * dx / dt  # cap of a contact's normal velocity change [m/s]
     reach = dx + S.consts[REACH]  # particles farther than this from a collider skip it [m]
-    n, n_col, n_walls = S.counts[N_ACTIVE], S.counts[N_COL], S.counts[N_WALLS]
+    n, n_col, n_walls, n_env = S.counts[N_ACTIVE], S.counts[N_COL], S.counts[N_WALLS], S.counts[N_ENVS]
     ox, oy, oz = O.active_box[0], O.active_box[1], O.active_box[2]
     ny, nz, n_slabs = O.active_box[4], O.active_box[5], O.active_box[6]
     ncell = O.active_box[3] * ny * nz
-    ntot = ncell * (2 if ti.static(two_field) else 1)
+    ntot = ncell * n_env * (2 if ti.static(two_field) else 1)  # every env's box, of each field
     clear_grid(ntot, G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_dp, G.grid_vol, G.grid_vc, G.grid_ds,
                G.grid_bond, two_field, cellp, G.cell_slot)
     if ti.static(cellp):
         number_cells(P, S, G, O, ntot, ncell, ny, nz, inv_dx, ti.Vector([ox, oy, oz]), two_field)
     if ti.static(fbar):
         volume_scatter(O.order, O.slab_start, n_slabs, P.x, P.F, P.vol, P.kind, P.matid, S.mat_table, ox, oy, oz,
-                       ny, nz, inv_dx, G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
+                       ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field, atomic)
     p2g(gravity, O.order, O.slab_start, n_slabs, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.mass, P.vol, P.kind,
         P.link, P.matid, S.mat_table, P.group, S.group_qs, ox, oy, oz, ny, nz, inv_dx, dt,
         G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only,
-        S.group_field, ncell, two_field, G.grid_vc, P.bond, S.link_frames, G.grid_bond, atomic,
+        S.group_copy, ncell, two_field, G.grid_vc, P.bond, S.link_frames, G.grid_bond, atomic,
         cellp, G.cell_slot, G.cell_a, G.cell_G)
-    grid_update(ntot, ncell, ox, oy, oz, ny, nz, dx, dt, damping, relax,
+    grid_update(ntot, ncell, ox, oy, oz, ny, nz, dx, dt, damping, S.env_relax, n_env,
                 G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
                 1 if ti.static(contact_mode == 2) else 0, n_col, S.col_kind, S.col_prm, S.col_frames,
-                S.col_mu, S.col_sticky, S.sdf, S.sdf_info, S.col_impulse)
+                S.col_mu, S.col_sticky, S.sdf, S.sdf_info, S.col_impulse, S.col_env)
     nx = O.active_box[3]
     bond_on = S.consts[BOND] > 0.0
     if bond_on:
@@ -1353,12 +1373,13 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
             bond_ghosts(ntot, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
                         G.grid_link, S.link_frames)
     if ti.static(two_field):
-        field_contact(ncell, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_mk, G.grid_vc, G.grid_ds)
+        field_contact(ncell * n_env, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_mk, G.grid_vc, G.grid_ds)
     if ti.static(contact_mode == 1):
         contact_scatter(O.order, O.slab_start, n_slabs, P.x, P.kind, P.mass, P.radius, P.impulse,
                         P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp,
                         n_col, S.col_kind, S.col_prm, S.col_frames, S.col_mu, S.col_sticky, S.sdf, S.sdf_info,
-                        max_push, reach, P.group, S.group_field, ncell, two_field, atomic, P.anchor)
+                        max_push, reach, P.group, S.group_copy, ncell, two_field, atomic, P.anchor, S.group_env,
+                        S.col_env)
         contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls,
                       n_walls)
         if bond_on:  # the contact moved free nodes near the bond: the ghosts follow
@@ -1366,7 +1387,7 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
                         G.grid_link, S.link_frames)
     g2p(nh_only, O.order, n, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.kind, P.matid, S.mat_table, P.group,
         S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, fbar,
-        S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id, cellp)
+        S.group_copy, S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id, cellp)
 
 
 @ti.kernel
@@ -1387,9 +1408,9 @@ def stress_pass(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.temp
     ny, nz = O.active_box[4], O.active_box[5]
     ncell = O.active_box[3] * ny * nz
     if ti.static(fbar):
-        for i in range(ncell * (2 if ti.static(two_field) else 1)):
+        for i in range(ncell * S.counts[N_ENVS] * (2 if ti.static(two_field) else 1)):
             G.grid_vol[i] = ti.Vector([0.0, 0.0])
         volume_scatter(O.order, O.slab_start, O.active_box[6], P.x, P.F, P.vol, P.kind, P.matid, S.mat_table,
-                       ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_field, ncell, two_field, atomic)
+                       ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field, atomic)
     report_stress(nh_only, fbar, cellp, O.order, S.counts[N_ACTIVE], P.x, P.F, P.tau, P.Jp, P.matid, S.mat_table,
-                ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_field, ncell, two_field)
+                ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field)

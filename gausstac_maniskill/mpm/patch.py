@@ -55,17 +55,21 @@ NDM = ti.types.ndarray(dtype=ti.math.mat3, ndim=1)
 
 @ti.kernel
 def rest_gap(cand: NDI, n: ti.i32, X_rest: NDV, link: NDI, radius: NDF, link_poses: NDF2, n_col: ti.i32,
-             col_poses: NDF2, col_kind: NDI, col_prm: NDF2, sdf: NDF, sdf_info: NDI2, out: NDF):
+             col_poses: NDF2, col_kind: NDI, col_prm: NDF2, sdf: NDF, sdf_info: NDI2, out: NDF,
+             group: NDI, group_env: NDI, col_env: NDI):
     """out[ii]: the smallest gap [m] between particle cand[ii]'s surface (its rest place
-    on its link, inflated by its contact radius) and any collider, at the start and at the
-    end of the control step (pose rows of kinematics.py)."""
+    on its link, inflated by its contact radius) and any collider of its env, at the start
+    and at the end of the control step (pose rows of kinematics.py)."""
     for ii in range(n):
         p = cand[ii]
         gap = 1e9
+        env = group_env[group[p]]
         for e in ti.static(range(2)):
             R, t = pose_at(link_poses, link[p], float(e))
             xw = R @ X_rest[p] + t
             for c in range(n_col):
+                if col_env[c] != env:
+                    continue
                 Rc, tc = pose_at(col_poses, c, float(e))
                 prm = ti.Vector([col_prm[c, 0], col_prm[c, 1], col_prm[c, 2], col_prm[c, 3]])
                 phi, _nrm = local_sdf(col_kind[c], prm, sdf, sdf_info, c, Rc.transpose() @ (xw - tc))

@@ -30,6 +30,11 @@ box of awake particles plus a margin and follows them; sleeping groups are not
 touched at all. With ``SolverSettings.patch_radius`` only the part of a pad near a contact
 is simulated and the rest rides rigidly with its link (:mod:`.patch`).
 
+A world can hold several independent scenes, *envs* (``env=`` of :meth:`MPMWorld.add_link`,
+:meth:`~MPMWorld.add_group`, :meth:`~MPMWorld.add_collider`): each env has its own copy of the
+grid box and touches only its own colliders, and all envs step in the same kernel launches
+(:class:`gausstac_maniskill.batch.BatchedCosim` builds such worlds).
+
 Units: metres, kilograms, seconds, pascals, newtons.
 
 Example::
@@ -104,6 +109,7 @@ class Group:
     awake: bool = True
     sleep_pose: np.ndarray | None = None  # link pose when the group fell asleep
     patch_state: int = 0  # active patch (mpm.patch): 0 at rest, 1 patched in contact, 2 released (whole)
+    env: int = 0  # the env (scene) of a batched world it belongs to: it touches only that env's groups and colliders
 
     @property
     def stop(self) -> int:
@@ -144,7 +150,9 @@ class MPMWorld:
         self._link_prev: list[np.ndarray] = []  # pose at the start of the next step
         self._link_next: list[np.ndarray] = []  # pose at its end (last set)
         self._link_twist: list[np.ndarray] = []  # (v_origin, ω) [m/s, rad/s] of the last step
+        self._link_env: list[int] = []
         self.colliders: list[Collider] = []
+        self._col_env: list[int] = []
         self._col_prev: list[np.ndarray] = []
         self._walls: list[tuple[int, float, float]] = []
         self.time = 0.0
@@ -171,11 +179,13 @@ class MPMWorld:
         _WORLDS.add(self)
 
     # ------------------------------------------------------------------ building
-    def add_link(self, name: str, pose) -> int:
-        """Register a rigid link that kinematic particles can bind to; returns its index."""
+    def add_link(self, name: str, pose, env: int = 0) -> int:
+        """Register a rigid link that kinematic particles can bind to, in env ``env`` of a
+        batched world (see :attr:`num_envs`); returns its index."""
         if name in self.link_names:
             raise ConfigError(f"link {name!r} is already registered")
         T = as_pose_matrix(pose, f"pose of link {name!r}")
+        self._link_env.append(_env_index(env, f"add_link({name!r})"))
         self.link_names.append(name)
         self._link_prev.append(T.copy())
         self._link_next.append(T.copy())
@@ -198,7 +208,7 @@ class MPMWorld:
                   velocity=None, particle_volume: float | None = None,
                   spacing: float | None = None, quasi_static: bool | None = None,
                   relaxation: float | None = None, field: int = 0, contact_radius=None,
-                  bond_distance=None, bond_normal=None) -> Group:
+                  bond_distance=None, bond_normal=None, env: int | None = None) -> Group:
         """Add a group of particles.
 
         Args:
@@ -238,6 +248,10 @@ class MPMWorld:
                 ``settings.soft_friction``). Pads use field 0 and soft objects field 1
                 (:class:`~gausstac_maniskill.cosim.GaussTacSim` does this). While groups
                 of both fields are awake the grid holds two copies of the active box.
+            env: the env (independent scene) of a batched world the group belongs to
+                (default: its link's env, or 0). Groups of different envs never interact
+                and touch only their own env's colliders, yet all envs step in the same
+                kernel launches (:attr:`num_envs`).
         """
         if any(g.name == name for g in self.groups):
             raise ConfigError(f"group {name!r} already exists")
@@ -261,6 +275,12 @@ class MPMWorld:
             if link is None:
                 raise ConfigError(f"add_group({name!r}): kinematic particles need a link")
             lidx = self.link_index(link)
+        if env is None:
+            env = self._link_env[lidx] if lidx >= 0 else 0
+        env = _env_index(env, f"add_group({name!r})")
+        if lidx >= 0 and self._link_env[lidx] != env:
+            raise ConfigError(f"add_group({name!r}): env={env} but its link {self.link_names[lidx]!r} is in env "
+                              f"{self._link_env[lidx]}")
         h = float(spacing if spacing is not None else self.settings.particle_spacing)
         if not (h > 0 and math.isfinite(h)):
             raise ConfigError(f"add_group({name!r}): spacing={spacing!r} must be > 0")
@@ -323,17 +343,19 @@ class MPMWorld:
         self._host["group_bind"] = np.concatenate(
             [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])
         group = Group(name, self._n, n, material, lidx, int(kin.sum()), h, bool(quasi_static), scale, relax,
-                      int(field))
+                      int(field), env=env)
         self.groups.append(group)
         self._n += n
         self._dirty = True
         return group
 
-    def add_collider(self, collider: Collider) -> int:
-        """Add a rigid SDF collider; returns its index (for poses and wrenches)."""
+    def add_collider(self, collider: Collider, env: int = 0) -> int:
+        """Add a rigid SDF collider that the groups of env ``env`` touch; returns its index
+        (for poses and wrenches)."""
         if not isinstance(collider, Collider) or type(collider) is Collider:
             raise ConfigError(f"add_collider expects a Sphere, Box, Capsule, HalfSpace or MeshCollider, "
                               f"got {type(collider).__name__}")
+        self._col_env.append(_env_index(env, "add_collider"))
         self.colliders.append(collider)
         self._col_prev.append(collider.pose.copy())
         # one impulse row per collider from the start, so the state keeps its shape before
@@ -367,6 +389,15 @@ class MPMWorld:
         """Whether a step from a given state always gives the same bits (the CPU's slab
         scatter); the atomic scatter on CUDA sums in a run-dependent order."""
         return not self._atomic
+
+    @property
+    def num_envs(self) -> int:
+        """Number of envs (independent scenes) in this world: 1 + the largest env index given
+        to :meth:`add_link`, :meth:`add_group` or :meth:`add_collider`. Every env has its own
+        copy of the grid box; all step together, in the same kernel launches, with one
+        substep count (the smallest that every env's CFL bound allows)."""
+        envs = [g.env for g in self.groups] + self._link_env + self._col_env
+        return 1 + max(envs, default=0)
 
     @property
     def num_particles(self) -> int:
@@ -631,9 +662,13 @@ class MPMWorld:
             speed = max(speed, (np.linalg.norm(b[:3, 3] - a[:3, 3]) + ang * r) / dt)
         return speed
 
-    def step(self, dt: float) -> StepInfo:
+    def step(self, dt: float, min_substeps: int = 1) -> StepInfo:
         """Advance one control step of ``dt`` seconds; links and colliders move from
         their previous pose to the last one set. Returns a :class:`StepInfo`.
+
+        ``min_substeps``: take at least this many substeps (more than the CFL bound asks):
+        a single scene then steps exactly as it would inside a batch whose other envs
+        needed that many (the batched co-simulator's equivalence test).
 
         Raises:
             ConfigError: dt is not a positive finite number.
@@ -646,6 +681,8 @@ class MPMWorld:
         self._push()
         driver = self._driver_speed(float(dt))
         n_sub, dt_sub = self.plan_substeps(float(dt), driver)
+        if int(min_substeps) > n_sub and self._n_active:
+            n_sub, dt_sub = int(min_substeps), float(dt) / int(min_substeps)
         # particles farther than this from a collider cannot reach it within a substep
         self._reach = 2.0 * (self._vmax + driver) * dt_sub
         self._upload_consts()
@@ -654,13 +691,17 @@ class MPMWorld:
         d = self._dev
         twists = [_twist(a, b, float(dt)) for a, b in zip(self._link_prev, self._link_next)]
         if self._n_active:
+            # not in an env whose colliders were touched in the last step: there the jump would
+            # reach the object as a pseudo-mass impulse (a 62 g cube was kicked to 0.1 m/s);
+            # pseudo-inertia stays then
+            touching = np.zeros(self.num_envs, bool)
+            for e, J in zip(self._col_env, self._col_impulse):
+                touching[e] |= bool(np.any(J))
             change = np.zeros((max(len(twists), 1), 9), np.float32)
             for i, (new, old) in enumerate(zip(twists, self._link_twist)):
-                change[i] = np.concatenate([new - old, self._link_prev[i][:3, 3]])
-            # not after a step with collider contact: there the jump would reach the object as a
-            # pseudo-mass impulse (a 62 g cube was kicked to 0.1 m/s); pseudo-inertia stays then
-            touching = bool(np.any(self._col_impulse))
-            if np.any(change[:, :6]) and not touching and any(g.awake and g.quasi_static for g in self.groups):
+                if not touching[self._link_env[i]]:
+                    change[i] = np.concatenate([new - old, self._link_prev[i][:3, 3]])
+            if np.any(change[:, :6]) and any(g.awake and g.quasi_static for g in self.groups):
                 d["twist_change"].from_numpy(change)
                 K.follow_links(d["active"], self._n_active, d["v"], d["C"], d["x"], d["kind"], d["link"],
                                d["group"], d["group_qs"], d["twist_change"])
@@ -719,7 +760,7 @@ class MPMWorld:
         if ncell > s.max_grid_cells or n_slabs < 0:
             raise SimulationError(self._explode_message(np.array([ox, oy, oz]) + s.grid_margin,
                                                         np.array([ox + nx, oy + ny, oz + nz]) - s.grid_margin - 3))
-        need = ncell * (2 if self._two_fields else 1)
+        need = ncell * (2 if self._two_fields else 1) * self.num_envs
         if need > self._grid_cap:
             self._alloc_grid(int(min(need * 1.5, 2 * s.max_grid_cells)))
         return box
@@ -733,7 +774,8 @@ class MPMWorld:
 
     def _upload_counts(self) -> None:
         self._dev["counts"].from_numpy(np.array([len(self.link_names), len(self.groups), len(self.colliders),
-                                                 len(self._walls), self._n_active, self._n_kin], np.int32))
+                                                 len(self._walls), self._n_active, self._n_kin, self.num_envs],
+                                                np.int32))
 
     def _choose_patch(self) -> np.ndarray | None:
         """The active patch of this step (:mod:`~gausstac_maniskill.mpm.patch`): rewrites the
@@ -754,7 +796,7 @@ class MPMWorld:
             d["patch_cand"].from_numpy(np.resize(cand, n))
             rest_gap(d["patch_cand"], len(cand), d["X_rest"], d["link"], d["radius"], d["link_pose"],
                      len(self.colliders), d["col_pose"], d["col_kind"], d["col_prm"], d["sdf"], d["sdf_info"],
-                     d["patch_gap"])
+                     d["patch_gap"], d["group"], d["group_env"], d["col_env"])
             gap = d["patch_gap"].to_numpy()
             start = 0
             for i in gids:
@@ -829,11 +871,15 @@ class MPMWorld:
 
     def _upload_consts(self) -> None:
         """Scene constants of the kernels (kernels.DX ...): spacing, gravity, damping rate,
-        relaxation rate ζ of the quasi-static nodes (the largest of the awake groups), reach,
-        margin, friction between the two velocity fields."""
+        reach, margin, friction between the two velocity fields, bond mode; and per env the
+        relaxation rate ζ of its quasi-static nodes (the largest of its awake groups)."""
         s = self.settings
-        rate = max((g.relaxation for g in self.groups if g.awake and g.quasi_static), default=0.0)
-        self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, rate, self._reach, s.grid_margin,
+        rate = np.zeros(self.num_envs, np.float32)
+        for g in self.groups:
+            if g.awake and g.quasi_static:
+                rate[g.env] = max(rate[g.env], g.relaxation)
+        self._dev["env_relax"].from_numpy(rate)
+        self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, self._reach, s.grid_margin,
                                                  s.soft_friction, float(s.bond == "surface")], np.float32))
 
     def _alloc_grid(self, cap: int) -> None:
@@ -979,6 +1025,12 @@ class MPMWorld:
         upload("mat_table", material_table(self.materials, self.settings.pressure), ti.f32)
         upload("group_qs", np.array([int(g.quasi_static) for g in self.groups] or [0], np.int32), ti.i32)
         upload("group_field", np.array([g.field for g in self.groups] or [0], np.int32), ti.i32)
+        # the grid holds one box per env and awake field: copy = field · num_envs + env
+        B = self.num_envs
+        upload("group_env", np.array([g.env for g in self.groups] or [0], np.int32), ti.i32)
+        upload("group_copy", np.array([(g.field if self._two_fields else 0) * B + g.env for g in self.groups] or [0],
+                                      np.int32), ti.i32)
+        upload("col_env", np.array(self._col_env or [0], np.int32), ti.i32)
         walls = np.array(self._walls, np.float32).reshape(-1, 3)
         upload("walls", walls if len(walls) else np.zeros((1, 3), np.float32), ti.f32)
         # colliders
@@ -1012,9 +1064,10 @@ class MPMWorld:
         if "group_bind" not in d:
             upload("group_bind", np.tile(np.array([1.0, 0, 0, 0], np.float32), (1, 1)), ti.f32)
         d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
-        d["counts"] = ti.ndarray(ti.i32, shape=6)
+        d["counts"] = ti.ndarray(ti.i32, shape=7)
         self._upload_counts()
-        d["consts"] = ti.ndarray(ti.f32, shape=10)
+        d["consts"] = ti.ndarray(ti.f32, shape=9)
+        d["env_relax"] = ti.ndarray(ti.f32, shape=self.num_envs)
         self._upload_consts()
         self._build_packs()
         if self._grid_cap == 0:
@@ -1043,9 +1096,9 @@ class MPMWorld:
                                      "cursor", "order", "slab_start")},
                 link_poses=d["link_pose"], col_poses=d["col_pose"], kin=d["active_kin"], active_box=d["box"])
         pk["S"] = K.Scene(**{k: d[k] for k in (
-            "counts", "consts", "mat_table", "group_qs", "group_frames", "group_field", "link_frames", "walls",
-            "col_kind",
-            "col_prm", "col_frames", "col_mu", "col_sticky", "sdf", "sdf_info", "col_impulse")})
+            "counts", "consts", "mat_table", "group_qs", "group_frames", "group_field", "group_env", "group_copy",
+            "env_relax", "link_frames", "walls", "col_kind", "col_prm", "col_frames", "col_mu", "col_sticky", "sdf",
+            "sdf_info", "col_impulse", "col_env")})
         pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
 
     def _upload_poses(self) -> None:
@@ -1177,6 +1230,13 @@ def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale
     L = float(cKDTree(pts[kin]).query(dyn)[0].max())
     c_s = math.sqrt(material.mu / (material.density * scale))
     return (math.pi / 2.0) * c_s / max(L, 1e-9)
+
+
+def _env_index(env, where: str) -> int:
+    """``env`` as an env index (an int >= 0), or a ConfigError naming ``where``."""
+    if isinstance(env, bool) or not isinstance(env, (int, np.integer)) or env < 0:
+        raise ConfigError(f"{where}: env={env!r} must be an integer >= 0 (the env of a batched world)")
+    return int(env)
 
 
 def _angle(R: np.ndarray) -> float:
