@@ -35,6 +35,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench resolution --tasks GaussTac-PressCube-v1 --dx 2e-3 1.5e-3 1e-3
 	$(PY) -m gausstac_maniskill.bench resolution --tasks GaussTac-GraspSqueezeSponge-v1 --dx 2e-3 1.5e-3 --settle 5 --out out/bench_resolution_sponge
 	$(PY) -m gausstac_maniskill.bench hold
+	$(PY) -m gausstac_maniskill.bench batch
 
 clean:
 	rm -rf .venv out build *.egg-info

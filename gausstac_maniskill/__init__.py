@@ -19,7 +19,7 @@ import importlib
 __version__ = "0.1.0"
 
 #: Submodules and subpackages, imported on first attribute access.
-_SUBMODULES = ("agents", "assets", "backend", "bench", "cli", "collect", "config", "cosim", "demo", "errors",
+_SUBMODULES = ("agents", "assets", "backend", "batch", "bench", "cli", "collect", "config", "cosim", "demo", "errors",
                "experts", "mpm", "obs_wrappers", "pose", "render", "replay", "sensors", "splat", "tactile",
                "tasks", "transforms", "urdf")
 

@@ -64,14 +64,26 @@ class GaussTacSim:
             dx = 0.5 mm of the same mode (``bench pad --curve``, 2026-11-23): mesh +5.5 %
             (5 mm sphere) / −3.6 % (plate); particles +10.9 % / +6.3 %, and at dx = 0.5 mm the
             particle staircase still reads 12 % (sphere) / 4 % (plate) above the mesh surface.
+        world, env: build the scene as env ``env`` of a shared (batched) :class:`MPMWorld`
+            instead of a world of its own (:class:`~gausstac_maniskill.batch.BatchedCosim`
+            does this); its links and groups are named ``env{env}/<name>`` there. A scene in
+            a shared world does not step it (the batch does): use the batch's ``step``.
     """
 
     def __init__(self, pads: Sequence[PadSpec], link_poses: Mapping[str, np.ndarray], *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
-                 sleep_margin: float = 5e-3, pad_surface: str = "mesh"):
-        self.settings = settings or default_hand_settings()
+                 sleep_margin: float = 5e-3, pad_surface: str = "mesh", world: MPMWorld | None = None,
+                 env: int = 0):
         self.urdf = urdf or default_hand_urdf()
-        self.world = MPMWorld(self.settings)
+        if world is None:
+            self.settings = settings or default_hand_settings()
+            self.world = MPMWorld(self.settings)
+        else:
+            self.settings = world.settings
+            self.world = world
+        self.env = int(env)
+        self.shared = world is not None
+        self._prefix = f"env{self.env}/" if self.shared else ""
         self.sleep_margin = float(sleep_margin)
         if pad_surface not in ("particles", "mesh"):
             raise ConfigError(f"GaussTacSim(pad_surface={pad_surface!r}) must be 'particles' or 'mesh'")
@@ -89,11 +101,11 @@ class GaussTacSim:
                                   f"(given: {sorted(link_poses)})")
             pad = build_pad(spec, pad_mesh(spec, self.urdf), h, self.settings.dx)
             T = as_pose_matrix(link_poses[spec.link], f"link_poses[{spec.link!r}]")
-            if spec.link not in self.world.link_names:
-                self.world.add_link(spec.link, T)
+            if self._w(spec.link) not in self.world.link_names:
+                self.world.add_link(self._w(spec.link), T, env=self.env)
             world_pts = pad.rest @ T[:3, :3].T + T[:3, 3]
             # the bond surface lies ``thickness`` below the link surface, parallel to it
-            self.world.add_group(spec.name, world_pts, spec.material, link=spec.link,
+            self.world.add_group(self._w(spec.name), world_pts, spec.material, link=self._w(spec.link),
                                  kinematic=pad.kinematic, spacing=h,
                                  contact_radius=pad.contact_radius if pad_surface == "mesh" else None,
                                  bond_distance=spec.thickness - pad.depth, bond_normal=pad.normal @ T[:3, :3].T)
@@ -104,12 +116,21 @@ class GaussTacSim:
         self._awake = {name: True for name in self.pads}
         self._update_sleep()
 
+    def _w(self, name: str) -> str:
+        """The world's name of this scene's link or group ``name``."""
+        return self._prefix + name
+
+    def group(self, name: str):
+        """The world's :class:`~gausstac_maniskill.mpm.solver.Group` of pad or soft object
+        ``name`` (its particle rows ``start:stop`` in the world's arrays)."""
+        return self.world.group(self._w(name))
+
     # ------------------------------------------------------------------ objects
     def add_rigid_object(self, name: str, collider: Collider) -> None:
         """A rigid object (SDF collider) the pads can touch; move it with :meth:`set_object_pose`."""
         if name in self._objects or name in self._soft:
             raise ConfigError(f"object {name!r} already exists")
-        self._objects[name] = self.world.add_collider(collider)
+        self._objects[name] = self.world.add_collider(collider, env=self.env)
         self._update_sleep()
 
     def add_soft_object(self, name: str, positions, material: Material, **kwargs) -> None:
@@ -120,7 +141,9 @@ class GaussTacSim:
         if name in self._objects or name in self._soft or name in self.pads:
             raise ConfigError(f"object {name!r} already exists")
         kwargs.setdefault("field", 1)
-        self.world.add_group(name, positions, material, **kwargs)
+        if isinstance(kwargs.get("link"), str):
+            kwargs["link"] = self._w(kwargs["link"])
+        self.world.add_group(self._w(name), positions, material, env=self.env, **kwargs)
         self._soft[name] = name
         self._update_sleep()
 
@@ -142,7 +165,7 @@ class GaussTacSim:
         pads bound to hand link ``link`` passed to it during the last step: what objects
         pushed on them, through a massless layer (for two-way coupling of the hand; equal
         and opposite to the rigid objects' share of :meth:`object_wrench`)."""
-        return self.world.link_wrench(link)
+        return self.world.link_wrench(self._w(link))
 
     def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:
         """Per object that hand link ``link``'s pads touched in the last step, ``[7]``: the
@@ -151,7 +174,7 @@ class GaussTacSim:
         from its rest place, along its push). Keys: rigid object names; ``None`` for soft
         objects (the other velocity field). Objects not touched are left out; the values
         sum to :meth:`link_wrench`."""
-        rows = self.world.link_contacts(link)
+        rows = self.world.link_contacts(self._w(link))
         names = {i: n for n, i in self._objects.items()}
         return {names.get(i): r for i, r in enumerate(rows) if (i in names or i == len(rows) - 1) and np.any(r[:6])}
 
@@ -160,28 +183,41 @@ class GaussTacSim:
              object_poses: Mapping[str, np.ndarray] | None = None) -> dict[str, dict[str, torch.Tensor]]:
         """Advance ``dt`` seconds with the links moving to ``link_poses`` (name → 4x4,
         must include every pad link) and objects to ``object_poses``; return tactile maps."""
+        if self.shared:
+            raise ConfigError("GaussTacSim.step: this scene is one env of a shared world; step the batch "
+                              "(BatchedCosim.step), which steps every env in the same launches")
+        self.begin_step(link_poses, object_poses)
+        self.world.step(dt)
+        self.end_step()
+        return self.tactile()
+
+    def begin_step(self, link_poses: Mapping[str, np.ndarray],
+                   object_poses: Mapping[str, np.ndarray] | None = None) -> None:
+        """First half of :meth:`step`: set the link and object targets, wake or put pads
+        to sleep (the world is then stepped once for every scene in it)."""
         for spec in (p.spec for p in self.pads.values()):
             if spec.link not in link_poses:
                 raise ConfigError(f"step: link_poses has no pose for pad link {spec.link!r}")
         for link, T in link_poses.items():
             T = as_pose_matrix(T, f"link_poses[{link!r}]")
             self._link_pose[link] = T  # every link is kept: the renderer poses the whole hand
-            if link in self.world.link_names:
-                self.world.set_link_pose(link, T)
+            if self._w(link) in self.world.link_names:
+                self.world.set_link_pose(self._w(link), T)
         for name, T in (object_poses or {}).items():
             self.set_object_pose(name, T)
         self._update_sleep()
-        self.world.step(dt)
+
+    def end_step(self) -> None:
+        """Second half of :meth:`step`, after the world stepped: forget the last maps."""
         self._maps = {}
         self._posed = None
-        return self.tactile()
 
     def _update_sleep(self) -> None:
         """Wake pads near an object (collider or soft group), put the others to sleep."""
         soft_boxes = []
         if self._soft:
             for g in self._soft:
-                x = self.world.positions(g)
+                x = self.world.positions(self._w(g))
                 soft_boxes.append((x.min(0), x.max(0)))
         for name, pad in self.pads.items():
             T = self._link_pose[pad.spec.link]
@@ -194,16 +230,16 @@ class GaussTacSim:
                 d = float(np.linalg.norm(np.maximum(np.maximum(lo - c, c - hi), 0.0)))
                 near |= d - r < self.sleep_margin
             if not near and self._awake[name]:
-                x = self.world.positions(name).astype(np.float64)
+                x = self.world.positions(self._w(name)).astype(np.float64)
                 settled = self._relative_speed(name, x) * self.world.last_dt_ctrl < 0.2 * REST_TOLERANCE
                 if np.abs(self._displacement(name, x)).max() >= REST_TOLERANCE and not settled:
                     near = True  # still moving back: stay awake until the pad has relaxed
                 else:
                     # away from every object, the unloaded elastic solution is the rest shape:
                     # sleep exactly there (what remains is MPM's numerical plasticity)
-                    self.world.rest_group(name)
+                    self.world.rest_group(self._w(name))
             if near != self._awake[name]:
-                self.world.set_awake(name, near)
+                self.world.set_awake(self._w(name), near)
                 self._awake[name] = near
 
     def _relative_speed(self, name: str, x: np.ndarray) -> float:
@@ -211,16 +247,17 @@ class GaussTacSim:
         relative to its link's rigid motion (bound particles move with the link by definition;
         their finite-difference velocity carries float32 rounding of ~3e-5 m/s)."""
         pad = self.pads[name]
-        T, (v_o, w) = self.world.link_pose(pad.spec.link), self.world.link_twist(pad.spec.link)
+        link = self._w(pad.spec.link)
+        T, (v_o, w) = self.world.link_pose(link), self.world.link_twist(link)
         soft = ~pad.kinematic
         rigid = v_o + np.cross(w, x[soft] - T[:3, 3])
-        return float(np.linalg.norm(self.world.velocities(name)[soft] - rigid, axis=1).max())
+        return float(np.linalg.norm(self.world.velocities(self._w(name))[soft] - rigid, axis=1).max())
 
     def _displacement(self, name: str, x: np.ndarray) -> np.ndarray:
         """[N, 3] displacement [m] of pad ``name``'s particles (at world positions x [N, 3])
         from rest, in the link frame."""
         pad = self.pads[name]
-        T = self.world.link_pose(pad.spec.link)  # where the particles were last stepped to
+        T = self.world.link_pose(self._w(pad.spec.link))  # where the particles were last stepped to
         return (x - T[:3, 3]) @ T[:3, :3] - pad.rest
 
     # ------------------------------------------------------------------ rendering
@@ -281,21 +318,17 @@ class GaussTacSim:
         """``{pad: {"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N,
         "pressure": [H, W] Pa}}`` of the last step; a sleeping pad reads all zeros."""
         if not self._maps:
-            awake = any(self._awake.values())
-            x_all = self.world.positions() if awake else None
-            f_all = self.world.contact_forces() if awake else None
-            s_all = self.world.stresses() if awake else None
             for name, pad in self.pads.items():
-                g = self.world.group(name)
                 if not self._awake[name]:
                     lay = pad.spec.layout
                     z = torch.zeros(lay.rows, lay.cols)
                     self._maps[name] = {"depth": z, "shear": torch.zeros(lay.rows, lay.cols, 2),
                                         "force": z.clone(), "pressure": z.clone()}
                     continue
-                sl = slice(g.start, g.stop)
-                self._maps[name] = tactile_maps(pad, self._binning[name], x_all[sl],
-                                                self._link_pose[pad.spec.link], f_all[sl], s_all[sl])
+                g = self._w(name)  # only this pad's rows come back from the device
+                self._maps[name] = tactile_maps(pad, self._binning[name], self.world.positions(g),
+                                                self._link_pose[pad.spec.link], self.world.contact_forces(g),
+                                                self.world.stresses(g))
         return self._maps
 
     def pad_pressure_force(self, pad: str) -> float:
@@ -322,9 +355,9 @@ class GaussTacSim:
         p = self._pad(pad)
         if not self._awake[p.name]:
             return np.zeros(3)
-        grad_phi = (p.normal @ self.world.binding_rotation(p.name).T) / p.spec.thickness  # world at binding
+        grad_phi = (p.normal @ self.world.binding_rotation(self._w(p.name)).T) / p.spec.thickness  # world at binding
         grad_phi[p.kinematic] = 0.0
-        f = self.world.virtual_work_force(p.name, grad_phi)
+        f = self.world.virtual_work_force(self._w(p.name), grad_phi)
         R = self._link_pose[p.spec.link][:3, :3] @ p.sensor_frame[:3, :3]
         return R.T @ f
 
@@ -337,7 +370,8 @@ class GaussTacSim:
 
         A sleeping pad is not simulated; it is reported carried rigidly by its link."""
         name = self._pad(pad).name
-        return self._carried(name, self.world.positions(name), self.world.deformation_gradients(name))
+        g = self._w(name)
+        return self._carried(name, self.world.positions(g), self.world.deformation_gradients(g))
 
     def particles(self, index: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """World positions [P, 3] and F [P, 3, 3] of every particle of the world (pads, soft
@@ -349,7 +383,7 @@ class GaussTacSim:
             index = np.asarray(index)
             x, F = x[index], F[index]
         for name in self.pads:
-            g = self.world.group(name)
+            g = self.group(name)
             # the group's rows: all of [start, stop), or those of ``index`` in it (ascending)
             lo, hi = (g.start, g.stop) if index is None else np.searchsorted(index, (g.start, g.stop))
             if hi > lo:
@@ -357,14 +391,21 @@ class GaussTacSim:
         return x, F
 
     def _carried(self, name: str, x: np.ndarray, F: np.ndarray):
-        g = self.world.group(name)
+        g = self.group(name)
         if g.awake or g.sleep_pose is None:
             return x, F
         D = self._link_pose[self.pads[name].spec.link] @ np.linalg.inv(g.sleep_pose)
         return (x @ D[:3, :3].T + D[:3, 3]).astype(np.float32), (D[:3, :3] @ F).astype(np.float32)
 
+    def _own_world(self, what: str) -> None:
+        if self.shared:
+            raise ConfigError(f"GaussTacSim.{what}: this scene is env {self.env} of a shared (batched) world, "
+                              f"whose per-env state cannot be saved or restored yet; build it with a world of "
+                              f"its own (world=None)")
+
     def state_dict(self) -> dict:
         """Full state (MPM world, link poses, sleep flags); restore with :meth:`load_state_dict`."""
+        self._own_world("state_dict")
         return {"world": self.world.state_dict(), "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
                 "awake": dict(self._awake)}
 
@@ -372,6 +413,7 @@ class GaussTacSim:
         """The state of :meth:`state_dict` as a flat dict of fixed-shape numpy arrays
         (no ``None``, no nesting), so that several identical scenes stack along a batch
         axis — the form ManiSkill's ``get_state_dict`` and ``RecordEpisode`` store."""
+        self._own_world("flat_state")
         w = self.world.state_dict()
         out = {f"p_{k}": v for k, v in w["particles"].items()}
         n_groups = len(w["awake"])
@@ -422,6 +464,7 @@ class GaussTacSim:
 
     def load_state_dict(self, state: dict) -> None:
         """Restore a :meth:`state_dict` of a scene built the same way (bit-exact)."""
+        self._own_world("load_state_dict")
         self.world.load_state_dict(state["world"])
         self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
         self._awake = dict(state["awake"])

@@ -64,7 +64,7 @@ def particle_gaussians(sim) -> tuple[GaussianSet, np.ndarray]:
     h = sim.settings.particle_spacing
     pts, nrm, rgb, idx = [], [], [], []
     for name, pad in sim.pads.items():
-        g = sim.world.group(name)
+        g = sim.group(name)
         T = sim._link_pose[pad.spec.link]
         sel = np.flatnonzero(pad.surface)
         n = pad.normal[sel] @ T[:3, :3].T
@@ -73,7 +73,7 @@ def particle_gaussians(sim) -> tuple[GaussianSet, np.ndarray]:
         rgb.append(np.tile(PAD_RGB, (len(sel), 1)))
         idx.append(g.start + sel)
     for name in sim._soft:
-        g = sim.world.group(name)
+        g = sim.group(name)
         p = x0[g.start:g.stop]
         lo, hi = p.min(0), p.max(0)
         outer = np.any((p < lo + h) | (p > hi - h), axis=1)

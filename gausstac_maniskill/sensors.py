@@ -30,6 +30,7 @@ from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
 from mani_skill.sensors.camera import Camera, CameraConfig
 
 from .errors import ConfigError
+from .tactile.extract import stack_tactile
 
 __all__ = ["GaussianSplatCameraConfig", "GaussianSplatCamera", "TactileSensor", "TactileSensorConfig",
            "TACTILE_KEYS", "stack_tactile"]
@@ -258,13 +259,6 @@ class GaussianSplatCamera(Camera):
             out.update(super().get_obs(rgb=False, depth=False, position=position, segmentation=segmentation,
                                        normal=False, albedo=False))
         return out
-
-
-def stack_tactile(per_env: Sequence[dict], pads: Sequence[str], keys: Sequence[str], device=None) -> dict:
-    """Batch per-env maps ``[{pad: {key: [H, W(, 2)]}}]`` into ``{pad: {key: [B, H, W(, 2)]}}``
-    float32 tensors on ``device``."""
-    return {pad: {k: torch.stack([maps[pad][k] for maps in per_env]).float().to(device) for k in keys}
-            for pad in pads}
 
 
 @dataclass

@@ -25,6 +25,7 @@ BENCHMARKS = {
     "sponge": "gausstac_maniskill.bench.sponge",
     "resolution": "gausstac_maniskill.bench.resolution",
     "hold": "gausstac_maniskill.bench.hold",
+    "batch": "gausstac_maniskill.bench.batch",
 }
 
 

@@ -1,0 +1,121 @@
+"""BatchedCosim: B scenes (envs) of soft pads and objects in one MPM world.
+
+Every env is a :class:`~gausstac_maniskill.cosim.GaussTacSim` built into the same
+:class:`~gausstac_maniskill.mpm.MPMWorld` as env ``b``: its particles, links and colliders
+carry the env index, the grid holds one copy of the active box per env, and a particle
+touches only its own env's colliders. All envs advance in the same kernel launches, so the
+launches per control step do not grow with B (``tests/mpm/test_batch.py`` counts them).
+Envs sleep and wake per pad, as in a scene alone.
+
+Every env takes the same substeps: the number the most demanding env's CFL bound needs.
+An env then steps exactly as it would alone with that many substeps (to float rounding:
+the grid box and the order of the P2G sums may differ; the tests hold this).
+
+Data flows one way: link poses [B, L, 4, 4] (torch or numpy, world frame, m) →
+:meth:`BatchedCosim.step` → MPM → tactile maps ``{pad: {map: [B, H, W(, 2)]}}``.
+
+Not yet: saving or restoring one env's state out of the batch, and rendering a batch in
+one rasterizer call (each env's scene renders on its own, :attr:`BatchedCosim.scenes`).
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+import torch
+
+from .config import PadSpec, SolverSettings
+from .cosim import GaussTacSim, default_hand_settings
+from .errors import ConfigError
+from .mpm import MPMWorld
+from .mpm.colliders import Collider
+from .tactile import stack_tactile
+
+__all__ = ["BatchedCosim"]
+
+MAP_KEYS = ("depth", "shear", "force", "pressure")
+
+
+def _as_batch(poses, name: str) -> np.ndarray:
+    """``poses`` ([B, ..., 4, 4] tensor or array) as a float64 numpy array, in one copy."""
+    if isinstance(poses, torch.Tensor):
+        poses = poses.detach().cpu().double().numpy()
+    arr = np.asarray(poses, np.float64)
+    if arr.ndim < 3 or arr.shape[-2:] != (4, 4):
+        raise ConfigError(f"{name} must have shape [B, ..., 4, 4], got {list(arr.shape)}")
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{name} contains NaN or inf")
+    return arr
+
+
+class BatchedCosim:
+    """B co-simulated scenes in one MPM world (see the module docstring).
+
+    Args:
+        pads: pad descriptions, the same in every env.
+        link_names: the L links whose poses :meth:`step` receives (every pad link among them).
+        link_poses: [B, L, 4, 4] initial world poses [m] of those links; B is the env count.
+        urdf, settings, sleep_margin, pad_surface: as :class:`~gausstac_maniskill.cosim.GaussTacSim`.
+    """
+
+    def __init__(self, pads: Sequence[PadSpec], link_names: Sequence[str], link_poses, *,
+                 urdf: str | None = None, settings: SolverSettings | None = None,
+                 sleep_margin: float = 5e-3, pad_surface: str = "mesh"):
+        self.link_names = list(link_names)
+        P = _as_batch(link_poses, "BatchedCosim link_poses")
+        if P.ndim != 4 or P.shape[1] != len(self.link_names):
+            raise ConfigError(f"BatchedCosim link_poses must have shape [B, {len(self.link_names)}, 4, 4] "
+                              f"(one pose per link of link_names), got {list(P.shape)}")
+        self.world = MPMWorld(settings or default_hand_settings())
+        self.scenes = [GaussTacSim(pads, self._env_poses(P, b), urdf=urdf, world=self.world, env=b,
+                                   sleep_margin=sleep_margin, pad_surface=pad_surface)
+                       for b in range(P.shape[0])]
+        self.pad_names = [p.name for p in pads]
+
+    @property
+    def num_envs(self) -> int:
+        """B, the number of envs."""
+        return len(self.scenes)
+
+    def _env_poses(self, P: np.ndarray, b: int) -> dict[str, np.ndarray]:
+        return {n: P[b, i] for i, n in enumerate(self.link_names)}
+
+    def add_rigid_object(self, name: str, colliders: Sequence[Collider]) -> None:
+        """Rigid object ``name`` in every env: ``colliders[b]`` is env b's (its shape and
+        initial pose; the envs' objects may differ)."""
+        if len(colliders) != self.num_envs:
+            raise ConfigError(f"add_rigid_object({name!r}): {len(colliders)} colliders for {self.num_envs} envs")
+        for scene, col in zip(self.scenes, colliders):
+            scene.add_rigid_object(name, col)
+
+    def step(self, link_poses, dt: float, object_poses: Mapping[str, object] | None = None) -> dict:
+        """Advance every env ``dt`` seconds, its links moving to ``link_poses`` [B, L, 4, 4]
+        and its rigid objects to ``object_poses`` (name → [B, 4, 4]); returns :meth:`tactile`."""
+        P = _as_batch(link_poses, "BatchedCosim.step link_poses")
+        if P.shape[:2] != (self.num_envs, len(self.link_names)):
+            raise ConfigError(f"BatchedCosim.step link_poses must have shape [{self.num_envs}, "
+                              f"{len(self.link_names)}, 4, 4], got {list(P.shape)}")
+        objects = {k: _as_batch(v, f"object_poses[{k!r}]") for k, v in (object_poses or {}).items()}
+        for k, v in objects.items():
+            if v.shape != (self.num_envs, 4, 4):
+                raise ConfigError(f"object_poses[{k!r}] must have shape [{self.num_envs}, 4, 4], got {list(v.shape)}")
+        for b, scene in enumerate(self.scenes):
+            scene.begin_step(self._env_poses(P, b), {k: v[b] for k, v in objects.items()})
+        self.world.step(dt)
+        for scene in self.scenes:
+            scene.end_step()
+        return self.tactile()
+
+    def tactile(self, device=None) -> dict[str, dict[str, torch.Tensor]]:
+        """``{pad: {"depth": [B, H, W] m, "shear": [B, H, W, 2] m, "force": [B, H, W] N,
+        "pressure": [B, H, W] Pa}}`` of the last step (float32, on ``device``)."""
+        return stack_tactile([s.tactile() for s in self.scenes], self.pad_names, MAP_KEYS, device)
+
+    def object_wrench(self, name: str) -> np.ndarray:
+        """[B, 6] force [N] and torque [N·m] (about its origin) the pads exerted on rigid
+        object ``name`` in each env during the last step."""
+        return np.stack([np.concatenate(s.object_wrench(name)) for s in self.scenes])
+
+    def link_contacts(self, link: str) -> list[dict]:
+        """Per env, :meth:`GaussTacSim.link_contacts` of hand link ``link``."""
+        return [s.link_contacts(link) for s in self.scenes]

@@ -1,0 +1,111 @@
+"""BatchedCosim: three Allegro scenes in one MPM world against each scene alone (CPU).
+
+Guards the batched co-simulator's correctness: envs with different hand poses and
+contacts, overlapping in space, give the maps and wrenches each scene gives alone when
+stepped with the same substeps (the batch takes the largest any env needs).
+"""
+import numpy as np
+import pytest
+import torch
+
+from gausstac_maniskill.batch import BatchedCosim
+from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.mpm import Sphere
+from gausstac_maniskill.pose import MujocoPoseSource
+from gausstac_maniskill.tactile import allegro_pad_specs
+from gausstac_maniskill.transforms import make_pose
+
+INDEX = "link_3.0_tip"
+R = 6e-3
+STEPS, DT = 6, 0.02
+# Float32 rounding alone moves a scene's maps by this share of their largest value: a static
+# block 5 cm from the hand, which touches nothing and only widens the grid box (so the P2G
+# sums run in another order), changed the index pad's frictionless press by 1.1e-5 (depth),
+# 8.5e-4 (shear: its tangential motion is weakly held) and 3.0e-5 (force) (2026-11-24). The
+# batch must agree with each scene alone to within a small multiple of that.
+ROUNDING = {"depth": 1e-4, "shear": 2e-3, "force": 1e-4, "pressure": 1e-4}
+
+
+def _rot_z(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@pytest.fixture(scope="module")
+def setup():
+    src = MujocoPoseSource()
+    names = [s.link for s in allegro_pad_specs()]
+    base = src.link_poses(names)[0].double().numpy()  # [L, 4, 4]
+    # env 0: the hand as loaded; env 1: moved 1 mm and turned 0.2 rad (overlapping env 0),
+    # pressed deeper, with friction; env 2: its ball far away (every pad asleep)
+    moves = [np.eye(4), make_pose([0.001, 0.0, 0.0], _rot_z(0.2)), make_pose([0.0, 0.0005, 0.0])]
+    poses = np.stack([M @ base for M in moves])  # [B, L, 4, 4]
+    i = names.index(INDEX)
+    settings = default_hand_settings(dx=1.5e-3)
+    S = GaussTacSim(allegro_pad_specs(), dict(zip(names, base)), settings=settings).pads[INDEX].sensor_frame
+    envs = []  # per env: the ball's centre at step k (k = -1: 0.5 mm clear of the pad), friction
+    for b, (depth, mu) in enumerate([(0.6e-3, 0.0), (0.9e-3, 0.5), (None, 0.0)]):
+        W = poses[b, i] @ S
+        if depth is None:
+            centre = lambda k, W=W: make_pose(W[:3, 3] + W[:3, 2] * 0.05)  # noqa: E731
+        else:
+            centre = lambda k, W=W, d=depth: make_pose(  # noqa: E731
+                W[:3, 3] + W[:3, 2] * (R + 0.5e-3 - (d + 0.5e-3) * min(1.0, (k + 1) / 4)))
+        envs.append((centre, mu))
+    return names, poses, settings, envs
+
+
+def _balls(envs):
+    return [Sphere(radius=R, pose=centre(-1), friction=mu) for centre, mu in envs]
+
+
+def test_batched_envs_match_each_scene_alone(setup):
+    names, poses, settings, envs = setup
+    batch = BatchedCosim(allegro_pad_specs(), names, torch.as_tensor(poses), settings=settings)
+    batch.add_rigid_object("ball", _balls(envs))
+    substeps = []
+    for k in range(STEPS):
+        obj = {"ball": np.stack([centre(k) for centre, _ in envs])}
+        maps = batch.step(torch.as_tensor(poses), DT, obj)
+        substeps.append(batch.world.last_step.substeps)
+    assert maps[INDEX]["force"].shape[0] == 3 and maps[INDEX]["shear"].shape[-1] == 2
+    for b, (centre, mu) in enumerate(envs):
+        alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[b])), settings=settings)
+        alone.add_rigid_object("ball", Sphere(radius=R, pose=centre(-1), friction=mu))
+        for k in range(STEPS):
+            alone.begin_step(dict(zip(names, poses[b])), {"ball": centre(k)})
+            alone.world.step(DT, min_substeps=substeps[k])
+            alone.end_step()
+            info = alone.world.last_step
+            assert info.substeps == substeps[k] or info.active_particles == 0  # asleep: nothing to step
+        a = alone.tactile()
+        for pad in batch.pad_names:
+            assert batch.scenes[b].is_awake(pad) == alone.is_awake(pad), (b, pad)
+            for key in ("depth", "shear", "force", "pressure"):
+                ref = a[pad][key]
+                tol = ROUNDING[key] * float(ref.abs().max()) + 1e-12
+                np.testing.assert_allclose(maps[pad][key][b].numpy(), ref.numpy(), rtol=0, atol=tol,
+                                           err_msg=f"env {b} pad {pad} {key}")
+        w_alone = np.concatenate(alone.object_wrench("ball"))
+        np.testing.assert_allclose(batch.object_wrench("ball")[b], w_alone, rtol=0,
+                                   atol=1e-4 * np.abs(w_alone).max() + 1e-12)
+    # real, different contacts in envs 0 and 1; none in env 2
+    f = [float(maps[INDEX]["force"][b].sum()) for b in range(3)]
+    assert f[0] > 0.05 and f[1] > 1.3 * f[0] and f[2] == 0.0
+    assert not any(batch.scenes[2].is_awake(p) for p in batch.pad_names)
+
+
+def test_bad_batch_input_is_named(setup):
+    names, poses, settings, _ = setup
+    with pytest.raises(ConfigError, match=r"link_poses must have shape \[B, 4, 4, 4\]"):
+        BatchedCosim(allegro_pad_specs(), names, poses[:, :2], settings=settings)
+    batch = BatchedCosim(allegro_pad_specs(), names, poses[:1], settings=settings)
+    bad = poses[:1].copy()
+    bad[0, 0, 0, 3] = np.nan
+    with pytest.raises(ConfigError, match="link_poses contains NaN"):
+        batch.step(bad, DT)
+    with pytest.raises(ConfigError, match="step the batch"):
+        batch.scenes[0].step(dict(zip(names, poses[0])), DT)
+    with pytest.raises(ConfigError, match="cannot be saved or restored yet"):
+        batch.scenes[0].flat_state()
