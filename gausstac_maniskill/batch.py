@@ -14,8 +14,11 @@ the grid box and the order of the P2G sums may differ; the tests hold this).
 Data flows one way: link poses [B, L, 4, 4] (torch or numpy, world frame, m) →
 :meth:`BatchedCosim.step` → MPM → tactile maps ``{pad: {map: [B, H, W(, 2)]}}``.
 
-Not yet: saving or restoring one env's state out of the batch, and rendering a batch in
-one rasterizer call (each env's scene renders on its own, :attr:`BatchedCosim.scenes`).
+Each env's state saves and restores on its own (``scenes[b].flat_state()`` /
+``load_flat_state``), in the layout of the same scene alone: a state moves between a batch
+and a single scene. :class:`~gausstac_maniskill.tasks.GaussTacEnv` builds one batch for all
+its envs. Not yet: rendering a batch in one rasterizer call (each env's scene renders on its
+own, :attr:`BatchedCosim.scenes`).
 """
 from __future__ import annotations
 

@@ -126,6 +126,17 @@ class GaussTacSim:
         return self.world.group(self._w(name))
 
     # ------------------------------------------------------------------ objects
+    def add_link(self, name: str, pose) -> None:
+        """A rigid link of this scene that is not a pad link (e.g. the holder a soft object
+        is glued to: ``add_soft_object(..., link=name)``); ``pose`` 4x4 [m]."""
+        self.world.add_link(self._w(name), pose, env=self.env)
+
+    def object_positions(self, name: str) -> np.ndarray:
+        """[N, 3] world positions [m] of soft object ``name``'s particles after the last step."""
+        if name not in self._soft:
+            raise ConfigError(f"unknown soft object {name!r}; soft objects: {sorted(self._soft)}")
+        return self.world.positions(self._w(name))
+
     def add_rigid_object(self, name: str, collider: Collider) -> None:
         """A rigid object (SDF collider) the pads can touch; move it with :meth:`set_object_pose`."""
         if name in self._objects or name in self._soft:
@@ -397,24 +408,23 @@ class GaussTacSim:
         D = self._link_pose[self.pads[name].spec.link] @ np.linalg.inv(g.sleep_pose)
         return (x @ D[:3, :3].T + D[:3, 3]).astype(np.float32), (D[:3, :3] @ F).astype(np.float32)
 
-    def _own_world(self, what: str) -> None:
-        if self.shared:
-            raise ConfigError(f"GaussTacSim.{what}: this scene is env {self.env} of a shared (batched) world, "
-                              f"whose per-env state cannot be saved or restored yet; build it with a world of "
-                              f"its own (world=None)")
+    @property
+    def _state_env(self):
+        """The env whose part of the world is this scene's state (None: the whole world)."""
+        return self.env if self.shared else None
 
     def state_dict(self) -> dict:
-        """Full state (MPM world, link poses, sleep flags); restore with :meth:`load_state_dict`."""
-        self._own_world("state_dict")
-        return {"world": self.world.state_dict(), "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
+        """Full state (MPM world, link poses, sleep flags); restore with :meth:`load_state_dict`.
+        In a shared world, this env's part only: it loads into the same scene alone and back."""
+        return {"world": self.world.state_dict(env=self._state_env),
+                "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
                 "awake": dict(self._awake)}
 
     def flat_state(self) -> dict[str, np.ndarray]:
         """The state of :meth:`state_dict` as a flat dict of fixed-shape numpy arrays
         (no ``None``, no nesting), so that several identical scenes stack along a batch
         axis — the form ManiSkill's ``get_state_dict`` and ``RecordEpisode`` store."""
-        self._own_world("flat_state")
-        w = self.world.state_dict()
+        w = self.world.state_dict(env=self._state_env)
         out = {f"p_{k}": v for k, v in w["particles"].items()}
         n_groups = len(w["awake"])
         sleep = np.tile(np.eye(4), (n_groups, 1, 1))
@@ -464,8 +474,7 @@ class GaussTacSim:
 
     def load_state_dict(self, state: dict) -> None:
         """Restore a :meth:`state_dict` of a scene built the same way (bit-exact)."""
-        self._own_world("load_state_dict")
-        self.world.load_state_dict(state["world"])
+        self.world.load_state_dict(state["world"], env=self._state_env)
         self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
         self._awake = dict(state["awake"])
         self._maps = {}

@@ -5,7 +5,8 @@ One control step (``env.step``)::
     SAPIEN physics (sim_freq substeps; the MPM reaction wrench of the last step is
     applied to two-way-coupled rigid objects)
       -> link poses [B, L, 4, 4] and object poses
-      -> GaussTacSim.step per env (pads, soft objects; dt = control timestep)
+      -> BatchedCosim.step: every env's pads and soft objects in one MPM world, one set of
+         kernel launches (dt = control timestep)
       -> evaluate / reward (may read the tactile maps)
       -> obs: agent/extra (+ sensor_data from the GaussianSplatCamera) + obs["tactile"]
 
@@ -63,6 +64,7 @@ from mani_skill.utils.structs.pose import Pose
 from .. import backend
 from ..agents.base import GaussTacAgent, load_hand_gaussians
 from ..config import Material
+from ..batch import BatchedCosim
 from ..cosim import GaussTacSim, default_hand_settings
 from ..errors import AssetWarning, ConfigError
 from ..mpm.colliders import Collider
@@ -438,11 +440,6 @@ class GaussTacEnv(BaseEnv):
         self.scene.human_render_cameras = self._human_render_cameras
 
     # ------------------------------------------------------------------ co-simulation
-    def _link_pose_dicts(self) -> list[dict[str, np.ndarray]]:
-        P = self._pose_source.all_link_poses().detach().cpu().double().numpy()
-        names = self._pose_source.link_names
-        return [{n: P[b, i] for i, n in enumerate(names)} for b in range(P.shape[0])]
-
     def _object_poses(self) -> list[dict[str, np.ndarray]]:
         out = [dict() for _ in range(self.num_envs)]
         for name, obj in self._rigid.items():
@@ -451,35 +448,42 @@ class GaussTacEnv(BaseEnv):
                 out[b][name] = T[b]
         return out
 
+    def _link_poses(self) -> torch.Tensor:
+        """[B, L, 4, 4] world poses of every link of the pose source (``link_names`` order)."""
+        return self._pose_source.all_link_poses().detach()
+
     def _build_cosims(self) -> None:
-        """(Re)build one co-simulator per env at rest, from the current SAPIEN poses."""
+        """(Re)build the co-simulator at rest, from the current SAPIEN poses: one MPM world
+        holding every env (:class:`~gausstac_maniskill.batch.BatchedCosim`); ``self.cosims[b]``
+        is env b's scene in it."""
         t0 = time.perf_counter()
         agent = type(self.agent)
         hand = None
         if agent.gausstac_gaussians:
             hand = load_hand_gaussians(agent.gausstac_gaussians)
-        links, objects = self._link_pose_dicts(), self._object_poses()
-        self.cosims = []
-        for b in range(self.num_envs):
-            sim = GaussTacSim(agent.gausstac_pads, links[b], urdf=agent.pad_urdf(), settings=self.mpm_settings,
-                              sleep_margin=self.mpm_sleep_margin)
-            for name, obj in self._rigid.items():
-                col = copy.deepcopy(obj.collider)
+        objects = self._object_poses()
+        self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
+                                   urdf=agent.pad_urdf(), settings=self.mpm_settings,
+                                   sleep_margin=self.mpm_sleep_margin)
+        self.cosims = self._batch.scenes
+        for name, obj in self._rigid.items():
+            cols = [copy.deepcopy(obj.collider) for _ in range(self.num_envs)]
+            for b, col in enumerate(cols):
                 col.pose = objects[b][name]
-                sim.add_rigid_object(name, col)
+            self._batch.add_rigid_object(name, cols)
+        for b, sim in enumerate(self.cosims):
             for name, soft in self._soft.items():
                 x, kin, anchor = soft.particles(b)
                 link = None
                 if kin is not None and np.any(kin):
                     link = f"{name}_anchor"
-                    sim.world.add_link(link, np.eye(4) if anchor is None else np.asarray(anchor, np.float64))
+                    sim.add_link(link, np.eye(4) if anchor is None else np.asarray(anchor, np.float64))
                 sim.add_soft_object(name, x, soft.material, link=link, kinematic=kin)
             if hand is not None or any(o.gaussians is not None for o in self._rigid.values()) or self._soft \
                     or self._scene_layer is not None or self._captured:
                 sim.attach_gaussians(hand[0] if hand else None, hand[1] if hand else (),
                                      {n: o.gaussians for n, o in self._rigid.items() if o.gaussians is not None})
                 self._add_captured_layers(sim, b)
-            self.cosims.append(sim)
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
         self._contacts = np.zeros((self.num_envs, len(self._pad_links) if self.pad_reaction else 0,
                                    len(self._rigid) + 1, 7))
@@ -539,9 +543,9 @@ class GaussTacEnv(BaseEnv):
     def _step_mpm(self, dt: float) -> None:
         self._ensure_cosims()
         t0 = time.perf_counter()
-        links, objects = self._link_pose_dicts(), self._object_poses()
+        objects = self._object_poses()
+        self._batch.step(self._link_poses(), dt, {n: np.stack([o[n] for o in objects]) for n in self._rigid})
         for b, sim in enumerate(self.cosims):
-            sim.step(links[b], dt, objects[b])
             for name in self._wrench:
                 self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
             if self._contacts.shape[1]:

@@ -126,7 +126,7 @@ class GraspSqueezeSpongeEnv(PinchGraspEnv):
     def sponge_positions(self, b: int) -> np.ndarray:
         """[N, 3] world positions [m] of env ``b``'s sponge particles."""
         self._ensure_cosims()
-        return self.cosims[b].world.positions("sponge")
+        return self.cosims[b].object_positions("sponge")
 
     def object_centre(self) -> torch.Tensor:
         """[B, 3] the sponge's centre of mass [m] (its particles' mean: equal masses)."""

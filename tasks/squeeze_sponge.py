@@ -93,7 +93,7 @@ class SqueezeSpongeEnv(IndexCubeTask):
         for b, sim in enumerate(self.cosims):
             rest = self._sponge_rest[b]
             F = self.face_frame[b].numpy()
-            x = sim.world.positions("sponge")
+            x = sim.object_positions("sponge")
             local = (x - F[:3, 3]) @ F[:3, :3]
             front = rest[:, 2] < h
             near = front & (np.linalg.norm(rest[:, :2] - apex[b, :2].numpy(), axis=1) < self.probe_radius)

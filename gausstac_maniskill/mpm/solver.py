@@ -1115,58 +1115,106 @@ class MPMWorld:
         self._dev["col_pose"].from_numpy(rows(self._col_prev, [c.pose for c in self.colliders]))
 
     # ------------------------------------------------------------------ state
-    def state_dict(self) -> dict:
-        """The full mutable state (numpy arrays and scalars); see :meth:`load_state_dict`."""
+    def _env_parts(self, env: int | None):
+        """Indices of what env ``env`` owns (all with None): particle rows, groups, links,
+        colliders; a clear error for an env this world does not have."""
+        if env is None:
+            return (np.arange(self._n), np.arange(len(self.groups)), np.arange(len(self.link_names)),
+                    np.arange(len(self.colliders)))
+        env = _env_index(env, "state of env")
+        if env >= self.num_envs:
+            raise ConfigError(f"env={env}: this world has {self.num_envs} env(s)")
+        groups = np.array([i for i, g in enumerate(self.groups) if g.env == env], int)
+        rows = np.concatenate([np.arange(self.groups[i].start, self.groups[i].stop) for i in groups]) \
+            if len(groups) else np.zeros(0, int)
+        return (rows, groups, np.flatnonzero(np.array(self._link_env, int) == env),
+                np.flatnonzero(np.array(self._col_env, int) == env))
+
+    def state_dict(self, env: int | None = None) -> dict:
+        """The mutable state (numpy arrays and scalars); see :meth:`load_state_dict`. With
+        ``env``, only that env's part (its groups' particles, its links and colliders, in
+        world order): the same layout as the state of a world that holds that scene alone,
+        so a batched env's state loads into a single scene and back. The scalars (time, step
+        count, largest speed) are the world's."""
         self._pull()
+        rows, groups, links, cols = self._env_parts(env)
+        G = [self.groups[i] for i in groups]
+        pair_cols = np.append(cols, len(self.colliders))  # its colliders, then the other field
+        parts = {k: self._host[k][rows].copy() for k in _STATE_FIELDS} if len(rows) else {}
+        if parts and env is not None:  # collider ids of contacts and anchors: the env's own numbering
+            local = np.full(len(self.colliders), -1)
+            local[cols] = np.arange(len(cols))
+            _renumber(parts, local)
         return {
-            "particles": {k: self._host[k].copy() for k in _STATE_FIELDS} if self._n else {},
-            "link_prev": np.array(self._link_prev).copy(), "link_next": np.array(self._link_next).copy(),
-            "link_twist": np.array(self._link_twist).reshape(-1, 6).copy(),
-            "collider_prev": np.array(self._col_prev).copy(),
-            "collider_pose": np.array([c.pose for c in self.colliders]).copy(),
-            "awake": np.array([g.awake for g in self.groups]),
-            "patch_state": np.array([g.patch_state for g in self.groups], np.int32),
-            "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in self.groups],
+            "particles": parts,
+            "link_prev": np.array([self._link_prev[i] for i in links]).copy(),
+            "link_next": np.array([self._link_next[i] for i in links]).copy(),
+            "link_twist": np.array([self._link_twist[i] for i in links]).reshape(-1, 6).copy(),
+            "collider_prev": np.array([self._col_prev[i] for i in cols]).copy(),
+            "collider_pose": np.array([self.colliders[i].pose for i in cols]).copy(),
+            "awake": np.array([g.awake for g in G]),
+            "patch_state": np.array([g.patch_state for g in G], np.int32),
+            "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in G],
             "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
-            "collider_impulse": self._col_impulse.copy(), "last_dt_ctrl": self._last_dt_ctrl,
-            "pair_impulse": self._pair_impulse.copy(),
+            "collider_impulse": self._col_impulse[cols].copy(), "last_dt_ctrl": self._last_dt_ctrl,
+            "pair_impulse": self._pair_impulse[links][:, pair_cols].copy(),
         }
 
-    def load_state_dict(self, state: dict) -> None:
-        """Restore a state from :meth:`state_dict` of a world built the same way (bit-exact)."""
+    def load_state_dict(self, state: dict, env: int | None = None) -> None:
+        """Restore a state from :meth:`state_dict` of a world built the same way (bit-exact);
+        with ``env``, only that env's part (from ``state_dict(env=...)`` of this or another
+        world, or from the whole state of a world that holds that scene alone). The world's
+        clock (time, step count, last step) comes from the state; with other envs in the
+        world, its largest speed (for the next substep count) becomes the larger of the two."""
+        rows, groups, links, cols = self._env_parts(env)
         parts = dict(state.get("particles", {}))
-        if self._n and "anchor" not in parts and "x" in parts:  # saved before anchors: nothing sticks
+        if len(rows) and "anchor" not in parts and "x" in parts:  # saved before anchors: nothing sticks
             parts["anchor"] = no_anchor(len(parts["x"]))
-        for k in _STATE_FIELDS if self._n else ():
-            if k not in parts or parts[k].shape != self._host[k].shape:
+        for k in _STATE_FIELDS if len(rows) else ():
+            need = (len(rows),) + self._host[k].shape[1:]
+            if k not in parts or parts[k].shape != need:
                 got = None if k not in parts else parts[k].shape
                 raise ConfigError(f"load_state_dict: particles[{k!r}] has shape {got}, "
-                                  f"this world needs {self._host[k].shape}")
-        if len(state["awake"]) != len(self.groups):
-            raise ConfigError(f"load_state_dict: state has {len(state['awake'])} groups, world has {len(self.groups)}")
+                                  f"this world{'' if env is None else f's env {env}'} needs {need}")
+        if len(state["awake"]) != len(groups):
+            raise ConfigError(f"load_state_dict: state has {len(state['awake'])} groups, world"
+                              f"{'' if env is None else f' env {env}'} has {len(groups)}")
         self._pull()
-        for k in _STATE_FIELDS if self._n else ():
-            self._host[k] = parts[k].copy()
-        self._link_prev = [T.copy() for T in state["link_prev"]]
-        self._link_next = [T.copy() for T in state["link_next"]]
+        if len(rows) and env is not None:
+            parts = {k: v.copy() for k, v in parts.items()}
+            _renumber(parts, cols)  # the env's collider numbering back to the world's
+        for k in _STATE_FIELDS if len(rows) else ():
+            self._host[k][rows] = parts[k]
         twist = state.get("link_twist")
-        self._link_twist = [np.zeros(6) for _ in self._link_prev] if twist is None else [w.copy() for w in twist]
-        self._col_prev = [T.copy() for T in state["collider_prev"]]
-        for c, T in zip(self.colliders, state["collider_pose"]):
-            c.pose = T.copy()
-        for g, a, sp in zip(self.groups, state["awake"], state["sleep_pose"]):
-            g.awake, g.sleep_pose = bool(a), (None if sp is None else sp.copy())
-        for g, ps in zip(self.groups, state.get("patch_state", np.zeros(len(self.groups), np.int32))):
-            g.patch_state = int(ps)
+        for n, i in enumerate(links):
+            self._link_prev[i] = state["link_prev"][n].copy()
+            self._link_next[i] = state["link_next"][n].copy()
+            self._link_twist[i] = np.zeros(6) if twist is None else twist[n].copy()
+        for n, i in enumerate(cols):
+            self._col_prev[i] = state["collider_prev"][n].copy()
+            self.colliders[i].pose = state["collider_pose"][n].copy()
+        patch = state.get("patch_state", np.zeros(len(groups), np.int32))
+        for n, i in enumerate(groups):
+            g, sp = self.groups[i], state["sleep_pose"][n]
+            g.awake, g.sleep_pose, g.patch_state = bool(state["awake"][n]), (None if sp is None else sp.copy()), \
+                int(patch[n])
+        # one clock for all envs: every env's state carries the world's scalars, so restoring
+        # all of them is exact; the largest speed (the next substep count) is kept at least
+        # where it was while other envs share the world
         self.time, self.step_count = float(state["time"]), int(state["step_count"])
-        self._vmax = float(state["vmax"])
-        self._col_impulse = state["collider_impulse"].copy()
-        self._pair_impulse = np.zeros((len(self.link_names), len(self.colliders) + 1, 7))
-        if "pair_impulse" in state:
-            self._pair_impulse[...] = state["pair_impulse"]
-        elif state.get("link_impulse") is not None:  # saved before per-object pairs: the link's sum, no depth
-            self._pair_impulse[:, -1, :6] = np.asarray(state["link_impulse"], np.float64).reshape(-1, 6)
         self._last_dt_ctrl = float(state["last_dt_ctrl"])
+        one = env is None or self.num_envs == 1
+        self._vmax = float(state["vmax"]) if one else max(self._vmax, float(state["vmax"]))
+        if len(self._col_impulse) != len(self.colliders):
+            self._col_impulse = np.zeros((len(self.colliders), 6))
+        self._col_impulse[cols] = state["collider_impulse"]
+        pair_cols = np.append(cols, len(self.colliders))
+        if "pair_impulse" in state:
+            self._pair_impulse[np.ix_(links, pair_cols)] = state["pair_impulse"]
+        else:
+            self._pair_impulse[np.ix_(links, pair_cols)] = 0.0
+            if state.get("link_impulse") is not None:  # saved before per-object pairs: the link's sum, no depth
+                self._pair_impulse[links, -1, :6] = np.asarray(state["link_impulse"], np.float64).reshape(-1, 6)
         self._dirty = True
 
 
@@ -1230,6 +1278,17 @@ def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale
     L = float(cKDTree(pts[kin]).query(dyn)[0].max())
     c_s = math.sqrt(material.mu / (material.density * scale))
     return (math.pi / 2.0) * c_s / max(L, 1e-9)
+
+
+def _renumber(parts: dict, new_id: np.ndarray) -> None:
+    """Map the collider ids (>= 0) of the particles' contacts and static-friction anchors
+    through ``new_id`` (old id -> new id), in place."""
+    cid = parts["contact_id"]
+    hit = cid >= 0
+    cid[hit] = new_id[cid[hit]]
+    a = parts["anchor"][:, 3]
+    stuck = a >= 0
+    a[stuck] = new_id[a[stuck].astype(int)]
 
 
 def _env_index(env, where: str) -> int:
