@@ -137,6 +137,12 @@ class GaussTacSim:
             raise ConfigError(f"unknown soft object {name!r}; soft objects: {sorted(self._soft)}")
         return self.world.positions(self._w(name))
 
+    def object_deformation_gradients(self, name: str) -> np.ndarray:
+        """[N, 3, 3] deformation gradients of soft object ``name``'s particles after the last step."""
+        if name not in self._soft:
+            raise ConfigError(f"unknown soft object {name!r}; soft objects: {sorted(self._soft)}")
+        return self.world.deformation_gradients(self._w(name))
+
     def add_rigid_object(self, name: str, collider: Collider) -> None:
         """A rigid object (SDF collider) the pads can touch; move it with :meth:`set_object_pose`."""
         if name in self._objects or name in self._soft:

@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
                     lambda info, action: substeps.append(u.cosims[0].world.last_step.substeps))
                 sim = u.cosims[0]
                 c = float(info["compression"][0])
-                J = np.linalg.det(sim.world.deformation_gradients("sponge"))
+                J = np.linalg.det(sim.object_deformation_gradients("sponge"))
                 f = (u.touch_force("thumb").item(), u.touch_force("index").item())
                 lines.append(f"| {dx * 1e3:g} | {nu:g} | {len(J)} | {'-' if done is None else done} "
                              f"| {c:.3f} / {float(u.target_compression[0]):.3f} "

@@ -28,7 +28,7 @@ def _make(**kw):
 
 def _volume_ratio(sim) -> np.ndarray:
     """det F of every sponge particle: its current over its rest volume."""
-    return np.linalg.det(sim.world.deformation_gradients("sponge"))
+    return np.linalg.det(sim.object_deformation_gradients("sponge"))
 
 
 def test_expert_lifts_and_squeezes_the_sponge():
@@ -62,7 +62,7 @@ def test_expert_lifts_and_squeezes_the_sponge():
         assert abs(J.mean() - 1) <= (1 - 2 * nu) * c, (J.mean(), c)
         # the camera draws the sponge with soft Gaussians on its surface particles, which take
         # Sigma = F Sigma0 F^T: the squeezed faces are deformed
-        g = sim.world.group("sponge")
+        g = sim.group("sponge")
         idx = sim._scene.particle_index
         on_sponge = idx[(idx >= g.start) & (idx < g.stop)]
         assert len(on_sponge) > 0
