@@ -4,7 +4,7 @@ Every env is a :class:`~gausstac_maniskill.cosim.GaussTacSim` built into the sam
 :class:`~gausstac_maniskill.mpm.MPMWorld` as env ``b``: its particles, links and colliders
 carry the env index, the grid holds one copy of the active box per env, and a particle
 touches only its own env's colliders. All envs advance in the same kernel launches, so the
-launches per control step do not grow with B (``tests/mpm/test_batch.py`` counts them).
+launches per control step do not grow with B (``tests/mpm/test_envs.py`` counts them).
 Envs sleep and wake per pad, as in a scene alone.
 
 Every env takes the same substeps: the number the most demanding env's CFL bound needs.
@@ -94,6 +94,11 @@ class BatchedCosim:
     def step(self, link_poses, dt: float, object_poses: Mapping[str, object] | None = None) -> dict:
         """Advance every env ``dt`` seconds, its links moving to ``link_poses`` [B, L, 4, 4]
         and its rigid objects to ``object_poses`` (name → [B, 4, 4]); returns :meth:`tactile`."""
+        self.advance(link_poses, dt, object_poses)
+        return self.tactile()
+
+    def advance(self, link_poses, dt: float, object_poses: Mapping[str, object] | None = None) -> None:
+        """:meth:`step` without building the maps (a caller that reads them later, or not at all)."""
         P = _as_batch(link_poses, "BatchedCosim.step link_poses")
         if P.shape[:2] != (self.num_envs, len(self.link_names)):
             raise ConfigError(f"BatchedCosim.step link_poses must have shape [{self.num_envs}, "
@@ -107,7 +112,6 @@ class BatchedCosim:
         self.world.step(dt)
         for scene in self.scenes:
             scene.end_step()
-        return self.tactile()
 
     def tactile(self, device=None) -> dict[str, dict[str, torch.Tensor]]:
         """``{pad: {"depth": [B, H, W] m, "shear": [B, H, W, 2] m, "force": [B, H, W] N,

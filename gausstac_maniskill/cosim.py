@@ -101,7 +101,7 @@ class GaussTacSim:
                                   f"(given: {sorted(link_poses)})")
             pad = build_pad(spec, pad_mesh(spec, self.urdf), h, self.settings.dx)
             T = as_pose_matrix(link_poses[spec.link], f"link_poses[{spec.link!r}]")
-            if self._w(spec.link) not in self.world.link_names:
+            if not self.world.has_link(self._w(spec.link)):
                 self.world.add_link(self._w(spec.link), T, env=self.env)
             world_pts = pad.rest @ T[:3, :3].T + T[:3, 3]
             # the bond surface lies ``thickness`` below the link surface, parallel to it
@@ -133,15 +133,17 @@ class GaussTacSim:
 
     def object_positions(self, name: str) -> np.ndarray:
         """[N, 3] world positions [m] of soft object ``name``'s particles after the last step."""
-        if name not in self._soft:
-            raise ConfigError(f"unknown soft object {name!r}; soft objects: {sorted(self._soft)}")
-        return self.world.positions(self._w(name))
+        return self.world.positions(self._soft_group(name))
 
     def object_deformation_gradients(self, name: str) -> np.ndarray:
         """[N, 3, 3] deformation gradients of soft object ``name``'s particles after the last step."""
+        return self.world.deformation_gradients(self._soft_group(name))
+
+    def _soft_group(self, name: str) -> str:
+        """The world's group name of soft object ``name`` (clear error if there is none)."""
         if name not in self._soft:
             raise ConfigError(f"unknown soft object {name!r}; soft objects: {sorted(self._soft)}")
-        return self.world.deformation_gradients(self._w(name))
+        return self._w(name)
 
     def add_rigid_object(self, name: str, collider: Collider) -> None:
         """A rigid object (SDF collider) the pads can touch; move it with :meth:`set_object_pose`."""
@@ -218,7 +220,7 @@ class GaussTacSim:
         for link, T in link_poses.items():
             T = as_pose_matrix(T, f"link_poses[{link!r}]")
             self._link_pose[link] = T  # every link is kept: the renderer poses the whole hand
-            if self._w(link) in self.world.link_names:
+            if self.world.has_link(self._w(link)):
                 self.world.set_link_pose(self._w(link), T)
         for name, T in (object_poses or {}).items():
             self.set_object_pose(name, T)

@@ -544,7 +544,7 @@ class GaussTacEnv(BaseEnv):
         self._ensure_cosims()
         t0 = time.perf_counter()
         objects = self._object_poses()
-        self._batch.step(self._link_poses(), dt, {n: np.stack([o[n] for o in objects]) for n in self._rigid})
+        self._batch.advance(self._link_poses(), dt, {n: np.stack([o[n] for o in objects]) for n in self._rigid})
         for b, sim in enumerate(self.cosims):
             for name in self._wrench:
                 self._wrench[name][b] = np.concatenate(sim.object_wrench(name))

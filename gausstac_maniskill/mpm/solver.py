@@ -151,6 +151,9 @@ class MPMWorld:
         self._link_next: list[np.ndarray] = []  # pose at its end (last set)
         self._link_twist: list[np.ndarray] = []  # (v_origin, ω) [m/s, rad/s] of the last step
         self._link_env: list[int] = []
+        self._link_at: dict[str, int] = {}  # link name -> index
+        self._group_at: dict[str, int] = {}  # group name -> index
+        self._num_envs = 1
         self.colliders: list[Collider] = []
         self._col_env: list[int] = []
         self._col_prev: list[np.ndarray] = []
@@ -182,10 +185,11 @@ class MPMWorld:
     def add_link(self, name: str, pose, env: int = 0) -> int:
         """Register a rigid link that kinematic particles can bind to, in env ``env`` of a
         batched world (see :attr:`num_envs`); returns its index."""
-        if name in self.link_names:
+        if name in self._link_at:
             raise ConfigError(f"link {name!r} is already registered")
         T = as_pose_matrix(pose, f"pose of link {name!r}")
-        self._link_env.append(_env_index(env, f"add_link({name!r})"))
+        self._link_env.append(self._note_env(env, f"add_link({name!r})"))
+        self._link_at[name] = len(self.link_names)
         self.link_names.append(name)
         self._link_prev.append(T.copy())
         self._link_next.append(T.copy())
@@ -200,9 +204,13 @@ class MPMWorld:
             if not 0 <= link < len(self.link_names):
                 raise ConfigError(f"link index {link} out of range (have {len(self.link_names)} links)")
             return int(link)
-        if link not in self.link_names:
+        if link not in self._link_at:
             raise ConfigError(f"unknown link {link!r}; registered links: {self.link_names}")
-        return self.link_names.index(link)
+        return self._link_at[link]
+
+    def has_link(self, name: str) -> bool:
+        """Whether a link called ``name`` is registered."""
+        return name in self._link_at
 
     def add_group(self, name: str, positions, material: Material, *, link=None, kinematic=None,
                   velocity=None, particle_volume: float | None = None,
@@ -253,7 +261,7 @@ class MPMWorld:
                 and touch only their own env's colliders, yet all envs step in the same
                 kernel launches (:attr:`num_envs`).
         """
-        if any(g.name == name for g in self.groups):
+        if name in self._group_at:
             raise ConfigError(f"group {name!r} already exists")
         if field not in (0, 1) or isinstance(field, bool):
             raise ConfigError(f"add_group({name!r}): field={field!r} must be 0 or 1")
@@ -277,7 +285,7 @@ class MPMWorld:
             lidx = self.link_index(link)
         if env is None:
             env = self._link_env[lidx] if lidx >= 0 else 0
-        env = _env_index(env, f"add_group({name!r})")
+        env = self._note_env(env, f"add_group({name!r})")
         if lidx >= 0 and self._link_env[lidx] != env:
             raise ConfigError(f"add_group({name!r}): env={env} but its link {self.link_names[lidx]!r} is in env "
                               f"{self._link_env[lidx]}")
@@ -344,6 +352,7 @@ class MPMWorld:
             [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])
         group = Group(name, self._n, n, material, lidx, int(kin.sum()), h, bool(quasi_static), scale, relax,
                       int(field), env=env)
+        self._group_at[name] = len(self.groups)
         self.groups.append(group)
         self._n += n
         self._dirty = True
@@ -355,7 +364,7 @@ class MPMWorld:
         if not isinstance(collider, Collider) or type(collider) is Collider:
             raise ConfigError(f"add_collider expects a Sphere, Box, Capsule, HalfSpace or MeshCollider, "
                               f"got {type(collider).__name__}")
-        self._col_env.append(_env_index(env, "add_collider"))
+        self._col_env.append(self._note_env(env, "add_collider"))
         self.colliders.append(collider)
         self._col_prev.append(collider.pose.copy())
         # one impulse row per collider from the start, so the state keeps its shape before
@@ -379,10 +388,9 @@ class MPMWorld:
     # ------------------------------------------------------------------ queries
     def group(self, name: str) -> Group:
         """The group called ``name`` (clear error if unknown)."""
-        for g in self.groups:
-            if g.name == name:
-                return g
-        raise ConfigError(f"unknown group {name!r}; groups: {[g.name for g in self.groups]}")
+        if name not in self._group_at:
+            raise ConfigError(f"unknown group {name!r}; groups: {[g.name for g in self.groups]}")
+        return self.groups[self._group_at[name]]
 
     @property
     def bit_reproducible(self) -> bool:
@@ -396,8 +404,13 @@ class MPMWorld:
         to :meth:`add_link`, :meth:`add_group` or :meth:`add_collider`. Every env has its own
         copy of the grid box; all step together, in the same kernel launches, with one
         substep count (the smallest that every env's CFL bound allows)."""
-        envs = [g.env for g in self.groups] + self._link_env + self._col_env
-        return 1 + max(envs, default=0)
+        return self._num_envs
+
+    def _note_env(self, env, where: str) -> int:
+        """``env`` checked (:func:`_env_index`) and counted in :attr:`num_envs`."""
+        env = _env_index(env, where)
+        self._num_envs = max(self._num_envs, env + 1)
+        return env
 
     @property
     def num_particles(self) -> int:
@@ -463,7 +476,7 @@ class MPMWorld:
         """World rotation (3x3) of a group's link when the group was added: the frame its
         deformation gradients are measured from (identity for a group without a link)."""
         self._pull()
-        return quat_to_matrix(self._host["group_bind"][self.groups.index(self.group(group))].astype(np.float64))
+        return quat_to_matrix(self._host["group_bind"][self._group_at[self.group(group).name]].astype(np.float64))
 
     def kinematic_mask(self, group: str | None = None) -> np.ndarray:
         """[N] bool: which particles are kinematic."""
@@ -1205,8 +1218,6 @@ class MPMWorld:
         self._last_dt_ctrl = float(state["last_dt_ctrl"])
         one = env is None or self.num_envs == 1
         self._vmax = float(state["vmax"]) if one else max(self._vmax, float(state["vmax"]))
-        if len(self._col_impulse) != len(self.colliders):
-            self._col_impulse = np.zeros((len(self.colliders), 6))
         self._col_impulse[cols] = state["collider_impulse"]
         pair_cols = np.append(cols, len(self.colliders))
         if "pair_impulse" in state:
