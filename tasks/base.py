@@ -752,11 +752,15 @@ def _load_scene_capture(scene_ply, scene_pose, camera: str):
 
 
 def _check_num_envs(num_envs, sim_backend) -> None:
-    """``ConfigError`` for ``num_envs > 1`` where ManiSkill would simulate on the CPU (it runs
-    one env per process there, and says only "failed to find device cuda")."""
+    """``ConfigError`` for what ManiSkill or SAPIEN would refuse with a bare error: ``num_envs
+    > 1`` where ManiSkill simulates on the CPU (it runs one env per process there, and says
+    only "failed to find device cuda"), a GPU backend without CUDA, and a GPU backend whose
+    PhysX GPU library SAPIEN cannot fetch (a ``requests`` ConnectionError from deep inside)."""
     if not isinstance(num_envs, int) or isinstance(num_envs, bool) or num_envs < 1:
         raise ConfigError(f"num_envs={num_envs!r} must be a positive integer")
-    on_cpu = sim_backend in ("physx_cpu", "cpu") or (sim_backend == "auto" and not torch.cuda.is_available())
+    name = str(sim_backend).split(":")[0]  # "physx_cuda:1" names a device
+    cuda = torch.cuda.is_available()
+    on_cpu = name in ("physx_cpu", "cpu") or (name == "auto" and (num_envs == 1 or not cuda))
     if num_envs > 1 and on_cpu:
         raise ConfigError(
             f"num_envs={num_envs} with sim_backend={sim_backend!r}: ManiSkill simulates several envs in one "
@@ -764,6 +768,35 @@ def _check_num_envs(num_envs, sim_backend) -> None:
             "Use gymnasium.vector.AsyncVectorEnv over gym.make(..., num_envs=1), or, to record demonstrations, "
             "`python -m gausstac_maniskill.collect <env_id> --num-procs N` (add --ray [ADDRESS] to spread the "
             "workers over a Ray cluster)")
+    if on_cpu or name not in ("physx_cuda", "cuda", "gpu", "auto"):
+        return  # ManiSkill names a backend it does not know itself
+    if not cuda:
+        raise ConfigError(f"sim_backend={sim_backend!r} needs an NVIDIA GPU with CUDA, and torch sees none here "
+                          "(torch.cuda.is_available() is False); use sim_backend='physx_cpu' with num_envs=1")
+    _enable_physx_gpu(sim_backend)
+
+
+def _enable_physx_gpu(sim_backend) -> None:
+    """Load SAPIEN's PhysX GPU library now, so that a failure names the file. SAPIEN fetches
+    it from GitHub into ``~/.sapien/physx/<version>/`` on first use (measured 2026-11-24:
+    on a machine without internet this is a ConnectionError inside ``gym.make``)."""
+    from pathlib import Path
+
+    import sapien.physx
+
+    if sapien.physx.is_gpu_enabled():
+        return
+    version = sapien.physx.version()
+    folder = Path.home() / ".sapien" / "physx" / version
+    try:
+        sapien.physx.enable_gpu()
+    except Exception as err:  # noqa: BLE001 - any failure here: the library is missing or broken
+        raise ConfigError(
+            f"sim_backend={sim_backend!r}: SAPIEN could not load its PhysX GPU library "
+            f"{folder / 'libPhysXGpu_64.so'} ({type(err).__name__}: {str(err).splitlines()[0][:200]}). SAPIEN "
+            f"downloads it on first use from https://github.com/sapien-sim/physx-precompiled/releases/download/"
+            f"{version}/linux-so.zip; on a machine without internet, download that file elsewhere and unzip it "
+            f"into {folder}") from err
 
 
 def _apply_wrench(entity, w: np.ndarray) -> None:

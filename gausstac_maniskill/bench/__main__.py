@@ -26,6 +26,7 @@ BENCHMARKS = {
     "resolution": "gausstac_maniskill.bench.resolution",
     "hold": "gausstac_maniskill.bench.hold",
     "batch": "gausstac_maniskill.bench.batch",
+    "scale": "gausstac_maniskill.bench.scale",
 }
 
 

@@ -109,6 +109,29 @@ def test_several_envs_on_the_cpu_name_the_ways_that_work(sim_backend):
         gym.make("GaussTac-Gesture-v1", num_envs=0, sim_backend=sim_backend, obs_mode="state_dict")
 
 
+@pytest.mark.skipif(torch.cuda.is_available(), reason="the machine has CUDA")
+def test_gpu_backend_without_cuda_is_a_clear_error():
+    """ManiSkill's own error here is "failed to find device cuda"."""
+    with pytest.raises(ConfigError, match=r"physx_cuda.*needs an NVIDIA GPU.*physx_cpu"):
+        gym.make("GaussTac-Gesture-v1", num_envs=1, sim_backend="physx_cuda", obs_mode="state_dict")
+
+
+def test_missing_physx_gpu_library_names_the_file(monkeypatch):
+    """Where SAPIEN cannot fetch its PhysX GPU library (no internet; seen on a GPU machine,
+    2026-11-24), the error names the file, the URL and the folder, before ManiSkill starts.
+    CUDA and the download are stubbed: this runs the check, not SAPIEN's GPU."""
+    import sapien.physx
+
+    def offline():
+        raise ConnectionError("Failed to resolve 'github.com'")
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(sapien.physx, "is_gpu_enabled", lambda: False)
+    monkeypatch.setattr(sapien.physx, "enable_gpu", offline)
+    with pytest.raises(ConfigError, match=r"libPhysXGpu_64\.so.*ConnectionError.*linux-so\.zip.*unzip it into"):
+        gym.make("GaussTac-Gesture-v1", num_envs=2, sim_backend="physx_cuda", obs_mode="state_dict")
+
+
 def test_non_gausstac_robot_is_refused():
     with pytest.raises(ConfigError, match="has no GaussTac pads"):
         _make("GaussTac-Gesture-v1", robot_uids="allegro_hand_right")

@@ -1,0 +1,127 @@
+"""``python -m gausstac_maniskill.bench scale`` — env-steps per second of GaussTac tasks with
+``num_envs = B`` on one simulator (``physx_cuda``), and where the step's time goes.
+
+For each task (``--tasks``), obs mode (``--obs``: ``state_dict`` carries the tactile maps,
+``rgb`` adds the splat camera) and env count B (``--envs``): ``gym.make(task, num_envs=B,
+sim_backend=..., obs_mode=..., control_mode="pd_joint_pos")`` at the product's defaults
+(MPM dx = 1 mm, 128×128 splat camera), ``reset(seed=0)``, the task's scripted expert acting
+for every env. The first ``--warmup`` steps (Taichi compiles its kernels, the splat camera
+takes its background) are not timed; then up to ``--steps`` control steps, or as many as
+fit in ``--budget`` seconds.
+
+Prints per run: the build time (``gym.make`` + reset, compiling included), ms per control
+step and its split from ``GaussTacEnv.step_timing`` (``physics``: SAPIEN and ManiSkill,
+``mpm``: the co-simulator with its pose upload, ``tactile``: the maps and their copy into the
+observation, ``render``: the cameras), env-steps/s = B / step time, and the part that limits
+it. A run that fails prints its error instead of a row; the others go on. The table is also
+written to ``--out``/scale.md and scale.json.
+
+``num_envs > 1`` needs ``sim_backend='physx_cuda'`` (an NVIDIA GPU). On a CPU machine,
+``--backend physx_cpu --envs 1`` runs the same code path for one env.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+import traceback
+
+from . import STEP_PARTS, cli, write_report
+
+TASKS = ("GaussTac-PressCube-v1", "GaussTac-SqueezeSponge-v1")
+PARTS = ("physics", "mpm", "tactile", "render")
+
+
+def run(env_id: str, num_envs: int, obs_mode: str, sim_backend: str, steps: int, warmup: int,
+        budget: float) -> dict:
+    """One run (see the module docstring): build time [s], timed steps, mean ms per part."""
+    import gymnasium as gym
+    import numpy as np
+
+    from ..experts import make_expert
+
+    t0 = time.perf_counter()
+    env = gym.make(env_id, num_envs=num_envs, obs_mode=obs_mode, sim_backend=sim_backend,
+                   control_mode="pd_joint_pos")
+    try:
+        obs, _ = env.reset(seed=0)
+        base = env.unwrapped
+        expert = make_expert(env)
+        expert.reset()
+        build = time.perf_counter() - t0
+        rows, info = [], {}
+        t_start = None
+        for k in range(warmup + steps):
+            obs, _, _, _, info = env.step(expert.act(obs))
+            if k < warmup:
+                continue
+            rows.append({p: base.step_timing.get(p, 0.0) for p in STEP_PARTS})
+            t_start = t_start or time.perf_counter()
+            if time.perf_counter() - t_start > budget:
+                break
+        worlds = {id(s.world): s.world for s in base.cosims}
+        particles = sum(w.last_step.active_particles for w in worlds.values() if w.last_step is not None)
+        out = {p: 1e3 * float(np.mean([r[p] for r in rows])) for p in STEP_PARTS}
+        success = info.get("success")
+        out.update(build=build, steps=len(rows), particles=particles,
+                   success=None if success is None else float(success.float().mean()))
+        return out
+    finally:
+        env.close()
+
+
+def _row(env_id, obs_mode, B, r) -> str:
+    if "error" in r:
+        return f"| {env_id} | {obs_mode} | {B} | failed: {r['error']} |"
+    limit = max(PARTS, key=lambda p: r[p])
+    succ = "-" if r["success"] is None else f"{r['success']:.2f}"
+    return (f"| {env_id} | {obs_mode} | {B} | {r['build']:.0f} | {r['particles']} | {r['steps']} | "
+            f"{r['total']:.0f} | {r['physics']:.0f} | {r['mpm']:.0f} | {r['tactile']:.0f} | {r['render']:.0f} | "
+            f"**{B / r['total'] * 1e3:.1f}** | {limit} | {succ} |")
+
+
+HEADER = ("| task | obs | B | build [s] | active particles | timed steps | step [ms] | physics | MPM | tactile | "
+          "render | env-steps/s | limited by | success (last step) |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = cli("scale", __doc__)
+    ap.add_argument("--tasks", nargs="+", default=list(TASKS), metavar="ENV_ID")
+    ap.add_argument("--envs", type=int, nargs="+", default=[1, 16, 64, 256], help="env counts B")
+    ap.add_argument("--obs", nargs="+", default=["state_dict", "rgb"], help="obs modes")
+    ap.add_argument("--backend", default="physx_cuda", help="ManiSkill sim_backend (default: physx_cuda)")
+    ap.add_argument("--steps", type=int, default=10, help="timed control steps per run, at most")
+    ap.add_argument("--warmup", type=int, default=2, help="untimed control steps first")
+    ap.add_argument("--budget", type=float, default=30.0, help="seconds of timed steps per run, at most")
+    ap.add_argument("--out", default="out/bench_scale")
+    args = ap.parse_args(argv)
+    import platform
+
+    from .. import backend
+
+    arch = backend.ensure_init()
+    import torch
+
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no CUDA device"
+    print(f"[bench scale] Taichi {arch}, ManiSkill {args.backend}, {gpu}, {platform.machine()} "
+          f"{os.cpu_count()} cores", flush=True)
+    print(HEADER, flush=True)
+    results = []
+    for env_id in args.tasks:
+        for B in args.envs:  # small B first: a run cut short still leaves every obs mode's small rows
+            for obs_mode in args.obs:
+                try:
+                    r = run(env_id, B, obs_mode, args.backend, args.steps, args.warmup, args.budget)
+                except Exception as err:  # noqa: BLE001 - a failed run is reported, the others go on
+                    traceback.print_exc()
+                    r = {"error": f"{type(err).__name__}: {str(err).splitlines()[0][:160] if str(err) else ''}"}
+                results.append(dict(task=env_id, obs=obs_mode, num_envs=B, **r))
+                print(_row(env_id, obs_mode, B, r), flush=True)
+    text = f"Taichi {arch}, ManiSkill {args.backend}, {gpu}\n\n{HEADER}\n" + "\n".join(
+        _row(r["task"], r["obs"], r["num_envs"], r) for r in results)
+    print("\n" + text)
+    write_report(args.out, "scale.md", text)
+    with open(os.path.join(args.out, "scale.json"), "w") as f:
+        json.dump(results, f, indent=1)
+    return 0
