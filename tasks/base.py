@@ -187,7 +187,7 @@ class GaussTacEnv(BaseEnv):
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
                  pad_reaction: bool = False, **kwargs):
         backend.ensure_init()
-        _check_num_envs(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
+        _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
         self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
@@ -440,13 +440,10 @@ class GaussTacEnv(BaseEnv):
         self.scene.human_render_cameras = self._human_render_cameras
 
     # ------------------------------------------------------------------ co-simulation
-    def _object_poses(self) -> list[dict[str, np.ndarray]]:
-        out = [dict() for _ in range(self.num_envs)]
-        for name, obj in self._rigid.items():
-            T = vec7_to_matrix(obj.actor.pose.raw_pose).detach().cpu().double().numpy()
-            for b in range(self.num_envs):
-                out[b][name] = T[b]
-        return out
+    def _object_poses(self) -> dict[str, np.ndarray]:
+        """``{name: [B, 4, 4]}`` world poses [m] of the MPM rigid objects' actors."""
+        return {name: vec7_to_matrix(obj.actor.pose.raw_pose).detach().cpu().double().numpy()
+                for name, obj in self._rigid.items()}
 
     def _link_poses(self) -> torch.Tensor:
         """[B, L, 4, 4] world poses of every link of the pose source (``link_names`` order)."""
@@ -469,7 +466,7 @@ class GaussTacEnv(BaseEnv):
         for name, obj in self._rigid.items():
             cols = [copy.deepcopy(obj.collider) for _ in range(self.num_envs)]
             for b, col in enumerate(cols):
-                col.pose = objects[b][name]
+                col.pose = objects[name][b]
             self._batch.add_rigid_object(name, cols)
         for b, sim in enumerate(self.cosims):
             for name, soft in self._soft.items():
@@ -543,8 +540,7 @@ class GaussTacEnv(BaseEnv):
     def _step_mpm(self, dt: float) -> None:
         self._ensure_cosims()
         t0 = time.perf_counter()
-        objects = self._object_poses()
-        self._batch.advance(self._link_poses(), dt, {n: np.stack([o[n] for o in objects]) for n in self._rigid})
+        self._batch.advance(self._link_poses(), dt, self._object_poses())
         for b, sim in enumerate(self.cosims):
             for name in self._wrench:
                 self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
@@ -751,7 +747,7 @@ def _load_scene_capture(scene_ply, scene_pose, camera: str):
     return load_capture(scene_ply, Similarity.coerce(scene_pose, "scene_pose"))
 
 
-def _check_num_envs(num_envs, sim_backend) -> None:
+def _check_sim_backend(num_envs, sim_backend) -> None:
     """``ConfigError`` for what ManiSkill or SAPIEN would refuse with a bare error: ``num_envs
     > 1`` where ManiSkill simulates on the CPU (it runs one env per process there, and says
     only "failed to find device cuda"), a GPU backend without CUDA, and a GPU backend whose

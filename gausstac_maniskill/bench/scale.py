@@ -26,17 +26,16 @@ import os
 import time
 import traceback
 
-from . import STEP_PARTS, cli, write_report
+from . import STEP_PARTS, cli, step_split_ms, write_report
 
 TASKS = ("GaussTac-PressCube-v1", "GaussTac-SqueezeSponge-v1")
-PARTS = ("physics", "mpm", "tactile", "render")
+PARTS = STEP_PARTS[:-1]  # without the total
 
 
 def run(env_id: str, num_envs: int, obs_mode: str, sim_backend: str, steps: int, warmup: int,
         budget: float) -> dict:
     """One run (see the module docstring): build time [s], timed steps, mean ms per part."""
     import gymnasium as gym
-    import numpy as np
 
     from ..experts import make_expert
 
@@ -55,13 +54,13 @@ def run(env_id: str, num_envs: int, obs_mode: str, sim_backend: str, steps: int,
             obs, _, _, _, info = env.step(expert.act(obs))
             if k < warmup:
                 continue
-            rows.append({p: base.step_timing.get(p, 0.0) for p in STEP_PARTS})
+            rows.append(dict(base.step_timing))
             t_start = t_start or time.perf_counter()
             if time.perf_counter() - t_start > budget:
                 break
         worlds = {id(s.world): s.world for s in base.cosims}
         particles = sum(w.last_step.active_particles for w in worlds.values() if w.last_step is not None)
-        out = {p: 1e3 * float(np.mean([r[p] for r in rows])) for p in STEP_PARTS}
+        out = step_split_ms(rows)
         success = info.get("success")
         out.update(build=build, steps=len(rows), particles=particles,
                    success=None if success is None else float(success.float().mean()))

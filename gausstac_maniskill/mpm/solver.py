@@ -476,7 +476,8 @@ class MPMWorld:
         """World rotation (3x3) of a group's link when the group was added: the frame its
         deformation gradients are measured from (identity for a group without a link)."""
         self._pull()
-        return quat_to_matrix(self._host["group_bind"][self._group_at[self.group(group).name]].astype(np.float64))
+        self.group(group)  # clear error if unknown
+        return quat_to_matrix(self._host["group_bind"][self._group_at[group]].astype(np.float64))
 
     def kinematic_mask(self, group: str | None = None) -> np.ndarray:
         """[N] bool: which particles are kinematic."""

@@ -91,8 +91,7 @@ def _sources():
 FUNCS, KERNELS = _sources()
 
 
-@pytest.mark.parametrize("module,kernel", [(m, k) for m, k in KERNELS], ids=[f"{m.split('.')[-1]}.{k.name}"
-                                                                              for m, k in KERNELS])
+@pytest.mark.parametrize("module,kernel", KERNELS, ids=[f"{m.split('.')[-1]}.{k.name}" for m, k in KERNELS])
 def test_no_kernel_loop_is_serialised_by_a_runtime_branch(module, kernel):
     walker = _Walker(FUNCS)
     walker.body(kernel.body, [kernel.name], False)
