@@ -72,7 +72,7 @@ from ..pose.sapien_source import SapienPoseSource
 from ..transforms import vec7_to_matrix
 from ..render import RigidLayer
 from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
-                       TactileSensorConfig, stack_tactile)
+                       TactileSensorConfig)
 from .contact_spring import ObjectSpring
 from .joint_contact import JointContact
 
@@ -241,6 +241,13 @@ class GaussTacEnv(BaseEnv):
     def pad_reaction(self) -> bool:
         """Whether the pads' reaction acts on their links (see ``pad_coupling``)."""
         return self.pad_coupling is not None
+
+    @property
+    def mpm_world(self):
+        """The one :class:`~gausstac_maniskill.mpm.MPMWorld` that holds every env's pads and
+        objects (rebuilt after a reset or reconfiguration)."""
+        self._ensure_cosims()
+        return self._batch.world
 
     @property
     def _default_sim_config(self):
@@ -662,8 +669,7 @@ class GaussTacEnv(BaseEnv):
     def tactile(self) -> dict:
         """``{pad: {"depth", "shear", "force", "pressure"}}`` batched [B, ...] of the last step."""
         self._ensure_cosims()
-        per_env = [sim.tactile() for sim in self.cosims]
-        return stack_tactile(per_env, self.pad_names, ("depth", "shear", "force", "pressure"), self.device)
+        return self._batch.tactile(self.device)
 
     def pad_force(self, pad: str) -> torch.Tensor:
         """[B] total normal contact force [N] on ``pad`` (sum of its force map)."""

@@ -96,8 +96,7 @@ class _Run:
         if self.k == 1 and hasattr(self.cam, "background_renders"):
             self.pictures = self.cam.background_renders
         self.obs, _, _, _, self.info = self.env.step(self.expert.act(self.obs))
-        worlds = {id(s.world): s.world for s in self.base.cosims}  # one world holds every env
-        self.particles = max(self.particles, sum(g.count for w in worlds.values() for g in w.groups if g.awake))
+        self.particles = max(self.particles, sum(g.count for g in self.base.mpm_world.groups if g.awake))
         if self.k > 0:
             self.rows.append({p: self.base.step_timing[p] for p in PARTS + ("total",)})
         if self.success_at is None and "success" in self.info and bool(self.info["success"][0]):

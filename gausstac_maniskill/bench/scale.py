@@ -58,8 +58,8 @@ def run(env_id: str, num_envs: int, obs_mode: str, sim_backend: str, steps: int,
             t_start = t_start or time.perf_counter()
             if time.perf_counter() - t_start > budget:
                 break
-        worlds = {id(s.world): s.world for s in base.cosims}
-        particles = sum(w.last_step.active_particles for w in worlds.values() if w.last_step is not None)
+        last = base.mpm_world.last_step
+        particles = 0 if last is None else last.active_particles
         out = step_split_ms(rows)
         success = info.get("success")
         out.update(build=build, steps=len(rows), particles=particles,
