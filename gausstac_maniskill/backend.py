@@ -7,6 +7,19 @@ without CUDA, which is why we never pass ``ti.gpu``).
 
 The architecture can also be chosen with the environment variable
 ``GAUSSTAC_ARCH`` (same values), which ``ensure_init()`` reads.
+
+Compile time. Taichi compiles each variant of a kernel on its first launch and keeps it in
+its offline cache (``~/.cache/taichi``), so only a machine's first run pays. Two of
+Taichi's whole-kernel passes cost most of that on our substep kernel: its CFG optimisation
+(store forwarding and dead stores across the kernel) and its whole-kernel common
+subexpression elimination (``opt_level >= 1``). Measured on the 2-core CPU machine, a block
+pad pressed by a sphere (first step of a fresh cache; then the mean of 10 steps, three
+alternating runs; ``BENCHMARKS.md``, "Compile time"): Taichi's defaults compile in 156-173 s
+and step in 600-703 ms; without the CFG pass, 68-97 s and 583-623 ms; with ``opt_level=0``
+as well, 13 s and 674-693 ms. LLVM's own optimisation does the rest. The CFG pass is off
+here (no step-time cost measured); ``GAUSSTAC_FAST_COMPILE=1`` also sets ``opt_level=0``
+(about 13 % slower steps), which ``make test`` uses. Results differ from the default
+build's by float rounding only (8 nm in the pad's positions after 4 steps).
 """
 from __future__ import annotations
 
@@ -58,6 +71,18 @@ def _profiler_on() -> bool:
     return os.environ.get("GAUSSTAC_KERNEL_PROFILER", "") == "1"
 
 
+def _compile_options() -> dict:
+    """Taichi compiler settings of every ``ti.init`` here (module docstring, "Compile time").
+
+    The offline cache may hold 1 GiB: Taichi's 100 MB default evicts a quarter of its
+    entries at exit once full, and the test suite's variants alone take 34 MB per build."""
+    opts = dict(offline_cache=True, offline_cache_max_size_of_files=1 << 30, cfg_optimization=False,
+                kernel_profiler=_profiler_on())
+    if os.environ.get("GAUSSTAC_FAST_COMPILE", "") == "1":
+        opts["opt_level"] = 0
+    return opts
+
+
 def _try_cuda(seed: int, debug: bool) -> bool:
     """Initialise Taichi on CUDA; return False (and reset) if CUDA does not work.
 
@@ -66,7 +91,7 @@ def _try_cuda(seed: int, debug: bool) -> bool:
     reset and start again: one start-up line per process."""
     try:
         ti.init(arch=ti.cuda, default_fp=ti.f32, random_seed=seed, debug=debug,
-                log_level=ti.ERROR, offline_cache=True, enable_fallback=False, kernel_profiler=_profiler_on())
+                log_level=ti.ERROR, enable_fallback=False, **_compile_options())
     except Exception:  # noqa: BLE001 - any CUDA failure means "no CUDA here"
         ti.reset()
         return False
@@ -116,8 +141,7 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
                     "arch='auto', or set GAUSSTAC_ARCH=cpu.")
         cpu_threads = int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
         kwargs = dict(arch=ti.cpu, default_fp=ti.f32, random_seed=seed, debug=debug,
-                      log_level=ti.WARN, offline_cache=True,
-                      kernel_profiler=_profiler_on())
+                      log_level=ti.WARN, **_compile_options())
         if cpu_threads:
             kwargs["cpu_max_num_threads"] = cpu_threads
         ti.init(**kwargs)

@@ -1,4 +1,5 @@
-"""The single ti.init: arch names, and CUDA asked for on a machine without it."""
+"""The single ti.init: arch names, CUDA asked for on a machine without it, compile switches."""
+import os
 import subprocess
 import sys
 
@@ -30,3 +31,16 @@ def test_cuda_request_on_cpu_machine_gives_clear_error():
         pytest.skip("this machine has CUDA")
     assert "ERR backend arch='cuda' was requested but no working CUDA device" in out.stdout, out.stdout + out.stderr
     assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("fast", ["", "1"])
+def test_compile_switches_reach_taichi(fast):
+    """Guards the wiring of backend._compile_options (not physics): Taichi's CFG pass is off,
+    ``GAUSSTAC_FAST_COMPILE=1`` drops its whole-kernel CSE (opt_level 0), and the offline
+    cache may grow to 1 GiB. Checked in a child process: Taichi starts once per process."""
+    code = ("import taichi as ti\nfrom gausstac_maniskill import backend\nbackend.init('cpu')\n"
+            "c = ti.lang.impl.current_cfg()\n"
+            "print(c.cfg_optimization, c.opt_level, c.offline_cache_max_size_of_files)\n")
+    env = {**os.environ, "GAUSSTAC_FAST_COMPILE": fast}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert out.stdout.split()[-3:] == ["False", "0" if fast else "1", str(1 << 30)], out.stdout + out.stderr
