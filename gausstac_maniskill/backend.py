@@ -12,14 +12,13 @@ Compile time. Taichi compiles each variant of a kernel on its first launch and k
 its offline cache (``~/.cache/taichi``), so only a machine's first run pays. Two of
 Taichi's whole-kernel passes cost most of that on our substep kernel: its CFG optimisation
 (store forwarding and dead stores across the kernel) and its whole-kernel common
-subexpression elimination (``opt_level >= 1``). Measured on the 2-core CPU machine, a block
-pad pressed by a sphere (first step of a fresh cache; then the mean of 10 steps, three
-alternating runs; ``BENCHMARKS.md``, "Compile time"): Taichi's defaults compile in 156-173 s
-and step in 600-703 ms; without the CFG pass, 68-97 s and 583-623 ms; with ``opt_level=0``
-as well, 13 s and 674-693 ms. LLVM's own optimisation does the rest. The CFG pass is off
-here (no step-time cost measured); ``GAUSSTAC_FAST_COMPILE=1`` also sets ``opt_level=0``
-(about 13 % slower steps), which ``make test`` uses. Results differ from the default
-build's by float rounding only (8 nm in the pad's positions after 4 steps).
+subexpression elimination (``opt_level >= 1``). ``bench compile`` (index pad, 5 mm sphere,
+2-core CPU; ``BENCHMARKS.md``): the first step takes 158 s with Taichi's defaults, 109 s
+with the CFG pass off and 14 s with ``opt_level=0`` as well; the compiled steps take 1.03,
+1 and 1.20 times as long. The CFG pass is off here. ``GAUSSTAC_COMPILE`` chooses another
+build: ``fast`` also sets ``opt_level=0`` (``make test`` uses it) and ``taichi`` keeps
+Taichi's own defaults. Builds differ by float rounding only (at most 0.35 µm in the pad's
+positions after 7 steps pressing it 1 mm).
 """
 from __future__ import annotations
 
@@ -33,6 +32,7 @@ import taichi as ti
 __all__ = ["BackendError", "init", "ensure_init", "current_arch", "is_initialized", "before_shutdown"]
 
 _VALID = ("cpu", "cuda", "auto")
+_BUILDS = ("", "fast", "taichi")  # GAUSSTAC_COMPILE: the product build, make test's, Taichi's defaults
 _lock = threading.Lock()
 _arch: str | None = None
 _before_shutdown: list[Callable[[], None]] = []
@@ -76,14 +76,18 @@ def _compile_options() -> dict:
 
     The offline cache may hold 1 GiB: Taichi's 100 MB default evicts a quarter of its
     entries at exit once full, and the test suite's variants alone take 34 MB per build."""
-    opts = dict(offline_cache=True, offline_cache_max_size_of_files=1 << 30, cfg_optimization=False,
-                kernel_profiler=_profiler_on())
-    if os.environ.get("GAUSSTAC_FAST_COMPILE", "") == "1":
+    build = os.environ.get("GAUSSTAC_COMPILE", "")
+    if build not in _BUILDS:
+        raise BackendError(f"GAUSSTAC_COMPILE={build!r} is not one of {_BUILDS} (unset: the product build)")
+    opts = dict(offline_cache=True, offline_cache_max_size_of_files=1 << 30, kernel_profiler=_profiler_on())
+    if build != "taichi":
+        opts["cfg_optimization"] = False
+    if build == "fast":
         opts["opt_level"] = 0
     return opts
 
 
-def _try_cuda(seed: int, debug: bool) -> bool:
+def _try_cuda(seed: int, debug: bool, opts: dict) -> bool:
     """Initialise Taichi on CUDA; return False (and reset) if CUDA does not work.
 
     ``enable_fallback=False``: without CUDA, ``ti.init`` raises before it starts (and
@@ -91,7 +95,7 @@ def _try_cuda(seed: int, debug: bool) -> bool:
     reset and start again: one start-up line per process."""
     try:
         ti.init(arch=ti.cuda, default_fp=ti.f32, random_seed=seed, debug=debug,
-                log_level=ti.ERROR, enable_fallback=False, **_compile_options())
+                log_level=ti.ERROR, enable_fallback=False, **opts)
     except Exception:  # noqa: BLE001 - any CUDA failure means "no CUDA here"
         ti.reset()
         return False
@@ -130,8 +134,9 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
                 f"Taichi is already initialised on {_arch!r}; cannot switch to {arch!r} "
                 "in the same process (it would destroy all simulation state). "
                 "Choose the arch once, before creating any simulator.")
+        opts = _compile_options()  # before any start: a bad GAUSSTAC_COMPILE is named, not taken for "no CUDA"
         if arch in ("cuda", "auto"):
-            if _try_cuda(seed, debug):
+            if _try_cuda(seed, debug, opts):
                 _arch = "cuda"
                 return _arch
             if arch == "cuda":
@@ -141,7 +146,7 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
                     "arch='auto', or set GAUSSTAC_ARCH=cpu.")
         cpu_threads = int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
         kwargs = dict(arch=ti.cpu, default_fp=ti.f32, random_seed=seed, debug=debug,
-                      log_level=ti.WARN, **_compile_options())
+                      log_level=ti.WARN, **opts)
         if cpu_threads:
             kwargs["cpu_max_num_threads"] = cpu_threads
         ti.init(**kwargs)

@@ -33,14 +33,20 @@ def test_cuda_request_on_cpu_machine_gives_clear_error():
     assert "Traceback" not in out.stderr
 
 
-@pytest.mark.parametrize("fast", ["", "1"])
-def test_compile_switches_reach_taichi(fast):
-    """Guards the wiring of backend._compile_options (not physics): Taichi's CFG pass is off,
-    ``GAUSSTAC_FAST_COMPILE=1`` drops its whole-kernel CSE (opt_level 0), and the offline
-    cache may grow to 1 GiB. Checked in a child process: Taichi starts once per process."""
-    code = ("import taichi as ti\nfrom gausstac_maniskill import backend\nbackend.init('cpu')\n"
+@pytest.mark.parametrize("build, cfg, opt", [("", "False", "1"), ("fast", "False", "0"),
+                                             ("taichi", "True", "1"), ("bogus", None, None)])
+def test_compile_builds_reach_taichi(build, cfg, opt):
+    """Guards the wiring of backend._compile_options (not physics): the product build turns
+    Taichi's CFG pass off, ``GAUSSTAC_COMPILE=fast`` also its whole-kernel CSE (opt_level 0),
+    ``taichi`` keeps Taichi's defaults, another value is refused by name; the offline cache
+    may grow to 1 GiB. In a child process: Taichi starts once per process."""
+    code = ("import taichi as ti\nfrom gausstac_maniskill import backend\n"
+            "try:\n    backend.init('cpu')\nexcept backend.BackendError as e:\n    print('ERR', e)\n    raise SystemExit\n"
             "c = ti.lang.impl.current_cfg()\n"
             "print(c.cfg_optimization, c.opt_level, c.offline_cache_max_size_of_files)\n")
-    env = {**os.environ, "GAUSSTAC_FAST_COMPILE": fast}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
-    assert out.stdout.split()[-3:] == ["False", "0" if fast else "1", str(1 << 30)], out.stdout + out.stderr
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "GAUSSTAC_COMPILE": build})
+    if cfg is None:
+        assert "ERR GAUSSTAC_COMPILE='bogus' is not one of" in out.stdout, out.stdout + out.stderr
+    else:
+        assert out.stdout.split()[-3:] == [cfg, opt, str(1 << 30)], out.stdout + out.stderr

@@ -16,6 +16,7 @@ BENCHMARKS = {
     "thinlayer": "gausstac_maniskill.bench.thinlayer",
     "pad": "gausstac_maniskill.bench.pad",
     "kernels": "gausstac_maniskill.bench.kernels",
+    "compile": "gausstac_maniskill.bench.compile",
     "soft": "gausstac_maniskill.bench.soft",
     "patch": "gausstac_maniskill.bench.patch",
     "look": "gausstac_maniskill.bench.look",
