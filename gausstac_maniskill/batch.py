@@ -32,11 +32,9 @@ from .cosim import GaussTacSim, default_hand_settings
 from .errors import ConfigError
 from .mpm import MPMWorld
 from .mpm.colliders import Collider
-from .tactile import stack_tactile
+from .tactile.readout import TactileReadout
 
 __all__ = ["BatchedCosim"]
-
-MAP_KEYS = ("depth", "shear", "force", "pressure")
 
 
 def _as_batch(poses, name: str) -> np.ndarray:
@@ -74,6 +72,7 @@ class BatchedCosim:
                                    sleep_margin=sleep_margin, pad_surface=pad_surface)
                        for b in range(P.shape[0])]
         self.pad_names = [p.name for p in pads]
+        self._readout: TactileReadout | None = None
 
     @property
     def num_envs(self) -> int:
@@ -115,8 +114,13 @@ class BatchedCosim:
 
     def tactile(self, device=None) -> dict[str, dict[str, torch.Tensor]]:
         """``{pad: {"depth": [B, H, W] m, "shear": [B, H, W, 2] m, "force": [B, H, W] N,
-        "pressure": [B, H, W] Pa}}`` of the last step (float32, on ``device``)."""
-        return stack_tactile([s.tactile() for s in self.scenes], self.pad_names, MAP_KEYS, device)
+        "pressure": [B, H, W] Pa}}`` of the last step (float32, on ``device``; the Taichi
+        arch's by default). One launch reads every env's pads on the device: only the maps
+        are copied (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`)."""
+        if self._readout is None:
+            self._readout = TactileReadout(self.world, list(self.scenes[0].pads.values()),
+                                           [s.pad_slots() for s in self.scenes])
+        return self._readout.maps(device)
 
     def object_wrench(self, name: str) -> np.ndarray:
         """[B, 6] force [N] and torque [N·m] (about its origin) the pads exerted on rigid

@@ -25,7 +25,8 @@ from .config import Material, PadSpec, SolverSettings
 from .errors import ConfigError
 from .mpm import MPMWorld
 from .mpm.colliders import Collider
-from .tactile import Pad, TaxelBinning, build_pad, pad_mesh, tactile_maps
+from .tactile import Pad, build_pad, pad_mesh
+from .tactile.readout import TactileReadout
 from .transforms import as_pose_matrix
 from .urdf import default_hand_urdf
 
@@ -88,7 +89,6 @@ class GaussTacSim:
         if pad_surface not in ("particles", "mesh"):
             raise ConfigError(f"GaussTacSim(pad_surface={pad_surface!r}) must be 'particles' or 'mesh'")
         self.pads: dict[str, Pad] = {}
-        self._binning: dict[str, TaxelBinning] = {}
         self._objects: dict[str, int] = {}
         self._soft: dict[str, str] = {}
         names = [p.name for p in pads]
@@ -110,7 +110,6 @@ class GaussTacSim:
                                  contact_radius=pad.contact_radius if pad_surface == "mesh" else None,
                                  bond_distance=spec.thickness - pad.depth, bond_normal=pad.normal @ T[:3, :3].T)
             self.pads[spec.name] = pad
-            self._binning[spec.name] = TaxelBinning.for_pad(pad)
         self._link_pose = {k: as_pose_matrix(v, f"link_poses[{k!r}]") for k, v in link_poses.items()}
         self._maps: dict[str, dict[str, torch.Tensor]] = {}
         self._awake = {name: True for name in self.pads}
@@ -335,20 +334,22 @@ class GaussTacSim:
 
     def tactile(self) -> dict[str, dict[str, torch.Tensor]]:
         """``{pad: {"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N,
-        "pressure": [H, W] Pa}}`` of the last step; a sleeping pad reads all zeros."""
+        "pressure": [H, W] Pa}}`` of the last step (float32, on the Taichi arch's device); a
+        sleeping pad reads all zeros. One launch reads every pad on the device
+        (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`)."""
         if not self._maps:
-            for name, pad in self.pads.items():
-                if not self._awake[name]:
-                    lay = pad.spec.layout
-                    z = torch.zeros(lay.rows, lay.cols)
-                    self._maps[name] = {"depth": z, "shear": torch.zeros(lay.rows, lay.cols, 2),
-                                        "force": z.clone(), "pressure": z.clone()}
-                    continue
-                g = self._w(name)  # only this pad's rows come back from the device
-                self._maps[name] = tactile_maps(pad, self._binning[name], self.world.positions(g),
-                                                self._link_pose[pad.spec.link], self.world.contact_forces(g),
-                                                self.world.stresses(g))
+            self._maps = {name: {k: v[0] for k, v in m.items()} for name, m in self.readout().maps().items()}
         return self._maps
+
+    def readout(self) -> TactileReadout:
+        """The :class:`~gausstac_maniskill.tactile.readout.TactileReadout` of this scene's pads."""
+        if getattr(self, "_readout", None) is None:
+            self._readout = TactileReadout(self.world, list(self.pads.values()), [self.pad_slots()])
+        return self._readout
+
+    def pad_slots(self) -> list[tuple[str, str]]:
+        """Per pad, the world's names of its particle group and its link."""
+        return [(self._w(name), self._w(pad.spec.link)) for name, pad in self.pads.items()]
 
     def pad_pressure_force(self, pad: str) -> float:
         """Normal force [N] on ``pad`` estimated from its stress (pressure map × taxel area);

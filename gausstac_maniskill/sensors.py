@@ -30,10 +30,9 @@ from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
 from mani_skill.sensors.camera import Camera, CameraConfig
 
 from .errors import ConfigError
-from .tactile.extract import stack_tactile
 
 __all__ = ["GaussianSplatCameraConfig", "GaussianSplatCamera", "TactileSensor", "TactileSensorConfig",
-           "TACTILE_KEYS", "stack_tactile"]
+           "TACTILE_KEYS"]
 
 #: The maps a :class:`TactileSensor` puts in the observation, per pad.
 TACTILE_KEYS = ("depth", "shear", "force")
@@ -273,8 +272,9 @@ class TactileSensor(BaseSensor):
 
     Args:
         config: uid and map names (default ``depth``, ``shear``, ``force``).
-        maps_fn: returns, for each env, ``{pad: {map name: [H, W(, 2)] tensor}}``
-            (the co-simulators' :meth:`~gausstac_maniskill.cosim.GaussTacSim.tactile`).
+        maps_fn: returns the maps of every env, ``{pad: {map name: [B, H, W(, 2)] tensor}}``
+            (:meth:`~gausstac_maniskill.batch.BatchedCosim.tactile`, or the env's
+            :meth:`~gausstac_maniskill.tasks.GaussTacEnv.tactile`).
         pad_names: pad ids in observation order.
         device: torch device of the observations (the env's).
 
@@ -284,7 +284,7 @@ class TactileSensor(BaseSensor):
     normal contact force per taxel.
     """
 
-    def __init__(self, config: TactileSensorConfig, maps_fn: Callable[[], Sequence[dict]],
+    def __init__(self, config: TactileSensorConfig, maps_fn: Callable[[], dict],
                  pad_names: Sequence[str], device=None):
         super().__init__(config)
         bad = [k for k in config.keys if k not in ("depth", "shear", "force", "pressure")]
@@ -298,7 +298,8 @@ class TactileSensor(BaseSensor):
 
     def capture(self):
         """Gather the maps of the last co-simulation step."""
-        self._obs = stack_tactile(self.maps_fn(), self.pad_names, self.config.keys, self.device)
+        maps = self.maps_fn()
+        self._obs = {p: {k: maps[p][k].to(self.device) for k in self.config.keys} for p in self.pad_names}
 
     def get_obs(self, **kwargs):
         if self._obs is None:

@@ -366,7 +366,7 @@ class GaussTacEnv(BaseEnv):
         self._pose_source = SapienPoseSource(self.agent)
         self._cosim_stale = True
         self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
-                                            lambda: [sim.tactile() for sim in self.cosims],
+                                            self.tactile,
                                             self.pad_names, device=self.device)
 
     @property
@@ -495,6 +495,7 @@ class GaussTacEnv(BaseEnv):
         self._contact_friction = np.array([o.collider.friction for o in self._rigid.values()]
                                           + [self.mpm_settings.soft_friction])
         self._cosim_stale = False
+        self._tactile_maps = None
         self.step_timing["cosim_build"] = time.perf_counter() - t0
 
     def _add_captured_layers(self, sim: GaussTacSim, b: int) -> None:
@@ -548,6 +549,7 @@ class GaussTacEnv(BaseEnv):
         self._ensure_cosims()
         t0 = time.perf_counter()
         self._batch.advance(self._link_poses(), dt, self._object_poses())
+        self._tactile_maps = None
         for b, sim in enumerate(self.cosims):
             for name in self._wrench:
                 self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
@@ -565,8 +567,7 @@ class GaussTacEnv(BaseEnv):
         if not self.mpm_every_sim_step:
             self._step_mpm(self.control_timestep)
         t1 = time.perf_counter()
-        for sim in self.cosims:
-            sim.tactile()  # extract the maps now (cached for evaluate / obs)
+        self.tactile()  # read the maps now (kept for evaluate / obs)
         self.step_timing["tactile"] = time.perf_counter() - t1
 
     def _before_simulation_step(self):
@@ -667,16 +668,19 @@ class GaussTacEnv(BaseEnv):
         return out
 
     def tactile(self) -> dict:
-        """``{pad: {"depth", "shear", "force", "pressure"}}`` batched [B, ...] of the last step."""
+        """``{pad: {"depth": [B, H, W] m, "shear": [B, H, W, 2] m, "force": [B, H, W] N,
+        "pressure": [B, H, W] Pa}}`` of the last MPM step, float32 on the env's device: read
+        for every env in one launch, once per step (kept until the state changes)."""
         self._ensure_cosims()
-        return self._batch.tactile(self.device)
+        if self._tactile_maps is None:
+            self._tactile_maps = self._batch.tactile(self.device)
+        return self._tactile_maps
 
     def pad_force(self, pad: str) -> torch.Tensor:
         """[B] total normal contact force [N] on ``pad`` (sum of its force map)."""
         if pad not in self.pad_names:
             raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
-        self._ensure_cosims()
-        return torch.tensor([sim.pad_normal_force(pad) for sim in self.cosims], device=self.device)
+        return self.tactile()[pad]["force"].sum(dim=(1, 2))
 
     # ------------------------------------------------------------------ state
     def _get_task_state(self) -> dict[str, torch.Tensor]:
@@ -728,6 +732,7 @@ class GaussTacEnv(BaseEnv):
                 flat = {k: np.asarray(common.to_numpy(v))[b if np.shape(v)[0] == self.num_envs else row]
                         for k, v in mpm.items()}
                 self.cosims[b].load_flat_state(flat)
+            self._tactile_maps = None
         for name, w in wrench.items():
             if name in self._wrench:
                 self._wrench[name][rows.numpy()] = w.double().numpy()

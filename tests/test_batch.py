@@ -13,7 +13,7 @@ from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.mpm import Sphere
 from gausstac_maniskill.pose import MujocoPoseSource
-from gausstac_maniskill.tactile import allegro_pad_specs
+from gausstac_maniskill.tactile import allegro_pad_specs, readout
 from gausstac_maniskill.transforms import make_pose
 
 INDEX = "link_3.0_tip"
@@ -60,7 +60,7 @@ def _balls(envs):
     return [Sphere(radius=R, pose=centre(-1), friction=mu) for centre, mu in envs]
 
 
-def test_batched_envs_match_each_scene_alone(setup):
+def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
     names, poses, settings, envs = setup
     batch = BatchedCosim(allegro_pad_specs(), names, torch.as_tensor(poses), settings=settings)
     batch.add_rigid_object("ball", _balls(envs))
@@ -94,6 +94,17 @@ def test_batched_envs_match_each_scene_alone(setup):
     f = [float(maps[INDEX]["force"][b].sum()) for b in range(3)]
     assert f[0] > 0.05 and f[1] > 1.3 * f[0] and f[2] == 0.0
     assert not any(batch.scenes[2].is_awake(p) for p in batch.pad_names)
+    # the batch's read is one launch for every env and pad, and gives each env what its scene
+    # reads of itself in the shared world, bit for bit (the same sums)
+    launches = []
+    monkeypatch.setattr(readout, "taxel_maps", lambda *a, _f=readout.taxel_maps: launches.append(_f(*a)))
+    again = batch.tactile()
+    assert len(launches) == 1
+    for b, scene in enumerate(batch.scenes):
+        own = scene.readout().maps()
+        for pad in batch.pad_names:
+            for key in own[pad]:
+                assert torch.equal(again[pad][key][b], own[pad][key][0]), (b, pad, key)
 
 
 def test_bad_batch_input_is_named(setup):

@@ -442,6 +442,17 @@ class MPMWorld:
         J = np.linalg.det(self._read("F", group))
         return tau / np.maximum(J, 1e-6)[:, None, None]
 
+    def device_state(self, keys=("x", "v", "F", "tau")) -> dict:
+        """The particle state arrays ``keys`` where the kernels keep them (Taichi ndarrays on
+        the arch's device, all groups, [N, ...] rows), up to date with every change made on
+        the host: for kernels that read the state without copying it back
+        (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`). Do not write them."""
+        self._push()
+        missing = [k for k in keys if k not in self._dev]
+        if missing:
+            raise ConfigError(f"device_state: the world has no particles (no device array {missing[0]!r})")
+        return {k: self._dev[k] for k in keys}
+
     def rest_positions(self, group: str | None = None) -> np.ndarray:
         """Kinematic particles' rest coordinates [N, 3] in their link frame (0 for others)."""
         return self._read("X0", group)
@@ -544,6 +555,11 @@ class MPMWorld:
     def link_pose(self, link) -> np.ndarray:
         """World pose (4x4) of a link at the end of the last step: where its particles are."""
         return self._link_prev[self.link_index(link)].copy()
+
+    def link_poses(self) -> np.ndarray:
+        """[L, 4, 4] world poses [m] of every link (in :attr:`link_names` order) at the end of
+        the last step."""
+        return np.array(self._link_prev).reshape(-1, 4, 4)
 
     def link_twist(self, link) -> tuple[np.ndarray, np.ndarray]:
         """(velocity of the link origin [m/s], angular velocity [rad/s]) over the last step."""

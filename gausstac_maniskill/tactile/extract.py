@@ -32,7 +32,7 @@ import torch
 
 from .pad import Pad
 
-__all__ = ["TaxelBinning", "tactile_maps", "stack_tactile"]
+__all__ = ["TaxelBinning", "tactile_maps"]
 
 
 @dataclass
@@ -122,10 +122,3 @@ def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_po
             "shear": as_t(np.stack([sx, sy], -1).reshape(H, W, 2)),
             "force": as_t(force.reshape(H, W)),
             "pressure": as_t(pressure.reshape(H, W))}
-
-
-def stack_tactile(per_env, pads, keys, device=None) -> dict:
-    """Batch per-env maps ``[{pad: {key: [H, W(, 2)]}}]`` into ``{pad: {key: [B, H, W(, 2)]}}``
-    float32 tensors on ``device``."""
-    return {pad: {k: torch.stack([maps[pad][k] for maps in per_env]).float().to(device) for k in keys}
-            for pad in pads}
