@@ -32,21 +32,20 @@ from .cosim import GaussTacSim, default_hand_settings
 from .errors import ConfigError
 from .mpm import MPMWorld
 from .mpm.colliders import Collider
+from .transforms import as_pose_matrices
 from .tactile.readout import TactileReadout
 
 __all__ = ["BatchedCosim"]
 
 
 def _as_batch(poses, name: str) -> np.ndarray:
-    """``poses`` ([B, ..., 4, 4] tensor or array) as a float64 numpy array, in one copy."""
+    """``poses`` ([B, ..., 4, 4] tensor or array) as checked float64 rigid transforms (a copy)."""
     if isinstance(poses, torch.Tensor):
         poses = poses.detach().cpu().double().numpy()
-    arr = np.asarray(poses, np.float64)
+    arr = np.array(poses, np.float64)  # a copy: the scenes keep views of it
     if arr.ndim < 3 or arr.shape[-2:] != (4, 4):
         raise ConfigError(f"{name} must have shape [B, ..., 4, 4], got {list(arr.shape)}")
-    if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{name} contains NaN or inf")
-    return arr
+    return as_pose_matrices(arr, name)
 
 
 class BatchedCosim:
@@ -73,6 +72,7 @@ class BatchedCosim:
                        for b in range(P.shape[0])]
         self.pad_names = [p.name for p in pads]
         self._readout: TactileReadout | None = None
+        self._links = None  # (world link count, columns, world rows) of _world_links
 
     @property
     def num_envs(self) -> int:
@@ -81,6 +81,16 @@ class BatchedCosim:
 
     def _env_poses(self, P: np.ndarray, b: int) -> dict[str, np.ndarray]:
         return {n: P[b, i] for i, n in enumerate(self.link_names)}
+
+    def _world_links(self) -> tuple[np.ndarray, np.ndarray]:
+        """(columns of :attr:`link_names` that the world simulates, [K]; their world link
+        indices env by env, [B·K]): what :meth:`advance` sends to the world."""
+        if self._links is None or self._links[0] != len(self.world.link_names):
+            w = self.world
+            cols = [i for i, n in enumerate(self.link_names) if w.has_link(self.scenes[0]._w(n))]
+            rows = [w.link_index(s._w(self.link_names[i])) for s in self.scenes for i in cols]
+            self._links = (len(w.link_names), np.array(cols, np.int64), np.array(rows, np.int64))
+        return self._links[1], self._links[2]
 
     def add_rigid_object(self, name: str, colliders: Sequence[Collider]) -> None:
         """Rigid object ``name`` in every env: ``colliders[b]`` is env b's (its shape and
@@ -106,8 +116,10 @@ class BatchedCosim:
         for k, v in objects.items():
             if v.shape != (self.num_envs, 4, 4):
                 raise ConfigError(f"object_poses[{k!r}] must have shape [{self.num_envs}, 4, 4], got {list(v.shape)}")
+        cols, rows = self._world_links()
+        self.world.set_link_poses(P[:, cols].reshape(-1, 4, 4), rows)  # every env's links in one call
         for b, scene in enumerate(self.scenes):
-            scene.begin_step(self._env_poses(P, b), {k: v[b] for k, v in objects.items()})
+            scene.after_link_poses(self._env_poses(P, b), {k: v[b] for k, v in objects.items()})
         self.world.step(dt)
         for scene in self.scenes:
             scene.end_step()

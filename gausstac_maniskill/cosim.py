@@ -216,11 +216,16 @@ class GaussTacSim:
         for spec in (p.spec for p in self.pads.values()):
             if spec.link not in link_poses:
                 raise ConfigError(f"step: link_poses has no pose for pad link {spec.link!r}")
-        for link, T in link_poses.items():
-            T = as_pose_matrix(T, f"link_poses[{link!r}]")
-            self._link_pose[link] = T  # every link is kept: the renderer poses the whole hand
-            if self.world.has_link(self._w(link)):
-                self.world.set_link_pose(self._w(link), T)
+        poses = {link: as_pose_matrix(T, f"link_poses[{link!r}]") for link, T in link_poses.items()}
+        self.world.set_link_poses({self._w(k): T for k, T in poses.items() if self.world.has_link(self._w(k))})
+        self.after_link_poses(poses, object_poses)
+
+    def after_link_poses(self, link_poses: Mapping[str, np.ndarray],
+                         object_poses: Mapping[str, np.ndarray] | None = None) -> None:
+        """:meth:`begin_step` once the world holds the link targets (a batch sets every env's
+        at once): keep every link's pose ``link_poses`` (name → checked 4x4 [m]; the renderer
+        poses the whole hand), move the objects, wake or put pads to sleep."""
+        self._link_pose.update(link_poses)
         for name, T in (object_poses or {}).items():
             self.set_object_pose(name, T)
         self._update_sleep()

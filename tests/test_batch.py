@@ -90,6 +90,13 @@ def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
         w_alone = np.concatenate(alone.object_wrench("ball"))
         np.testing.assert_allclose(batch.object_wrench("ball")[b], w_alone, rtol=0,
                                    atol=1e-4 * np.abs(w_alone).max() + 1e-12)
+        pairs, pairs_alone = batch.link_contacts(INDEX)[b], alone.link_contacts(INDEX)
+        assert pairs.keys() == pairs_alone.keys() == ({"ball"} if b < 2 else set())
+        for name, row in pairs_alone.items():
+            np.testing.assert_allclose(pairs[name], row, rtol=0, atol=1e-4 * np.abs(row).max())
+    # the pair sums hold, per link, its own env's colliders (one each) and the other field:
+    # linear in the env count, not links × all colliders
+    assert batch.world._pair_impulse.shape == (len(batch.world.link_names), 2, 7)
     # real, different contacts in envs 0 and 1; none in env 2
     f = [float(maps[INDEX]["force"][b].sum()) for b in range(3)]
     assert f[0] > 0.05 and f[1] > 1.3 * f[0] and f[2] == 0.0

@@ -1,11 +1,14 @@
 """The two fronts of the one quaternion convention (w, x, y, z) in transforms.py agree:
-numpy (single poses on the host) and torch (batched, any device). What this guards: that
+numpy (on the host) and torch (any device), both batched. What this guards: that
 the two formulas stay the same convention; it is not a physics check."""
 import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from gausstac_maniskill.transforms import (matrix_to_quat, quat_multiply, quat_to_matrix, quat_to_rotmat,
+import pytest
+
+from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.transforms import (as_pose_matrices, matrix_to_quat, quat_multiply, quat_to_matrix, quat_to_rotmat,
                                            rotmat_to_quat, vec7_to_matrix)
 
 
@@ -26,6 +29,7 @@ def test_numpy_and_torch_agree_with_scipy_and_each_other():
         assert (q[:, 0] >= 0).all()
         assert np.allclose(np.abs((q * ref).sum(1)), 1.0, atol=1e-12)  # same rotation (sign at w = 0)
     assert np.allclose(quat_to_matrix(q_np), R, atol=1e-12)
+    assert np.array_equal(np.stack([matrix_to_quat(M) for M in R]), q_np)  # one at a time = batched
     assert np.allclose(quat_to_rotmat(torch.as_tensor(q_t)).numpy(), R, atol=1e-12)
 
 
@@ -38,3 +42,17 @@ def test_product_and_raw_pose():
     T = vec7_to_matrix(raw).numpy()
     assert np.allclose(T[:, :3, :3], R, atol=1e-12) and np.allclose(T[:, :3, 3], [0.1, -0.2, 0.3])
     assert np.allclose(T[:, 3], [0.0, 0.0, 0.0, 1.0])
+
+
+def test_pose_batches_are_checked_in_one_pass_and_name_the_bad_one():
+    T = np.tile(np.eye(4), (2, 3, 1, 1))
+    T[..., :3, :3] = _rotations(6, seed=2).reshape(2, 3, 3, 3)
+    assert np.array_equal(as_pose_matrices(T), T)
+    bad = T.copy()
+    bad[1, 2, 0, 3] = np.nan
+    with pytest.raises(ConfigError, match=r"poses contains NaN or inf at index \[1, 2\]"):
+        as_pose_matrices(bad, "poses")
+    bad = T.copy()
+    bad[0, 1, :3, :3] *= -1.0  # a reflection
+    with pytest.raises(ConfigError, match=r"poses at index \[0, 1\]: the upper-left 3x3 block is not a rotation"):
+        as_pose_matrices(bad, "poses")

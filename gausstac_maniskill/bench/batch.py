@@ -9,9 +9,11 @@ Every env is the Allegro hand (default pads, default dx = 1 mm), a little moved,
   (what ``GaussTacEnv`` does today), each with the batch's substeps.
 
 Prints per B: wall time per control step of both (the first step, which compiles, is left
-out), the ratio measured in this run, Taichi launches per step of both, and the error of the
-batch: the largest difference of env 0's maps from the same scene alone, over their
-largest value. Taichi arch: ``GAUSSTAC_ARCH`` (cpu by default).
+out) and its host part (the wall time outside Taichi launches: Python's pose handling, sleep
+logic and bookkeeping; on the CPU, where a launch returns when its kernel is done), the
+ratio measured in this run, Taichi launches per step of both (kernels and ndarray copies),
+and the error of the batch: the largest difference of env 0's maps from the same scene
+alone, over their largest value. Taichi arch: ``GAUSSTAC_ARCH`` (cpu by default).
 """
 from __future__ import annotations
 
@@ -22,7 +24,6 @@ import numpy as np
 
 R = 6e-3
 DT = 0.02
-KERNELS = ("prepare", "advance", "fbar_update", "reduce_contact", "follow_links", "reset_contact", "chunk_health")
 
 
 def _scenes(B: int, names, base, sensor):
@@ -45,24 +46,29 @@ def _scenes(B: int, names, base, sensor):
 
 
 class _Launches:
-    """Counts the MPM kernel launches (wraps the kernels module's functions)."""
+    """Counts Taichi launches (kernels and the ndarray copies, which are kernels too) and the
+    wall time spent in them, by wrapping Taichi's ``Kernel.__call__``. On the CPU a launch
+    returns when its kernel is done; on CUDA it returns once queued, and ``seconds`` is only
+    the launch's host side."""
 
     def __init__(self):
-        from ..mpm import kernels as K
+        from taichi.lang import kernel_impl
 
-        self.K, self.n, self._orig = K, 0, {}
-        for name in KERNELS:
-            f = self._orig[name] = getattr(K, name)
+        self.n, self.seconds = 0, 0.0
+        self._cls, self._orig = kernel_impl.Kernel, kernel_impl.Kernel.__call__
 
-            def counted(*a, _f=f, **kw):
+        def counted(kernel, *a, **kw):
+            t0 = time.perf_counter()
+            try:
+                return self._orig(kernel, *a, **kw)
+            finally:
                 self.n += 1
-                return _f(*a, **kw)
+                self.seconds += time.perf_counter() - t0
 
-            setattr(K, name, counted)
+        self._cls.__call__ = counted
 
     def close(self):
-        for name, f in self._orig.items():
-            setattr(self.K, name, f)
+        self._cls.__call__ = self._orig
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -91,9 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     sensor = GaussTacSim(pads, dict(zip(names, base)), settings=settings).pads["link_3.0_tip"].sensor_frame
     print(f"\nBatched co-simulator, Allegro index pad pressed by a 6 mm ball in every env, dx = {args.dx * 1e3:g} mm, "
           f"Taichi {arch}, {args.steps - 1} timed steps of {DT * 1e3:g} ms")
-    print("| B | particles | substeps | batched [ms/step] | loop [ms/step] | loop / batched | batched per env "
-          "[ms] | launches batched / loop | env 0 vs alone (max rel) | mean index force [N] |")
-    print("|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    print("| B | particles | substeps | batched [ms/step] | of it host | loop [ms/step] | of it host | loop / batched "
+          "| batched per env [ms] | launches batched / loop | env 0 vs alone (max rel) | mean index force [N] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     for B in tqdm(args.envs, desc="env counts", unit="B"):  # each row as it is measured: a cut run keeps them
         scenes = _scenes(B, names, base, sensor)
         poses = np.stack([P for P, _ in scenes])
@@ -104,14 +110,14 @@ def main(argv: list[str] | None = None) -> int:
             sim = GaussTacSim(pads, dict(zip(names, P)), settings=settings)
             sim.add_rigid_object("ball", Sphere(radius=R, pose=c(-1), friction=0.5))
             loop.append(sim)
-        t_batch = t_loop = 0.0
+        t_batch = t_loop = h_batch = h_loop = 0.0
         n_batch = n_loop = 0
         for k in range(args.steps):
             counter = _Launches()
             t0 = time.perf_counter()
             maps = batch.step(poses, DT, {"ball": np.stack([c(k) for _, c in scenes])})
             t1 = time.perf_counter()
-            nb = counter.n
+            nb, sb = counter.n, counter.seconds
             sub = batch.world.last_step.substeps
             for sim, (P, c) in zip(loop, scenes):  # zip: only env 0 above --loop-max
                 sim.begin_step(dict(zip(names, P)), {"ball": c(k)})
@@ -123,6 +129,8 @@ def main(argv: list[str] | None = None) -> int:
             if k:  # the first step compiles
                 t_batch += t1 - t0
                 t_loop += t2 - t1
+                h_batch += t1 - t0 - sb  # outside the launches: Python's share
+                h_loop += t2 - t1 - (counter.seconds - sb)
                 n_batch += nb
                 n_loop += counter.n - nb
         alone = loop[0].tactile()
@@ -132,12 +140,14 @@ def main(argv: list[str] | None = None) -> int:
         n = args.steps - 1
         est = len(loop) < B  # the loop ran env 0 alone: B times its time and launches, an estimate
         scale = B if est else 1
-        tqdm.write(_row(B, batch.world.last_step.active_particles, sub, t_batch / n, scale * t_loop / n,
-                        n_batch / n, scale * n_loop / n, err, force, est))
+        tqdm.write(_row(B, batch.world.last_step.active_particles, sub, (t_batch / n, h_batch / n),
+                        (scale * t_loop / n, scale * h_loop / n), n_batch / n, scale * n_loop / n, err, force, est))
     return 0
 
 
-def _row(B, npart, sub, tb, tl, nb, nl, err, f, est) -> str:
+def _row(B, npart, sub, batched, loop, nb, nl, err, f, est) -> str:
+    """A table row; ``batched`` and ``loop`` are (wall, outside launches) [s] per step."""
     mark = " (B × env 0 alone)" if est else ""
-    return (f"| {B} | {npart} | {sub} | {tb * 1e3:.0f} | {tl * 1e3:.0f}{mark} | {tl / tb:.2f} | {tb / B * 1e3:.1f} | "
-            f"{nb:.0f} / {nl:.0f} | {err:.1e} | {f:.3f} |")
+    (tb, hb), (tl, hl) = batched, loop
+    return (f"| {B} | {npart} | {sub} | {tb * 1e3:.0f} | {hb * 1e3:.0f} | {tl * 1e3:.0f}{mark} | {hl * 1e3:.0f} | "
+            f"{tl / tb:.2f} | {tb / B * 1e3:.1f} | {nb:.0f} / {nl:.0f} | {err:.1e} | {f:.3f} |")

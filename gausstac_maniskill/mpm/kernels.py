@@ -1099,45 +1099,6 @@ def pressure_solve(G: ti.template(), S: ti.template(), geo, dt, inv_dx, iters: t
 
 
 @ti.kernel
-def reduce_contact(active: NDI, n: ti.i32, x: NDV, impulse: NDV, contact_id: NDI, link: NDI, X_rest: NDV,
-                   col_pose: NDF2, link_pose: NDF2, n_slot: ti.i32, col_impulse: NDF2, pair_impulse: NDF2):
-    """Sum the per-particle contact impulses of the control step (deterministic):
-
-    * into each collider's reaction, -J about the collider's end origin;
-    * into the reaction on each particle's link, +J about the link's end origin, per
-      contact pair (row ``link * n_slot + collider``; slot ``n_slot - 1`` holds what came
-      from the other field): the layer is taken as massless (quasi-static), so what its
-      particles receive from an object passes to the link that holds them, and a pad's
-      link and the object it presses take equal and opposite impulses. Column 6 of a pair
-      row is its indentation [m]: the largest displacement of a touching particle from
-      its rest place on the link, along the push it received.
-    """
-    ti.loop_config(serialize=True)
-    for ii in range(n):
-        p = active[ii]
-        c = contact_id[p]
-        if c >= 0:
-            J = -impulse[p]  # what the particle exerted on the collider
-            t1 = ti.Vector([col_pose[c, 7], col_pose[c, 8], col_pose[c, 9]])
-            tq = (x[p] - t1).cross(J)
-            for d in ti.static(range(3)):
-                col_impulse[c, d] += J[d]
-                col_impulse[c, 3 + d] += tq[d]
-        lk = link[p]
-        if c != -1 and lk >= 0:
-            R, o = pose_at(link_pose, lk, 1.0)
-            tq = (x[p] - o).cross(impulse[p])
-            row = lk * n_slot + (c if c >= 0 else n_slot - 1)
-            for d in ti.static(range(3)):
-                pair_impulse[row, d] += impulse[p][d]
-                pair_impulse[row, 3 + d] += tq[d]
-            push = impulse[p].norm()
-            if push > 0.0:
-                depth = (x[p] - (R @ X_rest[p] + o)).dot(impulse[p]) / push
-                pair_impulse[row, 6] = ti.max(pair_impulse[row, 6], depth)
-
-
-@ti.kernel
 def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link: NDI, group: NDI,
                  group_qs: NDI, twist_change: NDF2):
     """Carry quasi-static particles through their link's change of rigid velocity.
@@ -1254,6 +1215,52 @@ Order = ti.types.argpack(
     order=NDI, slab_start=NDI,  # awake particles sorted by slab, first index of each slab
     active_box=NDI)  # the active box of the substep (BOX layout), written by prepare
 World = ti.types.argpack(P=Particles, G=Grid, S=Scene, O=Order)
+Reduction = ti.types.argpack(  # what reduce_contact reads and sums into
+    env_rows=NDI,  # first row of each env's particles in the active list (num_envs + 1 rows)
+    col_slot=NDI,  # per collider: its number among its env's colliders (its pair slot)
+    col_ends=NDF2, link_ends=NDF2,  # pose rows of the step (kinematics.py): the end poses are read
+    col_sums=NDF2, pair_sums=NDF2)  # per collider: -J, moment; per (link, slot): J, moment, depth
+
+
+@ti.kernel
+def reduce_contact(P: Particles, X0: NDV, active: NDI, sums: Reduction, n_env: ti.i32, n_slot: ti.i32):
+    """Sum the per-particle contact impulses of the control step (deterministic: the envs in
+    parallel, each env's particles in the order of the active list):
+
+    * into each collider's reaction, -J about the collider's end origin;
+    * into the reaction on each particle's link, +J about the link's end origin, per
+      contact pair (row ``link * n_slot + slot``, the slot the collider's number among its
+      env's, ``n_slot - 1`` what came from the other field): the layer is taken as massless
+      (quasi-static), so what its particles receive from an object passes to the link that
+      holds them, and a pad's link and the object it presses take equal and opposite
+      impulses. Column 6 of a pair row is its indentation [m]: the largest displacement of
+      a touching particle from its rest place on the link (X0), along the push it received.
+    """
+    for e in range(n_env):
+        for ii in range(sums.env_rows[e], sums.env_rows[e + 1]):
+            p = active[ii]
+            c = P.contact_id[p]
+            if c >= 0:
+                J = -P.impulse[p]  # what the particle exerted on the collider
+                t1 = ti.Vector([sums.col_ends[c, 7], sums.col_ends[c, 8], sums.col_ends[c, 9]])
+                tq = (P.x[p] - t1).cross(J)
+                for d in ti.static(range(3)):
+                    sums.col_sums[c, d] += J[d]
+                    sums.col_sums[c, 3 + d] += tq[d]
+            lk = P.link[p]
+            if c != -1 and lk >= 0:
+                R, o = pose_at(sums.link_ends, lk, 1.0)
+                tq = (P.x[p] - o).cross(P.impulse[p])
+                row = lk * n_slot + (sums.col_slot[c] if c >= 0 else n_slot - 1)
+                for d in ti.static(range(3)):
+                    sums.pair_sums[row, d] += P.impulse[p][d]
+                    sums.pair_sums[row, 3 + d] += tq[d]
+                push = P.impulse[p].norm()
+                if push > 0.0:
+                    depth = (P.x[p] - (R @ X0[p] + o)).dot(P.impulse[p]) / push
+                    sums.pair_sums[row, 6] = ti.max(sums.pair_sums[row, 6], depth)
+
+
 Placement = ti.types.argpack(  # what prepare reads and writes
     x=NDV, v=NDV, C=NDM, X0=NDV, link=NDI,  # particle state; rest coords in the link frame
     counts=NDI, consts=NDF,

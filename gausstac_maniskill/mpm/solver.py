@@ -61,7 +61,7 @@ import taichi as ti
 from .. import backend
 from ..config import Material, SolverSettings, _finite
 from ..errors import ConfigError, SimulationError
-from ..transforms import as_pose_matrix, matrix_to_quat, quat_to_matrix
+from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix
 from . import kernels as K
 from .colliders import Collider, MeshCollider
 from .kinematics import FRAME
@@ -147,16 +147,16 @@ class MPMWorld:
         self.groups: list[Group] = []
         self.materials: list[Material] = []
         self.link_names: list[str] = []
-        self._link_prev: list[np.ndarray] = []  # pose at the start of the next step
-        self._link_next: list[np.ndarray] = []  # pose at its end (last set)
-        self._link_twist: list[np.ndarray] = []  # (v_origin, ω) [m/s, rad/s] of the last step
+        self._link_prev = np.zeros((0, 4, 4))  # [L, 4, 4] pose at the start of the next step
+        self._link_next = np.zeros((0, 4, 4))  # [L, 4, 4] pose at its end (last set)
+        self._link_twist = np.zeros((0, 6))  # [L, 6] (v_origin, ω) [m/s, rad/s] of the last step
         self._link_env: list[int] = []
         self._link_at: dict[str, int] = {}  # link name -> index
         self._group_at: dict[str, int] = {}  # group name -> index
         self._num_envs = 1
         self.colliders: list[Collider] = []
         self._col_env: list[int] = []
-        self._col_prev: list[np.ndarray] = []
+        self._col_prev = np.zeros((0, 4, 4))  # [C, 4, 4] collider poses at the start of the next step
         self._walls: list[tuple[int, float, float]] = []
         self.time = 0.0
         self.step_count = 0
@@ -168,10 +168,12 @@ class MPMWorld:
         self._dirty = True
         self._vmax = 0.0
         self._col_impulse = np.zeros((0, 6))
-        self._pair_impulse = np.zeros((0, 1, 7))  # [link, collider + other field, J | moment | depth]
+        # [link, slot, J | moment | depth]: slot = the collider's number among its env's colliders
+        # (:meth:`pair_slots`), the last slot the other field; linear in the env count
+        self._pair_impulse = np.zeros((0, 1, 7))
         self._last_dt_ctrl = 1.0
         self._reach = 0.0
-        self._link_radius: list[float] = []
+        self._link_radius = np.zeros(0)  # [L] farthest bound particle from the link origin [m]
         self._pack: dict = {}  # kernel argument packs (kernels.Particles, Grid, Scene, Order)
         self._atomic = atomic_scatter()
         self._two_fields = False  # set by _push from the awake groups' fields
@@ -191,9 +193,9 @@ class MPMWorld:
         self._link_env.append(self._note_env(env, f"add_link({name!r})"))
         self._link_at[name] = len(self.link_names)
         self.link_names.append(name)
-        self._link_prev.append(T.copy())
-        self._link_next.append(T.copy())
-        self._link_twist.append(np.zeros(6))
+        self._link_prev = np.concatenate([self._link_prev, T[None]])
+        self._link_next = np.concatenate([self._link_next, T[None]])
+        self._link_twist = np.concatenate([self._link_twist, np.zeros((1, 6))])
         self._pair_impulse = np.concatenate([self._pair_impulse, np.zeros((1,) + self._pair_impulse.shape[1:])])
         self._dirty = True
         return len(self.link_names) - 1
@@ -366,13 +368,36 @@ class MPMWorld:
                               f"got {type(collider).__name__}")
         self._col_env.append(self._note_env(env, "add_collider"))
         self.colliders.append(collider)
-        self._col_prev.append(collider.pose.copy())
+        self._col_prev = np.concatenate([self._col_prev, collider.pose[None]])
         # one impulse row per collider from the start, so the state keeps its shape before
         # and after the first step (recorders stack states of successive steps)
         self._col_impulse = np.concatenate([self._col_impulse, np.zeros((1, 6))])
-        self._pair_impulse = np.insert(self._pair_impulse, self._pair_impulse.shape[1] - 1, 0.0, axis=1)
+        n_slot = self.pair_slots()[0]
+        if n_slot > self._pair_impulse.shape[1]:  # the env with the most colliders got one more
+            self._pair_impulse = np.insert(self._pair_impulse, self._pair_impulse.shape[1] - 1, 0.0, axis=1)
         self._dirty = True
         return len(self.colliders) - 1
+
+    def pair_slots(self) -> tuple[int, np.ndarray]:
+        """(slots per link, [C] each collider's slot): a link's contact pairs are its env's
+        colliders, numbered in their order of addition, then one slot for the other field."""
+        env = np.asarray(self._col_env, np.int64)
+        count = np.bincount(env, minlength=1)
+        order = np.argsort(env, kind="stable")  # env by env, each in its order of addition
+        slot = np.empty(len(env), np.int64)
+        slot[order] = np.arange(len(env)) - (np.cumsum(count) - count)[env[order]]
+        return int(count.max()) + 1, slot
+
+    def _pairs(self, links: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """[len(links), len(cols) + 1, 7] pair sums of ``links`` with colliders ``cols`` (zero
+        for a collider of another env), then with the other field."""
+        n_slot, slot = self.pair_slots()
+        same = np.asarray(self._link_env)[links][:, None] == np.asarray(self._col_env, np.int64)[cols][None, :]
+        rows = self._pair_impulse[links]
+        out = np.zeros((len(links), len(cols) + 1, 7))
+        out[:, :-1] = np.where(same[..., None], rows[:, slot[cols]], 0.0)
+        out[:, -1] = rows[:, n_slot - 1]
+        return out
 
     def add_slip_wall(self, axis: int, position: float, keep: str = "+") -> None:
         """A bilateral frictionless wall on the grid (e.g. a symmetry plane).
@@ -527,7 +552,7 @@ class MPMWorld:
         a touching particle from its rest place on the link, along its push). Row c < C:
         collider c; the last row: the other velocity field (soft objects). Rows sum to
         :meth:`link_wrench`."""
-        out = self._pair_impulse[self.link_index(link)].copy()
+        out = self._pairs(np.array([self.link_index(link)]), np.arange(len(self.colliders)))[0]
         out[:, :6] /= self._last_dt_ctrl
         return out
 
@@ -559,7 +584,7 @@ class MPMWorld:
     def link_poses(self) -> np.ndarray:
         """[L, 4, 4] world poses [m] of every link (in :attr:`link_names` order) at the end of
         the last step."""
-        return np.array(self._link_prev).reshape(-1, 4, 4)
+        return self._link_prev.copy()
 
     def link_twist(self, link) -> tuple[np.ndarray, np.ndarray]:
         """(velocity of the link origin [m/s], angular velocity [rad/s]) over the last step."""
@@ -576,17 +601,18 @@ class MPMWorld:
         i = self.link_index(link)
         self._link_next[i] = as_pose_matrix(pose, f"pose of link {self.link_names[i]!r}")
 
-    def set_link_poses(self, poses) -> None:
-        """Targets for all links: a dict name -> 4x4, or an array [L, 4, 4] in link order."""
+    def set_link_poses(self, poses, links=None) -> None:
+        """Targets for many links at once: a dict name -> 4x4; or an array [K, 4, 4] for the
+        link indices ``links`` [K] (all links in order when None). Checked in one pass."""
         if isinstance(poses, dict):
-            for name, T in poses.items():
-                self.set_link_pose(name, T)
-            return
-        arr = np.asarray(poses)
-        if arr.shape != (len(self.link_names), 4, 4):
-            raise ConfigError(f"set_link_poses: expected shape {(len(self.link_names), 4, 4)}, got {arr.shape}")
-        for i, T in enumerate(arr):
-            self.set_link_pose(i, T)
+            links, poses = [self.link_index(n) for n in poses], list(poses.values())
+        idx = np.arange(len(self.link_names)) if links is None else np.asarray(links, np.int64).reshape(-1)
+        if len(idx) and (idx.min() < 0 or idx.max() >= len(self.link_names)):
+            raise ConfigError(f"set_link_poses: link index out of range (have {len(self.link_names)} links)")
+        arr = np.asarray(poses, np.float64)
+        if arr.shape != (len(idx), 4, 4):
+            raise ConfigError(f"set_link_poses: expected shape {(len(idx), 4, 4)}, got {arr.shape}")
+        self._link_next[idx] = as_pose_matrices(arr, "set_link_poses poses")
 
     def set_collider_pose(self, index: int, pose) -> None:
         """Target world pose (4x4) of collider ``index`` at the end of the next control step."""
@@ -673,24 +699,21 @@ class MPMWorld:
         return n, dt / n
 
     def _driver_speed(self, dt: float) -> float:
-        """Upper bound of link/collider surface speeds [m/s] over the next step."""
-        speed = 0.0
-        h = self._host
-        for i in range(len(self.link_names)):
-            a, b = self._link_prev[i], self._link_next[i]
-            ang = _angle(a[:3, :3].T @ b[:3, :3])
-            r = self._link_radius[i] if i < len(self._link_radius) else 0.0
-            speed = max(speed, (np.linalg.norm(b[:3, 3] - a[:3, 3]) + ang * r) / dt)
-        for c, a in zip(self.colliders, self._col_prev):
-            b = c.pose
-            ang = _angle(a[:3, :3].T @ b[:3, :3])
-            r = _collider_radius(c)
-            if not math.isfinite(r) and self._n:
+        """Upper bound of link/collider surface speeds [m/s] over the next step: the origin's
+        travel plus the turn's angle times the body's radius, over dt."""
+        r = np.zeros(len(self.link_names))
+        r[:len(self._link_radius)] = self._link_radius
+        speed = _surface_travel(self._link_prev, self._link_next, r).max(initial=0.0)
+        if self.colliders:
+            nxt = np.array([c.pose for c in self.colliders])
+            r = np.array([_collider_radius(c) for c in self.colliders])
+            far = ~np.isfinite(r)
+            if far.any():  # no bound: the farthest particle from the collider's end origin
                 self._pull(("x",))
-                x = h["x"]
-                r = float(np.linalg.norm(x - b[:3, 3], axis=1).max())
-            speed = max(speed, (np.linalg.norm(b[:3, 3] - a[:3, 3]) + ang * r) / dt)
-        return speed
+                x = self._host["x"] if self._n else np.zeros((1, 3))
+                r[far] = [float(np.linalg.norm(x - T[:3, 3], axis=1).max()) for T in nxt[far]]
+            speed = max(speed, _surface_travel(self._col_prev, nxt, r).max())
+        return float(speed) / dt
 
     def step(self, dt: float, min_substeps: int = 1) -> StepInfo:
         """Advance one control step of ``dt`` seconds; links and colliders move from
@@ -719,25 +742,24 @@ class MPMWorld:
         self._upload_poses()
         frozen = self._choose_patch() if self._patch is not None else None
         d = self._dev
-        twists = [_twist(a, b, float(dt)) for a, b in zip(self._link_prev, self._link_next)]
+        twists = _twists(self._link_prev, self._link_next, float(dt))
         if self._n_active:
             # not in an env whose colliders were touched in the last step: there the jump would
             # reach the object as a pseudo-mass impulse (a 62 g cube was kicked to 0.1 m/s);
             # pseudo-inertia stays then
             touching = np.zeros(self.num_envs, bool)
-            for e, J in zip(self._col_env, self._col_impulse):
-                touching[e] |= bool(np.any(J))
+            np.logical_or.at(touching, np.asarray(self._col_env, np.int64),
+                             np.any(self._col_impulse != 0, axis=1))
             change = np.zeros((max(len(twists), 1), 9), np.float32)
-            for i, (new, old) in enumerate(zip(twists, self._link_twist)):
-                if not touching[self._link_env[i]]:
-                    change[i] = np.concatenate([new - old, self._link_prev[i][:3, 3]])
+            free = ~touching[np.asarray(self._link_env, np.int64)]
+            change[:len(twists)][free] = np.concatenate([twists - self._link_twist, self._link_prev[:, :3, 3]], 1)[free]
             if np.any(change[:, :6]) and any(g.awake and g.quasi_static for g in self.groups):
                 d["twist_change"].from_numpy(change)
                 K.follow_links(d["active"], self._n_active, d["v"], d["C"], d["x"], d["kind"], d["link"],
                                d["group"], d["group_qs"], d["twist_change"])
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
-        d["col_impulse"].from_numpy(np.zeros((max(len(self.colliders), 1), 6), np.float32))
-        d["pair_impulse"].from_numpy(np.zeros(d["pair_impulse"].shape, np.float32))
+        d["col_impulse"].fill(0.0)
+        d["pair_impulse"].fill(0.0)
         self._stale = set(_STATE_FIELDS)  # from here on the device holds the newer state
         cells = 0
         for k in range(n_sub):
@@ -763,16 +785,16 @@ class MPMWorld:
         if self._patched and self._n_active:
             self._note_patch_contact()
         if self._n_active and self.contact == "particle":
-            K.reduce_contact(d["active"], self._n_active, d["x"], d["impulse"], d["contact_id"], d["link"], d["X0"],
-                             d["col_pose"], d["link_pose"], len(self.colliders) + 1, d["col_impulse"], d["pair_impulse"])
+            K.reduce_contact(self._pack["P"], d["X0"], d["active"], K.Reduction(
+                env_rows=d["env_rows"], col_slot=d["col_slot"], col_ends=d["col_pose"], link_ends=d["link_pose"],
+                col_sums=d["col_impulse"], pair_sums=d["pair_impulse"]), self.num_envs, self._pair_impulse.shape[1])
         self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
+        n_slot = self._pair_impulse.shape[1]
         pairs = d["pair_impulse"].to_numpy().astype(np.float64)
-        self._pair_impulse = pairs[: len(self.link_names) * (len(self.colliders) + 1)].reshape(
-            len(self.link_names), len(self.colliders) + 1, 7)
-        for i in range(len(self.link_names)):
-            self._link_prev[i] = self._link_next[i].copy()
+        self._pair_impulse = pairs[: len(self.link_names) * n_slot].reshape(len(self.link_names), n_slot, 7)
+        self._link_prev = self._link_next.copy()
         self._link_twist = twists
-        self._col_prev = [c.pose.copy() for c in self.colliders]
+        self._col_prev = np.array([c.pose for c in self.colliders]).reshape(-1, 4, 4)
         self._last_dt_ctrl = float(dt)
         self.time += float(dt)
         self.step_count += 1
@@ -842,14 +864,15 @@ class MPMWorld:
             if split is not None and not split[0].any() and g.patch_state == 1:
                 g.patch_state, split = 2, None  # its contact has just ended: relax it whole
             if split is None:
-                parts.append(idx)
+                parts.append((g.env, idx))
                 continue
             patch, shell = split  # nothing touches a group at rest: all of it rides with the link
             self._patched.append(i)
-            parts.append(idx[patch | shell])
+            parts.append((g.env, idx[patch | shell]))
             bind.append(idx[shell & (kind[sl] == 0)])
             frozen.append(idx[~(patch | shell)])
-        active = np.concatenate(parts)
+        active, env_rows = self._env_major(parts)
+        d["env_rows"].from_numpy(env_rows)
         kd = kind.copy()
         bind = np.concatenate(bind) if bind else np.zeros(0, np.int32)
         kd[bind] = 1
@@ -949,6 +972,15 @@ class MPMWorld:
                                                        "grid_bond", "cell_slot", "slot_cell", "cell_count",
                                                        "cell_a", "cell_b", "cell_G", "grid_t", "cg_sum")})
 
+    def _env_major(self, parts) -> tuple[np.ndarray, np.ndarray]:
+        """The active list from ``parts`` [(env, particle rows)] in group order: env by env
+        (each env's rows in their order: a node only ever sums its own env's particles, so
+        this order changes no sum), and where each env's rows start in it ([num_envs + 1])."""
+        parts = sorted(parts, key=lambda p: p[0])  # stable: group order within an env
+        active = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int32)
+        count = np.bincount([p[0] for p in parts], [len(p[1]) for p in parts], minlength=self.num_envs)
+        return active.astype(np.int32), np.concatenate([[0], np.cumsum(count)]).astype(np.int32)
+
     def _explode_message(self, lo, hi) -> str:
         x = self._dev["x"].to_numpy()
         parts = []
@@ -1022,12 +1054,10 @@ class MPMWorld:
             for key in ("kind", "matid", "link", "group", "contact_id"):
                 upload(key, h[key], ti.i32)
             upload("group_bind", h["group_bind"].astype(np.float32), ti.f32)
-        awake = np.zeros(n, bool)
-        for g in self.groups:
-            if g.awake:
-                awake[g.start:g.stop] = True
         kind = h["kind"] if self._n else np.zeros(n, np.int32)
-        active = np.flatnonzero(awake[: self._n]).astype(np.int32)
+        active, env_rows = self._env_major([(g.env, np.arange(g.start, g.stop, dtype=np.int32))
+                                            for g in self.groups if g.awake])
+        upload("env_rows", env_rows, ti.i32)
         active_kin = active[kind[active] == 1]
         self._n_active, self._n_kin = len(active), len(active_kin)
         # groups of both velocity fields awake (see add_group's ``field``): two grid copies
@@ -1086,7 +1116,9 @@ class MPMWorld:
         d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
         d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
         d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
-        d["pair_impulse"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1) * (len(self.colliders) + 1), 7))
+        n_slot, slot = self.pair_slots()
+        d["pair_impulse"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1) * n_slot, 7))
+        upload("col_slot", slot.astype(np.int32) if len(slot) else np.zeros(1, np.int32), ti.i32)
         d["link_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), FRAME))
         d["col_frames"] = ti.ndarray(ti.f32, shape=(nc, FRAME))
         d["group_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.groups), 1), FRAME))
@@ -1104,10 +1136,10 @@ class MPMWorld:
             self._alloc_grid(4096)
         else:
             self._alloc_cells()  # the particle count or the materials may have changed
-        self._link_radius = []
-        for i in range(len(self.link_names)):
-            mask = (h["link"] == i) & (h["kind"] == 1) if self._n else np.zeros(0, bool)
-            self._link_radius.append(float(np.linalg.norm(h["X0"][mask], axis=1).max()) if mask.any() else 0.0)
+        self._link_radius = np.zeros(len(self.link_names))
+        if self._n:
+            bound = (h["kind"] == 1) & (h["link"] >= 0)
+            np.maximum.at(self._link_radius, h["link"][bound], np.linalg.norm(h["X0"][bound], axis=1))
         self._dirty = False
         self._stale = set()
 
@@ -1132,17 +1164,18 @@ class MPMWorld:
         pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
 
     def _upload_poses(self) -> None:
+        """The step's pose rows (kinematics.py: start position, quaternion, end position,
+        quaternion on the same hemisphere) of every link and collider."""
         def rows(prev, nxt):
             out = np.zeros((max(len(prev), 1), 14), np.float32)
-            for i, (a, b) in enumerate(zip(prev, nxt)):
-                qa, qb = matrix_to_quat(a[:3, :3]), matrix_to_quat(b[:3, :3])
-                if qa @ qb < 0:
-                    qb = -qb
-                out[i] = np.concatenate([a[:3, 3], qa, b[:3, 3], qb])
+            if len(prev):
+                qa, qb = matrix_to_quat(prev[:, :3, :3]), matrix_to_quat(nxt[:, :3, :3])
+                qb *= np.where(np.einsum("ij,ij->i", qa, qb) < 0, -1.0, 1.0)[:, None]
+                out[:len(prev)] = np.concatenate([prev[:, :3, 3], qa, nxt[:, :3, 3], qb], 1)
             return out
 
         self._dev["link_pose"].from_numpy(rows(self._link_prev, self._link_next))
-        self._dev["col_pose"].from_numpy(rows(self._col_prev, [c.pose for c in self.colliders]))
+        self._dev["col_pose"].from_numpy(rows(self._col_prev, np.array([c.pose for c in self.colliders]).reshape(-1, 4, 4)))
 
     # ------------------------------------------------------------------ state
     def _env_parts(self, env: int | None):
@@ -1169,7 +1202,6 @@ class MPMWorld:
         self._pull()
         rows, groups, links, cols = self._env_parts(env)
         G = [self.groups[i] for i in groups]
-        pair_cols = np.append(cols, len(self.colliders))  # its colliders, then the other field
         parts = {k: self._host[k][rows].copy() for k in _STATE_FIELDS} if len(rows) else {}
         if parts and env is not None:  # collider ids of contacts and anchors: the env's own numbering
             local = np.full(len(self.colliders), -1)
@@ -1177,17 +1209,17 @@ class MPMWorld:
             _renumber(parts, local)
         return {
             "particles": parts,
-            "link_prev": np.array([self._link_prev[i] for i in links]).copy(),
-            "link_next": np.array([self._link_next[i] for i in links]).copy(),
-            "link_twist": np.array([self._link_twist[i] for i in links]).reshape(-1, 6).copy(),
-            "collider_prev": np.array([self._col_prev[i] for i in cols]).copy(),
+            "link_prev": self._link_prev[links],
+            "link_next": self._link_next[links],
+            "link_twist": self._link_twist[links],
+            "collider_prev": self._col_prev[cols],
             "collider_pose": np.array([self.colliders[i].pose for i in cols]).copy(),
             "awake": np.array([g.awake for g in G]),
             "patch_state": np.array([g.patch_state for g in G], np.int32),
             "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in G],
             "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
             "collider_impulse": self._col_impulse[cols].copy(), "last_dt_ctrl": self._last_dt_ctrl,
-            "pair_impulse": self._pair_impulse[links][:, pair_cols].copy(),
+            "pair_impulse": self._pairs(links, cols),
         }
 
     def load_state_dict(self, state: dict, env: int | None = None) -> None:
@@ -1216,12 +1248,11 @@ class MPMWorld:
         for k in _STATE_FIELDS if len(rows) else ():
             self._host[k][rows] = parts[k]
         twist = state.get("link_twist")
-        for n, i in enumerate(links):
-            self._link_prev[i] = state["link_prev"][n].copy()
-            self._link_next[i] = state["link_next"][n].copy()
-            self._link_twist[i] = np.zeros(6) if twist is None else twist[n].copy()
+        self._link_prev[links] = np.asarray(state["link_prev"]).reshape(-1, 4, 4)
+        self._link_next[links] = np.asarray(state["link_next"]).reshape(-1, 4, 4)
+        self._link_twist[links] = 0.0 if twist is None else np.asarray(twist).reshape(-1, 6)
+        self._col_prev[cols] = np.asarray(state["collider_prev"]).reshape(-1, 4, 4)
         for n, i in enumerate(cols):
-            self._col_prev[i] = state["collider_prev"][n].copy()
             self.colliders[i].pose = state["collider_pose"][n].copy()
         patch = state.get("patch_state", np.zeros(len(groups), np.int32))
         for n, i in enumerate(groups):
@@ -1236,13 +1267,15 @@ class MPMWorld:
         one = env is None or self.num_envs == 1
         self._vmax = float(state["vmax"]) if one else max(self._vmax, float(state["vmax"]))
         self._col_impulse[cols] = state["collider_impulse"]
-        pair_cols = np.append(cols, len(self.colliders))
-        if "pair_impulse" in state:
-            self._pair_impulse[np.ix_(links, pair_cols)] = state["pair_impulse"]
-        else:
-            self._pair_impulse[np.ix_(links, pair_cols)] = 0.0
-            if state.get("link_impulse") is not None:  # saved before per-object pairs: the link's sum, no depth
-                self._pair_impulse[links, -1, :6] = np.asarray(state["link_impulse"], np.float64).reshape(-1, 6)
+        self._pair_impulse[links] = 0.0
+        if "pair_impulse" in state:  # [links, cols + the other field] (see _pairs), back into the slots
+            pairs = np.asarray(state["pair_impulse"], np.float64)
+            same = np.asarray(self._link_env)[links][:, None] == np.asarray(self._col_env, np.int64)[cols][None, :]
+            li, ci = np.nonzero(same)
+            self._pair_impulse[links[li], self.pair_slots()[1][cols[ci]]] = pairs[li, ci]
+            self._pair_impulse[links, -1] = pairs[:, -1]
+        elif state.get("link_impulse") is not None:  # saved before per-object pairs: the link's sum, no depth
+            self._pair_impulse[links, -1, :6] = np.asarray(state["link_impulse"], np.float64).reshape(-1, 6)
         self._dirty = True
 
 
@@ -1256,13 +1289,24 @@ def atomic_scatter() -> bool:
     return mode == "atomic" if mode else backend.current_arch() == "cuda"
 
 
-def _twist(a: np.ndarray, b: np.ndarray, dt: float) -> np.ndarray:
-    """(v_origin, ω) [m/s, rad/s] of the uniform motion from pose a to pose b in dt seconds
-    (world frame; the slerp/lerp interpolation of the substeps has exactly these)."""
+def _twists(a: np.ndarray, b: np.ndarray, dt: float) -> np.ndarray:
+    """[N, 6] (v_origin, ω) [m/s, rad/s] of the uniform motions from poses a [N, 4, 4] to
+    poses b in dt seconds (world frame; the slerp/lerp interpolation of the substeps has
+    exactly these)."""
     from scipy.spatial.transform import Rotation
 
-    w = Rotation.from_matrix(b[:3, :3] @ a[:3, :3].T).as_rotvec() / dt
-    return np.concatenate([(b[:3, 3] - a[:3, 3]) / dt, w])
+    if not len(a):
+        return np.zeros((0, 6))
+    w = Rotation.from_matrix(b[:, :3, :3] @ a[:, :3, :3].transpose(0, 2, 1)).as_rotvec() / dt
+    return np.concatenate([(b[:, :3, 3] - a[:, :3, 3]) / dt, w], 1)
+
+
+def _surface_travel(a: np.ndarray, b: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """[N] bound on how far a point within ``radius`` [N] of the origin moves from pose a
+    [N, 4, 4] to pose b [m]: the origin's travel plus the turn's angle times the radius."""
+    cos = (np.einsum("nji,nji->n", a[:, :3, :3], b[:, :3, :3]) - 1.0) / 2.0  # trace(aᵀ b)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    return np.linalg.norm(b[:, :3, 3] - a[:, :3, 3], axis=1) + angle * radius
 
 
 def _bond_table(name: str, pts: np.ndarray, kin: np.ndarray, spacing: float, distance, normal) -> np.ndarray:
@@ -1324,10 +1368,6 @@ def _env_index(env, where: str) -> int:
     if isinstance(env, bool) or not isinstance(env, (int, np.integer)) or env < 0:
         raise ConfigError(f"{where}: env={env!r} must be an integer >= 0 (the env of a batched world)")
     return int(env)
-
-
-def _angle(R: np.ndarray) -> float:
-    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
 
 
 def _collider_radius(c: Collider) -> float:

@@ -74,9 +74,13 @@ class Pad:
         return np.where(self.depth < h, np.clip(self.depth, 0.05 * h, h), 0.5 * h)
 
     def bounding_sphere(self) -> tuple[np.ndarray, float]:
-        """(centre [3], radius) of the pad's particles in the link frame, metres."""
-        c = self.rest.mean(0)
-        return c, float(np.linalg.norm(self.rest - c, axis=1).max() + self.spacing)
+        """(centre [3], radius) of the pad's particles in the link frame, metres (computed once:
+        the co-simulator asks every step)."""
+        if "_sphere" not in self.__dict__:
+            c = self.rest.mean(0)
+            self.__dict__["_sphere"] = (c, float(np.linalg.norm(self.rest - c, axis=1).max() + self.spacing))
+        c, r = self.__dict__["_sphere"]
+        return c.copy(), r
 
 
 def pad_mesh(spec: PadSpec, urdf: str):
