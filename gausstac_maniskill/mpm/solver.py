@@ -63,6 +63,7 @@ from ..config import Material, SolverSettings, _finite
 from ..errors import ConfigError, SimulationError
 from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix
 from . import kernels as K
+from . import rows
 from .colliders import Collider, MeshCollider
 from .kinematics import FRAME
 from .materials import cell_pressure, material_table
@@ -166,6 +167,8 @@ class MPMWorld:
         self._dev: dict[str, object] = {}
         self._grid_cap = 0
         self._dirty = True
+        self._awake_changed = False  # groups woke or slept since the last push (the active lists are old)
+        self.rebuilds = 0  # full rebuilds of the device arrays from the host (structural changes)
         self._vmax = 0.0
         self._col_impulse = np.zeros((0, 6))
         # [link, slot, J | moment | depth]: slot = the collider's number among its env's colliders
@@ -630,23 +633,37 @@ class MPMWorld:
         g = self.group(name)
         if g.awake == bool(awake):
             return
-        self._pull()
+        on_device = self._on_device()
+        if not on_device:
+            self._pull()
         if not awake:
             if g.link >= 0:
                 g.sleep_pose = self._link_prev[g.link].copy()
-            self._forget_contact(g)
+            self._forget_contact(g, on_device)
         elif g.link >= 0 and g.sleep_pose is not None:
             T = self._link_prev[g.link] @ np.linalg.inv(g.sleep_pose)
             R, t = T[:3, :3], T[:3, 3]
-            sl = slice(g.start, g.stop)
-            h = self._host
-            h["x"][sl] = (h["x"][sl].astype(np.float64) @ R.T + t).astype(np.float32)
-            h["v"][sl] = (h["v"][sl] @ R.T).astype(np.float32)
-            for key in ("C", "tau"):
-                h[key][sl] = (R @ h[key][sl] @ R.T).astype(np.float32)
-            h["F"][sl] = (R @ h["F"][sl]).astype(np.float32)
+            if on_device:
+                rows.carry_rigidly(self._pack["P"], g.start, g.stop, ti.math.mat3(R), ti.math.vec3(t))
+                self._stale |= {"x", "v", "C", "tau", "F"}
+            else:
+                sl = slice(g.start, g.stop)
+                h = self._host
+                h["x"][sl] = (h["x"][sl].astype(np.float64) @ R.T + t).astype(np.float32)
+                h["v"][sl] = (h["v"][sl] @ R.T).astype(np.float32)
+                for key in ("C", "tau"):
+                    h[key][sl] = (R @ h[key][sl] @ R.T).astype(np.float32)
+                h["F"][sl] = (R @ h["F"][sl]).astype(np.float32)
         g.awake = bool(awake)
-        self._dirty = True
+        if on_device:
+            self._awake_changed = True  # the active lists follow at the next push; the state stays
+        else:
+            self._dirty = True
+
+    def _on_device(self) -> bool:
+        """Whether the device holds the world as built (no structural change pending), so a
+        group's rows can be changed there in place (mpm/rows.py) instead of on the host."""
+        return not self._dirty and self._n > 0 and "P" in self._pack
 
     def rest_group(self, name: str) -> None:
         """Put a link-bound group exactly on its rest shape on the link's current pose
@@ -655,22 +672,36 @@ class MPMWorld:
         g = self.group(name)
         if g.link < 0:
             raise ConfigError(f"rest_group({name!r}): the group is not bound to a link")
-        self._pull()
+        on_device = self._on_device()
+        if not on_device:
+            self._pull()
         T = self._link_prev[g.link]
-        sl, h = slice(g.start, g.stop), self._host
-        bind = quat_to_matrix(h["group_bind"][self.groups.index(g)].astype(np.float64))
-        h["x"][sl] = (h["X0"][sl].astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
-        h["v"][sl] = 0.0
-        h["C"][sl] = 0.0
-        h["tau"][sl] = 0.0
-        h["Jp"][sl] = 1.0
-        h["F"][sl] = (T[:3, :3] @ bind.T).astype(np.float32)
-        self._forget_contact(g)
+        bind = quat_to_matrix(self._host["group_bind"][self.groups.index(g)].astype(np.float64))
+        F_rest = T[:3, :3] @ bind.T
+        if on_device:  # X0 as built (the active patch rebinds some rows of the device's X0)
+            X0 = self._dev["X_rest" if self._patch is not None else "X0"]
+            rows.put_at_rest(self._pack["P"], X0, g.start, g.stop, ti.math.mat3(T[:3, :3]), ti.math.vec3(T[:3, 3]),
+                             ti.math.mat3(F_rest))
+            self._stale |= {"x", "v", "C", "tau", "Jp", "F", "impulse", "contact_id", "anchor"}
+        else:
+            sl, h = slice(g.start, g.stop), self._host
+            h["x"][sl] = (h["X0"][sl].astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
+            h["v"][sl] = 0.0
+            h["C"][sl] = 0.0
+            h["tau"][sl] = 0.0
+            h["Jp"][sl] = 1.0
+            h["F"][sl] = F_rest.astype(np.float32)
+            self._forget_contact(g, False)
+            self._dirty = True
         g.patch_state = 0
-        self._dirty = True
 
-    def _forget_contact(self, g: Group) -> None:
-        """Clear group g's contact state on the host: impulses, touched colliders, friction anchors."""
+    def _forget_contact(self, g: Group, on_device: bool) -> None:
+        """Clear group g's contact state: impulses, touched colliders, friction anchors (on the
+        device, or on the host when the world is to be rebuilt from it)."""
+        if on_device:
+            rows.forget_contact(self._pack["P"], g.start, g.stop)
+            self._stale |= {"impulse", "contact_id", "anchor"}
+            return
         sl, h = slice(g.start, g.stop), self._host
         h["impulse"][sl] = 0.0
         h["contact_id"][sl] = -1
@@ -1025,9 +1056,13 @@ class MPMWorld:
                 stale.discard(key)
 
     def _push(self) -> None:
-        """(Re)build device arrays from the host after any structural change."""
+        """(Re)build device arrays from the host after any structural change; after groups
+        only woke or fell asleep, renew just the active lists (:meth:`_refresh_active`)."""
         if not self._dirty:
+            if self._awake_changed:
+                self._refresh_active()
             return
+        self.rebuilds += 1
         self._pull()
         if self._n == 0 and not self.groups:
             self._n_active = 0
@@ -1054,19 +1089,11 @@ class MPMWorld:
             for key in ("kind", "matid", "link", "group", "contact_id"):
                 upload(key, h[key], ti.i32)
             upload("group_bind", h["group_bind"].astype(np.float32), ti.f32)
-        kind = h["kind"] if self._n else np.zeros(n, np.int32)
-        active, env_rows = self._env_major([(g.env, np.arange(g.start, g.stop, dtype=np.int32))
-                                            for g in self.groups if g.awake])
-        upload("env_rows", env_rows, ti.i32)
-        active_kin = active[kind[active] == 1]
-        self._n_active, self._n_kin = len(active), len(active_kin)
-        # groups of both velocity fields awake (see add_group's ``field``): two grid copies
-        self._two_fields = len({g.field for g in self.groups if g.awake}) == 2
         self._fbar, self._cellp = self._stress_flags()  # from the materials, which only _push sees change
-        # with the active patch the lists are rewritten every step: room for every particle
-        room = n if self._patch is not None else 1
-        upload("active", np.resize(active, max(len(active), room)), ti.i32)
-        upload("active_kin", np.resize(active_kin, max(len(active_kin), room)), ti.i32)
+        # room for every particle: the lists are rewritten when groups wake or sleep, and with
+        # the active patch every step
+        d["active"], d["active_kin"] = ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n)
+        d["env_rows"] = ti.ndarray(ti.i32, shape=self.num_envs + 1)
         if self._patch is not None:
             self._patch.forget()
             upload("X_rest", h["X0"] if self._n else np.zeros((1, 3), np.float32), ti.f32, (3,))
@@ -1085,11 +1112,9 @@ class MPMWorld:
         upload("mat_table", material_table(self.materials, self.settings.pressure), ti.f32)
         upload("group_qs", np.array([int(g.quasi_static) for g in self.groups] or [0], np.int32), ti.i32)
         upload("group_field", np.array([g.field for g in self.groups] or [0], np.int32), ti.i32)
-        # the grid holds one box per env and awake field: copy = field · num_envs + env
-        B = self.num_envs
         upload("group_env", np.array([g.env for g in self.groups] or [0], np.int32), ti.i32)
-        upload("group_copy", np.array([(g.field if self._two_fields else 0) * B + g.env for g in self.groups] or [0],
-                                      np.int32), ti.i32)
+        # the grid holds one box per env and awake field: each group's copy (_refresh_active)
+        d["group_copy"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
         upload("col_env", np.array(self._col_env or [0], np.int32), ti.i32)
         walls = np.array(self._walls, np.float32).reshape(-1, 3)
         upload("walls", walls if len(walls) else np.zeros((1, 3), np.float32), ti.f32)
@@ -1127,7 +1152,7 @@ class MPMWorld:
             upload("group_bind", np.tile(np.array([1.0, 0, 0, 0], np.float32), (1, 1)), ti.f32)
         d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
         d["counts"] = ti.ndarray(ti.i32, shape=7)
-        self._upload_counts()
+        self._refresh_active()
         d["consts"] = ti.ndarray(ti.f32, shape=9)
         d["env_relax"] = ti.ndarray(ti.f32, shape=self.num_envs)
         self._upload_consts()
@@ -1142,6 +1167,26 @@ class MPMWorld:
             np.maximum.at(self._link_radius, h["link"][bound], np.linalg.norm(h["X0"][bound], axis=1))
         self._dirty = False
         self._stale = set()
+
+    def _refresh_active(self) -> None:
+        """The awake groups' particles as the active list (env-major, :meth:`_env_major`),
+        its kinematic ones, each env's rows, the counts, and whether two velocity fields are
+        awake (then the grid holds two box copies per env: see add_group's ``field``)."""
+        d, n = self._dev, max(self._n, 1)
+        kind = self._host["kind"] if self._n else np.zeros(n, np.int32)
+        active, env_rows = self._env_major([(g.env, np.arange(g.start, g.stop, dtype=np.int32))
+                                            for g in self.groups if g.awake])
+        active_kin = active[kind[active] == 1]
+        self._n_active, self._n_kin = len(active), len(active_kin)
+        self._two_fields = len({g.field for g in self.groups if g.awake}) == 2
+        B = self.num_envs  # each group's grid copy: field · num_envs + env, the field only with two
+        d["group_copy"].from_numpy(np.array([(g.field if self._two_fields else 0) * B + g.env for g in self.groups]
+                                            or [0], np.int32))
+        d["env_rows"].from_numpy(env_rows)
+        d["active"].from_numpy(np.resize(active, n))
+        d["active_kin"].from_numpy(np.resize(active_kin, n))
+        self._upload_counts()
+        self._awake_changed = False
 
     def _build_packs(self) -> None:
         """Group the device arrays into the kernels' argument packs (kernels.Particles, Scene,
