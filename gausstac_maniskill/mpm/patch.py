@@ -33,6 +33,7 @@ import taichi as ti
 from scipy import ndimage
 
 from .colliders import local_sdf
+from .kernels import NDF, NDF2, NDI, NDI2, NDM, NDV
 from .kinematics import pose_at
 
 __all__ = ["ActivePatch", "SHELL_CELLS"]
@@ -44,13 +45,6 @@ SHELL_CELLS = 2.0
 #: A particle counts as touching a collider when the gap between its rest place and the
 #: collider's surface at either end of the step is under this many grid cells.
 SEED_CELLS = 0.5
-
-NDI = ti.types.ndarray(dtype=ti.i32, ndim=1)
-NDI2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-NDF = ti.types.ndarray(dtype=ti.f32, ndim=1)
-NDF2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-NDV = ti.types.ndarray(dtype=ti.math.vec3, ndim=1)
-NDM = ti.types.ndarray(dtype=ti.math.mat3, ndim=1)
 
 
 @ti.kernel

@@ -27,6 +27,7 @@ import taichi as ti
 import torch
 
 from .. import backend
+from ..mpm.kernels import NDF, NDF2, NDI, NDI2, NDM, NDV
 from .extract import TaxelBinning
 from .pad import Pad
 
@@ -36,13 +37,6 @@ __all__ = ["TactileReadout", "MAP_KEYS"]
 MAP_KEYS = ("depth", "shear", "force", "pressure")
 SURFACE, SOFT = 1, 2  # flag bits of an entry: depth/shear from the surface layer, pressure from the soft part
 CHANNELS = 5  # depth, shear x, shear y, force, pressure
-
-NDI = ti.types.ndarray(dtype=ti.i32, ndim=1)
-NDI2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-NDF = ti.types.ndarray(dtype=ti.f32, ndim=1)
-NDF2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-NDV = ti.types.ndarray(dtype=ti.math.vec3, ndim=1)
-NDM = ti.types.ndarray(dtype=ti.math.mat3, ndim=1)
 
 Particles = ti.types.argpack(  # the MPM world's state arrays (all groups, all envs)
     x=NDV, impulse=NDV, tau=NDM, F=NDM)  # position [m], contact impulse of the step [N s], τ [Pa], F
