@@ -12,8 +12,9 @@ Prints per B: wall time per control step of both (the first step, which compiles
 out) and its host part (the wall time outside Taichi launches: Python's pose handling, sleep
 logic and bookkeeping; on the CPU, where a launch returns when its kernel is done), the
 ratio measured in this run, Taichi launches per step of both (kernels and ndarray copies),
-and the error of the batch: the largest difference of env 0's maps from the same scene
-alone, over their largest value. Taichi arch: ``GAUSSTAC_ARCH`` (cpu by default).
+the error of the batch: the largest difference of env 0's maps from the same scene alone,
+over their largest value, and the cost of one pad of the batch falling asleep or waking up
+(done in place on the device, no rebuild). Taichi arch: ``GAUSSTAC_ARCH`` (cpu by default).
 """
 from __future__ import annotations
 
@@ -98,8 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nBatched co-simulator, Allegro index pad pressed by a 6 mm ball in every env, dx = {args.dx * 1e3:g} mm, "
           f"Taichi {arch}, {args.steps - 1} timed steps of {DT * 1e3:g} ms")
     print("| B | particles | substeps | batched [ms/step] | of it host | loop [ms/step] | of it host | loop / batched "
-          "| batched per env [ms] | launches batched / loop | env 0 vs alone (max rel) | mean index force [N] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+          "| batched per env [ms] | launches batched / loop | env 0 vs alone (max rel) | mean index force [N] "
+          "| wake/sleep event [ms] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     for B in tqdm(args.envs, desc="env counts", unit="B"):  # each row as it is measured: a cut run keeps them
         scenes = _scenes(B, names, base, sensor)
         poses = np.stack([P for P, _ in scenes])
@@ -137,17 +139,33 @@ def main(argv: list[str] | None = None) -> int:
         err = max(float((maps[p][key][0] - alone[p][key]).abs().max()) / max(float(alone[p][key].abs().max()), 1e-30)
                   for p in batch.pad_names for key in ("depth", "shear", "force") if alone[p][key].abs().max() > 0)
         force = float(maps["link_3.0_tip"]["force"].sum(dim=(1, 2)).mean())
+        event = _wake_sleep_ms(batch)
         n = args.steps - 1
         est = len(loop) < B  # the loop ran env 0 alone: B times its time and launches, an estimate
         scale = B if est else 1
         tqdm.write(_row(B, batch.world.last_step.active_particles, sub, (t_batch / n, h_batch / n),
-                        (scale * t_loop / n, scale * h_loop / n), n_batch / n, scale * n_loop / n, err, force, est))
+                        (scale * t_loop / n, scale * h_loop / n), n_batch / n, scale * n_loop / n, err, force, est,
+                        event))
     return 0
 
 
-def _row(B, npart, sub, batched, loop, nb, nl, err, f, est) -> str:
+def _wake_sleep_ms(batch) -> float:
+    """Mean wall time [ms] of env 0's index pad falling asleep or waking up, the device
+    arrays brought up to date (what the next step would find); the first pair is not
+    timed (its kernels compile)."""
+    world, group = batch.world, batch.scenes[0].pad_slots()[batch.pad_names.index("link_3.0_tip")][0]
+    times = []
+    for k in range(4):
+        t0 = time.perf_counter()
+        world.set_awake(group, not world.group(group).awake)
+        world.device_state(("x",))
+        times.append(time.perf_counter() - t0)
+    return float(np.mean(times[2:])) * 1e3
+
+
+def _row(B, npart, sub, batched, loop, nb, nl, err, f, est, event) -> str:
     """A table row; ``batched`` and ``loop`` are (wall, outside launches) [s] per step."""
     mark = " (B × env 0 alone)" if est else ""
     (tb, hb), (tl, hl) = batched, loop
     return (f"| {B} | {npart} | {sub} | {tb * 1e3:.0f} | {hb * 1e3:.0f} | {tl * 1e3:.0f}{mark} | {hl * 1e3:.0f} | "
-            f"{tl / tb:.2f} | {tb / B * 1e3:.1f} | {nb:.0f} / {nl:.0f} | {err:.1e} | {f:.3f} |")
+            f"{tl / tb:.2f} | {tb / B * 1e3:.1f} | {nb:.0f} / {nl:.0f} | {err:.1e} | {f:.3f} | {event:.1f} |")
