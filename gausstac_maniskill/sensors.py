@@ -30,6 +30,7 @@ from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
 from mani_skill.sensors.camera import Camera, CameraConfig
 
 from .errors import ConfigError
+from .tactile.extract import MAP_KEYS
 
 __all__ = ["GaussianSplatCameraConfig", "GaussianSplatCamera", "TactileSensor", "TactileSensorConfig",
            "TACTILE_KEYS"]
@@ -287,10 +288,10 @@ class TactileSensor(BaseSensor):
     def __init__(self, config: TactileSensorConfig, maps_fn: Callable[[], dict],
                  pad_names: Sequence[str], device=None):
         super().__init__(config)
-        bad = [k for k in config.keys if k not in ("depth", "shear", "force", "pressure")]
+        bad = [k for k in config.keys if k not in MAP_KEYS]
         if bad:
             raise ConfigError(f"TactileSensorConfig.keys: unknown map(s) {bad}; choose from "
-                              "'depth', 'shear', 'force', 'pressure'")
+                              + ", ".join(repr(k) for k in MAP_KEYS))
         self.maps_fn = maps_fn
         self.pad_names = list(pad_names)
         self.device = device

@@ -29,7 +29,7 @@ def forget_contact(P: Particles, start: ti.i32, stop: ti.i32):
 
 
 @ti.kernel
-def carry_rigidly(P: Particles, start: ti.i32, stop: ti.i32, R: mat3, t: vec3):
+def move_rigidly(P: Particles, start: ti.i32, stop: ti.i32, R: mat3, t: vec3):
     """Move rows [start, stop) by the rigid motion x -> R x + t (a sleeping pad's link moved):
     positions and velocities turn with it, and so do C and τ (R · Rᵀ) and F (R ·)."""
     for p in range(start, stop):

@@ -63,7 +63,7 @@ from ..config import Material, SolverSettings, _finite
 from ..errors import ConfigError, SimulationError
 from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix
 from . import kernels as K
-from . import rows
+from .rows import forget_contact, move_rigidly, put_at_rest
 from .colliders import Collider, MeshCollider
 from .kinematics import FRAME
 from .materials import cell_pressure, material_table
@@ -395,12 +395,15 @@ class MPMWorld:
         """[len(links), len(cols) + 1, 7] pair sums of ``links`` with colliders ``cols`` (zero
         for a collider of another env), then with the other field."""
         n_slot, slot = self.pair_slots()
-        same = np.asarray(self._link_env)[links][:, None] == np.asarray(self._col_env, np.int64)[cols][None, :]
-        rows = self._pair_impulse[links]
+        sums = self._pair_impulse[links]
         out = np.zeros((len(links), len(cols) + 1, 7))
-        out[:, :-1] = np.where(same[..., None], rows[:, slot[cols]], 0.0)
-        out[:, -1] = rows[:, n_slot - 1]
+        out[:, :-1] = np.where(self._same_env(links, cols)[..., None], sums[:, slot[cols]], 0.0)
+        out[:, -1] = sums[:, n_slot - 1]
         return out
+
+    def _same_env(self, links: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """[len(links), len(cols)] whether link links[i] and collider cols[j] share an env."""
+        return np.asarray(self._link_env)[links][:, None] == np.asarray(self._col_env, np.int64)[cols][None, :]
 
     def add_slip_wall(self, axis: int, position: float, keep: str = "+") -> None:
         """A bilateral frictionless wall on the grid (e.g. a symmetry plane).
@@ -644,7 +647,7 @@ class MPMWorld:
             T = self._link_prev[g.link] @ np.linalg.inv(g.sleep_pose)
             R, t = T[:3, :3], T[:3, 3]
             if on_device:
-                rows.carry_rigidly(self._pack["P"], g.start, g.stop, ti.math.mat3(R), ti.math.vec3(t))
+                move_rigidly(self._pack["P"], g.start, g.stop, ti.math.mat3(R), ti.math.vec3(t))
                 self._stale |= {"x", "v", "C", "tau", "F"}
             else:
                 sl = slice(g.start, g.stop)
@@ -680,7 +683,7 @@ class MPMWorld:
         F_rest = T[:3, :3] @ bind.T
         if on_device:  # X0 as built (the active patch rebinds some rows of the device's X0)
             X0 = self._dev["X_rest" if self._patch is not None else "X0"]
-            rows.put_at_rest(self._pack["P"], X0, g.start, g.stop, ti.math.mat3(T[:3, :3]), ti.math.vec3(T[:3, 3]),
+            put_at_rest(self._pack["P"], X0, g.start, g.stop, ti.math.mat3(T[:3, :3]), ti.math.vec3(T[:3, 3]),
                              ti.math.mat3(F_rest))
             self._stale |= {"x", "v", "C", "tau", "Jp", "F", "impulse", "contact_id", "anchor"}
         else:
@@ -699,7 +702,7 @@ class MPMWorld:
         """Clear group g's contact state: impulses, touched colliders, friction anchors (on the
         device, or on the host when the world is to be rebuilt from it)."""
         if on_device:
-            rows.forget_contact(self._pack["P"], g.start, g.stop)
+            forget_contact(self._pack["P"], g.start, g.stop)
             self._stale |= {"impulse", "contact_id", "anchor"}
             return
         sl, h = slice(g.start, g.stop), self._host
@@ -732,11 +735,9 @@ class MPMWorld:
     def _driver_speed(self, dt: float) -> float:
         """Upper bound of link/collider surface speeds [m/s] over the next step: the origin's
         travel plus the turn's angle times the body's radius, over dt."""
-        r = np.zeros(len(self.link_names))
-        r[:len(self._link_radius)] = self._link_radius
-        speed = _surface_travel(self._link_prev, self._link_next, r).max(initial=0.0)
+        speed = _surface_travel(self._link_prev, self._link_next, self._link_radius).max(initial=0.0)
         if self.colliders:
-            nxt = np.array([c.pose for c in self.colliders])
+            nxt = self._collider_poses()
             r = np.array([_collider_radius(c) for c in self.colliders])
             far = ~np.isfinite(r)
             if far.any():  # no bound: the farthest particle from the collider's end origin
@@ -825,7 +826,7 @@ class MPMWorld:
         self._pair_impulse = pairs[: len(self.link_names) * n_slot].reshape(len(self.link_names), n_slot, 7)
         self._link_prev = self._link_next.copy()
         self._link_twist = twists
-        self._col_prev = np.array([c.pose for c in self.colliders]).reshape(-1, 4, 4)
+        self._col_prev = self._collider_poses()
         self._last_dt_ctrl = float(dt)
         self.time += float(dt)
         self.step_count += 1
@@ -1211,7 +1212,7 @@ class MPMWorld:
     def _upload_poses(self) -> None:
         """The step's pose rows (kinematics.py: start position, quaternion, end position,
         quaternion on the same hemisphere) of every link and collider."""
-        def rows(prev, nxt):
+        def pose_rows(prev, nxt):
             out = np.zeros((max(len(prev), 1), 14), np.float32)
             if len(prev):
                 qa, qb = matrix_to_quat(prev[:, :3, :3]), matrix_to_quat(nxt[:, :3, :3])
@@ -1219,8 +1220,12 @@ class MPMWorld:
                 out[:len(prev)] = np.concatenate([prev[:, :3, 3], qa, nxt[:, :3, 3], qb], 1)
             return out
 
-        self._dev["link_pose"].from_numpy(rows(self._link_prev, self._link_next))
-        self._dev["col_pose"].from_numpy(rows(self._col_prev, np.array([c.pose for c in self.colliders]).reshape(-1, 4, 4)))
+        self._dev["link_pose"].from_numpy(pose_rows(self._link_prev, self._link_next))
+        self._dev["col_pose"].from_numpy(pose_rows(self._col_prev, self._collider_poses()))
+
+    def _collider_poses(self) -> np.ndarray:
+        """[C, 4, 4] the colliders' target poses (where they end the next step)."""
+        return np.array([c.pose for c in self.colliders]).reshape(-1, 4, 4)
 
     # ------------------------------------------------------------------ state
     def _env_parts(self, env: int | None):
@@ -1315,8 +1320,7 @@ class MPMWorld:
         self._pair_impulse[links] = 0.0
         if "pair_impulse" in state:  # [links, cols + the other field] (see _pairs), back into the slots
             pairs = np.asarray(state["pair_impulse"], np.float64)
-            same = np.asarray(self._link_env)[links][:, None] == np.asarray(self._col_env, np.int64)[cols][None, :]
-            li, ci = np.nonzero(same)
+            li, ci = np.nonzero(self._same_env(links, cols))
             self._pair_impulse[links[li], self.pair_slots()[1][cols[ci]]] = pairs[li, ci]
             self._pair_impulse[links, -1] = pairs[:, -1]
         elif state.get("link_impulse") is not None:  # saved before per-object pairs: the link's sum, no depth

@@ -32,7 +32,10 @@ import torch
 
 from .pad import Pad
 
-__all__ = ["TaxelBinning", "tactile_maps"]
+__all__ = ["TaxelBinning", "tactile_maps", "MAP_KEYS"]
+
+#: The maps a pad gives, in this order (:func:`tactile_maps`, the device read, the sensor).
+MAP_KEYS = ("depth", "shear", "force", "pressure")
 
 
 @dataclass

@@ -31,10 +31,8 @@ from ..mpm.kernels import NDF, NDF2, NDI, NDI2, NDM, NDV
 from .extract import TaxelBinning
 from .pad import Pad
 
-__all__ = ["TactileReadout", "MAP_KEYS"]
+__all__ = ["TactileReadout"]
 
-#: The maps of a read, in the order of the output tensor's last axis (shear takes two).
-MAP_KEYS = ("depth", "shear", "force", "pressure")
 SURFACE, SOFT = 1, 2  # flag bits of an entry: depth/shear from the surface layer, pressure from the soft part
 CHANNELS = 5  # depth, shear x, shear y, force, pressure
 
