@@ -29,7 +29,7 @@ from typing import Callable
 
 import taichi as ti
 
-__all__ = ["BackendError", "init", "ensure_init", "current_arch", "is_initialized", "before_shutdown"]
+__all__ = ["BackendError", "init", "ensure_init", "current_arch", "torch_device", "is_initialized", "before_shutdown"]
 
 _VALID = ("cpu", "cuda", "auto")
 _BUILDS = ("", "fast", "taichi")  # GAUSSTAC_COMPILE: the product build, make test's, Taichi's defaults
@@ -167,6 +167,12 @@ def ensure_init() -> str:
 def current_arch() -> str | None:
     """The arch chosen by :func:`init`, or ``None`` before initialisation."""
     return _arch
+
+
+def torch_device() -> str:
+    """The torch device of the Taichi arch in use (``"cuda"`` or ``"cpu"``; initialises Taichi
+    with :func:`ensure_init` if needed): where kernels that write torch tensors put them."""
+    return "cuda" if ensure_init() == "cuda" else "cpu"
 
 
 def is_initialized() -> bool:

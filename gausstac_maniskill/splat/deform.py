@@ -396,31 +396,32 @@ class FramedGaussians:
 
     def render(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None, viewmats, Ks,
                width: int, height: int, *, background=None, background_depth=None, near: float = 0.01,
-               far: float = 1e4, timings: bool = False, lighting=None):
+               far: float = 1e4, timings: bool = False, lighting=None, gaussian_ranges=None):
         """Render with the frames posed at ``frames`` [F, 3, 4] (or [F, 4, 4]) and SH frames
         rotated by ``frame_rotations`` [F, 3, 3] (``None``: not rotated); ``lighting`` (a
-        :class:`~gausstac_maniskill.splat.lighting.Lighting` or None) shades the Gaussians
-        that have normals; the other arguments as in
+        :class:`~gausstac_maniskill.splat.lighting.Lighting`, one per camera, or None) shades
+        the Gaussians that have normals; the other arguments as in
         :func:`~gausstac_maniskill.splat.rasterizer.rasterize`. Returns its ``RenderOutput``."""
         from .rasterizer import _frame_inputs, _rasterize, one_torch_thread
 
         with one_torch_thread():
-            frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames, self.means.device)
+            frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames,
+                                                    self._inputs.means.device)
             return _rasterize(self._inputs, frames, frame_rotations, viewmats, Ks, width, height, background,
-                              background_depth, near, far, timings, lighting)
+                              background_depth, near, far, timings, lighting, gaussian_ranges)
 
     def posed(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None = None) -> PosedGaussians:
         """The same Gaussians in world space (full covariances), e.g. to check a render or
         to hand them to other tools."""
         from .rasterizer import _frame_inputs
 
-        frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames, self.means.device)
+        frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames, self._inputs.means.device)
         f = self._inputs.frame_id.long()
         M, t = frames[f, :, :3], frames[f, :, 3]
         c = self._inputs.cov6
         S = torch.stack([c[:, [0, 1, 2]], c[:, [1, 3, 4]], c[:, [2, 4, 5]]], dim=1)
         rot = frame_rotations[f] if frame_rotations is not None else \
-            torch.eye(3).expand(len(self), 3, 3)
+            torch.eye(3, device=frames.device).expand(len(self), 3, 3)
         return PosedGaussians((M @ self._inputs.means.unsqueeze(-1)).squeeze(-1) + t,
                               M @ S @ M.transpose(-1, -2), rot.contiguous(), self._inputs.opacities,
                               self._inputs.sh)

@@ -77,6 +77,19 @@ c^(1/γ) — the diffuse part of SAPIEN's shaders, with the SH colour as linear 
 Gaussian with the zero normal keeps its SH colour (a captured scene's baked lighting). See
 :mod:`gausstac_maniskill.splat.lighting`.
 
+Batches
+-------
+With ``gaussian_ranges`` [C, 2], camera c sees only Gaussians [start, stop): B envs' scenes
+concatenated into one set, each env's cameras seeing their own env's range, render in one
+call of three launches (its records and keys are per camera and local to the range, so a
+camera's picture equals that of its range rendered alone, bit for bit). ``lighting`` may
+then differ per camera (each env's scene lights).
+
+Device
+------
+The kernels run on the Taichi arch in use (``GAUSSTAC_ARCH``); inputs are moved to its
+torch device (``backend.torch_device()``) and the outputs lie there.
+
 Depth-aware compositing
 -----------------------
 With ``background_depth`` [C, H, W] (e.g. a mesh render's depth), a pixel is
@@ -171,11 +184,12 @@ def _sh_to_rgb(sh: ti.template(), g: ti.i32, degree: ti.i32, d: ti.math.vec3) ->
 
 @ti.func
 def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.math.vec3,
-           lights: ti.template(), albedo_pow: ti.template(), g: ti.i32, grey: ti.template()) -> ti.math.vec3:
+           lights: ti.template(), c: ti.i32, albedo_pow: ti.template(), g: ti.i32,
+           grey: ti.template()) -> ti.math.vec3:
     """Diffuse shading of a Gaussian of linear albedo ``albedo`` and normal ``n0`` in the
     frame whose linear map is M, seen along ``view`` (camera -> Gaussian, world):
-    (A + Σᵢ Eᵢ/π · max(0, n·lᵢ))·albedo, written as c^(1/gamma). ``lights`` rows: (A, 1/gamma,
-    0, 0), then (lᵢ toward the light, Eᵢ/π). ``grey``: the ambient and every light are grey,
+    (A + Σᵢ Eᵢ/π · max(0, n·lᵢ))·albedo, written as c^(1/gamma). ``lights[c]`` (camera c's
+    scene) rows: (A, 1/gamma, 0, 0), then (lᵢ toward the light, Eᵢ/π). ``grey``: the ambient and every light are grey,
     so the light is one number L and c^(1/gamma) = albedo^(1/gamma) · L^(1/gamma), with
     albedo^(1/gamma) of Gaussian g read from ``albedo_pow`` (one power instead of three)."""
     # n = cof(M) n0, cof(M) = det(M) M⁻ᵀ with columns m1×m2, m2×m0, m0×m1 (normals move with it)
@@ -189,14 +203,14 @@ def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.mat
         n *= ti.rsqrt(len2)
         if n.dot(view) > 0.0:
             n = -n  # two-sided: the side facing the camera
-        light = ti.math.vec3(lights[0, 0], lights[0, 1], lights[0, 2])  # ambient
-        for i in range(1, lights.shape[0]):
-            l_dir = ti.math.vec3(lights[i, 0], lights[i, 1], lights[i, 2])
-            light += ti.math.vec3(lights[i, 3], lights[i, 4], lights[i, 5]) * ti.max(n.dot(l_dir), 0.0)
+        light = ti.math.vec3(lights[c, 0, 0], lights[c, 0, 1], lights[c, 0, 2])  # ambient
+        for i in range(1, lights.shape[1]):
+            l_dir = ti.math.vec3(lights[c, i, 0], lights[c, i, 1], lights[c, i, 2])
+            light += ti.math.vec3(lights[c, i, 3], lights[c, i, 4], lights[c, i, 5]) * ti.max(n.dot(l_dir), 0.0)
         if ti.static(grey):
-            rgb = ti.math.vec3(albedo_pow[g, 0], albedo_pow[g, 1], albedo_pow[g, 2]) * light[0] ** lights[0, 3]
+            rgb = ti.math.vec3(albedo_pow[g, 0], albedo_pow[g, 1], albedo_pow[g, 2]) * light[0] ** lights[c, 0, 3]
         else:
-            rgb = (albedo * light) ** lights[0, 3]
+            rgb = (albedo * light) ** lights[c, 0, 3]
     return rgb
 
 
@@ -219,25 +233,30 @@ def _box_1d(centre: ti.f32, radius: ti.f32, size: ti.i32):
 @ti.kernel
 def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _f32_2,
              sh: _f32_3, degree: ti.i32, sh_rot: _f32_3, frame_id: _i32_1, frames: _f32_3,
-             normals: _f32_2, lights: _f32_2, albedo_pow: _f32_2,
-             viewmats: _f32_3, cams: _f32_2, width: ti.i32, height: ti.i32,
+             normals: _f32_2, lights: _f32_3, albedo_pow: _f32_2,
+             viewmats: _f32_3, cams: _f32_2, seen: _i32_2, width: ti.i32, height: ti.i32,
              near: ti.f32, far: ti.f32,
              use_cov: ti.template(), framed: ti.template(), rot_mode: ti.template(),
              lit: ti.template(), grey: ti.template(), rec: _f32_3, bins: _i32_3):
-    """EWA projection of every Gaussian into every camera; bins[c, g, B_TILES] = 0 if culled.
+    """EWA projection of camera c's Gaussians into camera c: the j-th of the Gaussians
+    [seen[c, 0], seen[c, 1]) (all of them, or camera c's env's) writes rec[c, j] and
+    bins[c, j] (bins[c, j, B_TILES] = 0 if culled or past the range).
 
     ``use_cov``: covariances from ``cov6`` (else from ``quats``/``scales``); ``framed``:
     means and covariances lie in ``frames[frame_id[g]]``; ``rot_mode``: SH frames not
     rotated (0), rotated per Gaussian by ``sh_rot[g]`` (1) or per frame by
     ``sh_rot[frame_id[g]]`` (2); ``lit``: Gaussians with a non-zero ``normals[g]`` (in
-    their frame) are shaded with ``lights`` (see *Lighting*); ``grey``: grey lights and
+    their frame) are shaded with ``lights`` [C, 1 + L, 6] (see *Lighting*); ``grey``: grey lights and
     ``albedo_pow`` [N, 3] holds each Gaussian's albedo^(1/gamma) (see :func:`_shade`).
     ``opac`` [N, 3]: each Gaussian's opacity and support terms (see :attr:`_Inputs.opacity`).
     ``cams`` [C, 12]: the per-camera constants of :func:`_camera_constants`. Only entries
     of Gaussians that touch a tile are written.
     """
-    for c, g in ti.ndrange(viewmats.shape[0], means.shape[0]):
-        bins[c, g, B_TILES] = 0
+    for c, j in ti.ndrange(viewmats.shape[0], bins.shape[1]):
+        bins[c, j, B_TILES] = 0
+        g = seen[c, 0] + j  # the Gaussian; its entries are [c, j]
+        if g >= seen[c, 1]:
+            continue
         W = ti.Matrix([[viewmats[c, i, j] for j in ti.static(range(3))]
                        for i in ti.static(range(3))])  # world -> camera rotation
         t = ti.math.vec3(viewmats[c, 0, 3], viewmats[c, 1, 3], viewmats[c, 2, 3])
@@ -300,15 +319,15 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                     y0, y1 = _box_1d(v, k * ti.sqrt(d), height)
                     if x0 < x1 and y0 < y1:
                         # (shifts, not //: Taichi's floor division of ints costs a branch each)
-                        bins[c, g, B_TILES] = (((x1 - 1) >> TILE_BITS) - (x0 >> TILE_BITS) + 1) \
+                        bins[c, j, B_TILES] = (((x1 - 1) >> TILE_BITS) - (x0 >> TILE_BITS) + 1) \
                             * (((y1 - 1) >> TILE_BITS) - (y0 >> TILE_BITS) + 1)
-                        bins[c, g, B_X], bins[c, g, B_Y] = x0 | (x1 << 16), y0 | (y1 << 16)
-                        bins[c, g, B_Z] = ti.bit_cast(p.z, ti.i32)
-                        rec[c, g, R_U], rec[c, g, R_V] = u, v
-                        rec[c, g, R_A], rec[c, g, R_B], rec[c, g, R_C] = d / det, -b / det, a / det
-                        rec[c, g, R_O], rec[c, g, R_Z] = o, p.z
+                        bins[c, j, B_X], bins[c, j, B_Y] = x0 | (x1 << 16), y0 | (y1 << 16)
+                        bins[c, j, B_Z] = ti.bit_cast(p.z, ti.i32)
+                        rec[c, j, R_U], rec[c, j, R_V] = u, v
+                        rec[c, j, R_A], rec[c, j, R_B], rec[c, j, R_C] = d / det, -b / det, a / det
+                        rec[c, j, R_O], rec[c, j, R_Z] = o, p.z
                         # the exponent's support bound, with slack: the α test decides
-                        rec[c, g, R_THR] = -ln255o - 1e-4
+                        rec[c, j, R_THR] = -ln255o - 1e-4
                         # view direction (camera centre -> Gaussian), world frame; a rotated
                         # SH frame (link, polar(F)) R is evaluated at Rᵀ dir
                         view = mu - ti.math.vec3(cams[c, 8], cams[c, 9], cams[c, 10])
@@ -326,8 +345,8 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                         if ti.static(lit):
                             n0 = ti.math.vec3(normals[g, 0], normals[g, 1], normals[g, 2])
                             if n0.norm_sqr() > 0.0:
-                                rgb = _shade(rgb, n0, M, view, lights, albedo_pow, g, grey)
-                        rec[c, g, R_R], rec[c, g, R_G], rec[c, g, R_BL] = rgb[0], rgb[1], rgb[2]
+                                rgb = _shade(rgb, n0, M, view, lights, c, albedo_pow, g, grey)
+                        rec[c, j, R_R], rec[c, j, R_G], rec[c, j, R_BL] = rgb[0], rgb[1], rgb[2]
 
 
 @ti.kernel
@@ -628,7 +647,7 @@ def _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations,
     if not isinstance(means, torch.Tensor) or means.dim() != 2 or means.shape[1] != 3:
         raise ConfigError(f"means has shape {list(getattr(means, 'shape', []))}, expected [N, 3]")
     n = means.shape[0]
-    dev = means.device
+    dev = backend.torch_device()  # the kernels run on the Taichi arch, whatever the inputs' device
     f32 = dict(dtype=torch.float32, device=dev)
     means = _check_shape("means", means, (n, 3), "[N, 3]").to(**f32).contiguous()
     opacities = _check_shape("opacities", opacities, (n,), "[N]").to(**f32).contiguous()
@@ -717,11 +736,49 @@ def _background_tensor(background, C: int, H: int, W: int, device) -> tuple[torc
 
 def _rasterize(g: _Inputs, frames: torch.Tensor | None, frame_rotations: torch.Tensor | None,
                viewmats, Ks, width, height, background, background_depth, near, far,
-               timings: bool, lighting=None) -> RenderOutput:
+               timings: bool, lighting=None, gaussian_ranges=None) -> RenderOutput:
     """Camera checks and the three stages; ``g`` (and ``frames``) are already checked."""
     with one_torch_thread():
         return _rasterize_stages(g, frames, frame_rotations, viewmats, Ks, width, height, background,
-                                 background_depth, near, far, timings, lighting)
+                                 background_depth, near, far, timings, lighting, gaussian_ranges)
+
+
+def _camera_ranges(gaussian_ranges, C: int, n: int, device) -> tuple[torch.Tensor, int]:
+    """``gaussian_ranges`` [C, 2] (camera c sees Gaussians [start, stop)) checked, as int32 on
+    ``device``, and the longest range; None: every camera sees all ``n`` Gaussians."""
+    if gaussian_ranges is None:
+        return torch.tensor([[0, n]], dtype=torch.int32, device=device).expand(C, 2).contiguous(), n
+    r = torch.as_tensor(gaussian_ranges)
+    if r.shape != (C, 2) or r.dtype.is_floating_point:
+        raise ConfigError(f"gaussian_ranges must be an integer tensor of shape [C, 2] = [{C}, 2], got "
+                          f"{r.dtype} {list(r.shape)}")
+    r = r.to(torch.int64).cpu()
+    if C and ((r[:, 0] < 0).any() or (r[:, 1] < r[:, 0]).any() or (r[:, 1] > n).any()):
+        bad = int(((r[:, 0] < 0) | (r[:, 1] < r[:, 0]) | (r[:, 1] > n)).nonzero()[0])
+        raise ConfigError(f"gaussian_ranges[{bad}] = {r[bad].tolist()} is not a range [start, stop) "
+                          f"with 0 <= start <= stop <= N = {n}")
+    longest = int((r[:, 1] - r[:, 0]).max()) if C else 0
+    return r.to(device=device, dtype=torch.int32).contiguous(), longest
+
+
+def _camera_lights(lighting, C: int, device) -> tuple[torch.Tensor, list]:
+    """Per-camera light rows [C, 1 + L, 6] (see :meth:`Lighting.kernel_array`; a scene with
+    fewer lights is padded with dark ones, which add exactly 0) and the C ``Lighting`` s, from
+    one ``Lighting`` (every camera) or a sequence of C."""
+    from .lighting import Lighting
+
+    lights = [lighting] * C if isinstance(lighting, Lighting) else list(lighting)
+    if len(lights) != C or not all(isinstance(x, Lighting) for x in lights):
+        raise ConfigError(f"lighting must be a splat.lighting.Lighting, a sequence of C = {C} of them, or "
+                          f"None; got {type(lighting).__name__}")
+    arrays = [x.kernel_array(device) for x in lights]
+    rows = max(a.shape[0] for a in arrays) if arrays else 1
+    if all(a is arrays[0] for a in arrays):  # one scene's lights: no copy
+        return arrays[0].expand(C, rows, 6).contiguous(), lights
+    out = torch.zeros(C, rows, 6, dtype=torch.float32, device=device)
+    for c, a in enumerate(arrays):
+        out[c, :a.shape[0]] = a
+    return out, lights
 
 
 _CAMERA_CACHE: dict = {}
@@ -757,14 +814,14 @@ def _camera_constants(viewmats: torch.Tensor, Ks: torch.Tensor, width: int, heig
 
 
 def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, height, background,
-                      background_depth, near, far, timings: bool, lighting=None) -> RenderOutput:
-    backend.ensure_init()
+                      background_depth, near, far, timings: bool, lighting=None,
+                      gaussian_ranges=None) -> RenderOutput:
     t_start = time.perf_counter()
     if int(width) != width or int(height) != height or not (0 < width < 32768 and 0 < height < 32768):
         raise ConfigError(f"image size width={width!r}, height={height!r} must be ints in [1, 32767]")
     width, height = int(width), int(height)
     n = len(g)
-    dev = g.means.device
+    dev = g.means.device  # the Taichi arch's (_gaussian_inputs)
     f32 = dict(dtype=torch.float32, device=dev)
     viewmats = _check_shape("viewmats", viewmats, (None, 4, 4), "[C, 4, 4]").to(**f32).contiguous()
     C = viewmats.shape[0]
@@ -793,17 +850,16 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
         rot_mode = 0  # a constant colour does not depend on the view direction
     frame_id = g.frame_id if framed else _dummy((1,), torch.int32, dev)
     frames = frames if framed else _dummy((1, 3, 4), torch.float32, dev)
-    if lighting is not None:
-        from .lighting import Lighting
-
-        if not isinstance(lighting, Lighting):
-            raise ConfigError(f"lighting must be a splat.lighting.Lighting or None, got {type(lighting).__name__}")
+    seen, n_seen = _camera_ranges(gaussian_ranges, C, n, dev)
     lit = lighting is not None and g.normals is not None
+    lights, grey = _dummy((1, 1, 6), torch.float32, dev), False
+    if lighting is not None:
+        lights, scenes = _camera_lights(lighting, C, dev)
+        # grey lights of one gamma on constant colours: the kernel takes one power per
+        # Gaussian (see _shade)
+        grey = lit and g.degree == 0 and all(x.is_grey and x.gamma == scenes[0].gamma for x in scenes)
     normals = g.normals if lit else _dummy((1, 3), torch.float32, dev)
-    lights = lighting.kernel_array(dev) if lit else _dummy((1, 6), torch.float32, dev)
-    # grey lights on constant colours: the kernel takes one power per Gaussian (see _shade)
-    grey = lit and g.degree == 0 and lighting.is_grey
-    albedo_pow = g.albedo_pow(1.0 / lighting.gamma) if grey else _dummy((1, 3), torch.float32, dev)
+    albedo_pow = g.albedo_pow(1.0 / scenes[0].gamma) if grey else _dummy((1, 3), torch.float32, dev)
 
     tiles_x = (width + TILE - 1) // TILE
     tiles_y = (height + TILE - 1) // TILE
@@ -812,19 +868,19 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
 
     # 1. project: one record per (camera, Gaussian) ------------------------------------
     # only entries of Gaussians that touch a tile are written and ever read
-    rec = torch.empty(C, max(n, 1), REC, **f32)
-    bins = torch.empty(C, n, 4, dtype=torch.int32, device=dev)
+    rec = torch.empty(C, max(n_seen, 1), REC, **f32)
+    bins = torch.empty(C, n_seen, 4, dtype=torch.int32, device=dev)
     cams = _camera_constants(viewmats, Ks, width, height)  # (checks Ks)
-    if n:
+    if n_seen:
         _project(g.means, g.quats, g.scales, g.cov6, g.opacity, g.sh, g.degree, sh_rot, frame_id, frames,
-                 normals, lights, albedo_pow, viewmats, cams, width, height, float(near), float(far),
+                 normals, lights, albedo_pow, viewmats, cams, seen, width, height, float(near), float(far),
                  g.use_cov, framed, rot_mode, lit, grey, rec, bins)
     sync()
     t_proj = time.perf_counter()
 
     # 2. bin: one key per (Gaussian, tile), sort, per-tile ranges ---------------------
     ends = torch.cumsum(bins[:, :, B_TILES].reshape(-1), 0, dtype=torch.int64)
-    n_keys = int(ends[-1]) if n else 0
+    n_keys = int(ends[-1]) if n_seen else 0
     if n_keys:
         keys = torch.empty(n_keys, dtype=torch.int64, device=dev)
         vals = torch.empty(n_keys, dtype=torch.int64, device=dev)
@@ -864,6 +920,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
               frame_rotations: torch.Tensor | None = None,
               normals: torch.Tensor | None = None, lighting=None,
               background=None, background_depth: torch.Tensor | None = None,
+              gaussian_ranges: torch.Tensor | None = None,
               near: float = 0.01, far: float = 1e4,
               timings: bool = False) -> RenderOutput:
     """Render N Gaussians into C pinhole cameras (see the module docstring for the rules).
@@ -893,18 +950,23 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
         normals: optional [N, 3] normals (world, or in the Gaussians' frames with
             ``frames``; any length, sign free), the zero vector for a Gaussian that is
             not to be lit; see :func:`~gausstac_maniskill.splat.lighting.surface_normals`.
-        lighting: optional :class:`~gausstac_maniskill.splat.lighting.Lighting`; shades
-            the Gaussians with a normal (needs ``normals``), see *Lighting* above.
+        lighting: optional :class:`~gausstac_maniskill.splat.lighting.Lighting` (every
+            camera), or a sequence of C of them (camera c's scene's); shades the Gaussians
+            with a normal (needs ``normals``), see *Lighting* above.
         background: colour behind the Gaussians: scalar, [3], [C, 3] or an
             image [C, H, W, 3]. Default black.
         background_depth: optional [C, H, W] camera-z depth (metres) of the
             background image for depth-aware compositing (Gaussians behind it
             are hidden). Use ``inf`` where the background is empty.
+        gaussian_ranges: optional [C, 2] integers: camera c sees only Gaussians
+            [start, stop) (see *Batches* above); default: every camera sees all of them.
         near, far: clip distances along camera z, metres.
         timings: record per-stage wall times (ms) in ``RenderOutput.stats``.
 
     Returns:
-        :class:`RenderOutput` with rgb [C, H, W, 3], depth [C, H, W], alpha [C, H, W].
+        :class:`RenderOutput` with rgb [C, H, W, 3], depth [C, H, W], alpha [C, H, W],
+        on the device of the Taichi arch in use (``backend.torch_device()``); the inputs
+        may lie on any device and are moved there.
 
     Raises:
         ConfigError: a wrong shape (the message gives the expected one), NaN/inf
@@ -917,7 +979,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
         raise ConfigError("frame_rotations need frames and frame_ids")
     if lighting is not None and normals is None:
         raise ConfigError("lighting needs normals (splat.lighting.surface_normals(quats, scales))")
-    dev = means.device if isinstance(means, torch.Tensor) else None
+    dev = backend.torch_device()
     with one_torch_thread():  # the input checks are torch reductions too
         n_frames = 0
         if frames is not None:
@@ -926,7 +988,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
         g = _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations, frame_ids,
                              n_frames, frame_rotations is not None, normals)
         return _rasterize(g, frames, frame_rotations, viewmats, Ks, width, height, background,
-                          background_depth, near, far, timings, lighting)
+                          background_depth, near, far, timings, lighting, gaussian_ranges)
 
 
 def render(gaussians: GaussianSet, viewmats: torch.Tensor, Ks: torch.Tensor, width: int,

@@ -159,7 +159,7 @@ class TactileReadout:
         self._rows.from_numpy(np.array([(g.start, g.awake) for g in groups], np.int32).reshape(-1, 2))
         T = self.world.link_poses()[self._links]
         self._pose.from_numpy(np.concatenate([T[:, :3, :3].reshape(-1, 9), T[:, :3, 3]], 1).astype(np.float32))
-        device = "cuda" if backend.current_arch() == "cuda" else "cpu"
+        device = backend.torch_device()
         out = torch.empty((self.num_envs, self.offsets[-1], CHANNELS), dtype=torch.float32, device=device)
         dt = self.world.last_dt_ctrl
         taxel_maps(Particles(**state), Taxels(**self._tab), Slots(slot_rows=self._rows, slot_pose=self._pose),

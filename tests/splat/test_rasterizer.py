@@ -121,6 +121,40 @@ def test_batched_cameras_equal_single_renders(scene_factory):
         assert torch.equal(one.depth[0], both.depth[c])
 
 
+def test_gaussian_ranges_render_each_env_as_if_alone(scene_factory):
+    """Two envs' Gaussians in one set, each camera seeing its env's range and lit by its env's
+    lights (different numbers of lights): every picture equals the env rendered alone, bit for
+    bit (guards the batched camera's indexing; the physics of the picture is tested above)."""
+    from gausstac_maniskill.splat import Lighting, surface_normals
+
+    envs = [scene_factory(150, 0, seed=21), scene_factory(220, 0, seed=22)]
+    both = GaussianSet.cat(envs)
+    V, K = cameras()
+    ranges = torch.tensor([[0, 150], [150, 370], [0, 150]])
+    # (none grey: grey lights everywhere take a one-power path that differs by rounding)
+    lights = [Lighting((0.3, 0.3, 0.3), ((1.0, 1.0, -1.0), (0.0, 0.0, -1.0)), ((1.0, 0.9, 1.0), (0.5, 0.5, 0.5))),
+              Lighting((0.2, 0.25, 0.3), ((0.0, 1.0, -1.0),), ((0.9, 0.8, 0.7),), gamma=1.0),
+              Lighting((0.4, 0.4, 0.45), (), ())]
+    bg = torch.rand(3, H, W, 3, generator=torch.Generator().manual_seed(3))
+    # (activated once: torch's vectorised exp rounds a tensor's tail differently)
+    means, quats, scales, opac, sh = both.means, both.quats, both.scales, both.opacities, both.sh
+    normals = surface_normals(quats, scales)
+    out = rasterize(means, quats, scales, opac, sh, V, K, W, H, background=bg, lighting=lights, normals=normals,
+                    gaussian_ranges=ranges)
+    for c, (lo, hi) in enumerate(ranges.tolist()):
+        one = rasterize(means[lo:hi], quats[lo:hi], scales[lo:hi], opac[lo:hi], sh[lo:hi], V[c:c + 1],
+                        K[c:c + 1], W, H, background=bg[c:c + 1], lighting=lights[c], normals=normals[lo:hi])
+        assert one.alpha.max() > 0.3, "the env should show in camera %d" % c
+        for name in ("rgb", "depth", "alpha"):
+            assert torch.equal(getattr(one, name)[0], getattr(out, name)[c]), (c, name)
+    with pytest.raises(ConfigError, match=r"gaussian_ranges\[1\] = \[150, 371\]"):
+        render(both, V, K, W, H, gaussian_ranges=torch.tensor([[0, 150], [150, 371], [0, 1]]))
+    with pytest.raises(ConfigError, match="shape \\[C, 2\\] = \\[3, 2\\]"):
+        render(both, V, K, W, H, gaussian_ranges=ranges[:2])
+    with pytest.raises(ConfigError, match="sequence of C = 3"):
+        render(both, V, K, W, H, lighting=lights[:2], normals=normals)
+
+
 def test_deterministic(scene_factory):
     g = scene_factory(300, 3, seed=5)
     V, K = cameras()
