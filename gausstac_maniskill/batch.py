@@ -17,11 +17,12 @@ Data flows one way: link poses [B, L, 4, 4] (torch or numpy, world frame, m) →
 Each env's state saves and restores on its own (``scenes[b].flat_state()`` /
 ``load_flat_state``), in the layout of the same scene alone: a state moves between a batch
 and a single scene. :class:`~gausstac_maniskill.tasks.GaussTacEnv` builds one batch for all
-its envs. Not yet: rendering a batch in one rasterizer call (each env's scene renders on its
-own, :attr:`BatchedCosim.scenes`).
+its envs. :meth:`BatchedCosim.render` draws every env's splat scene in one rasterizer call
+(each camera sees its own env's Gaussians only).
 """
 from __future__ import annotations
 
+import functools
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -32,6 +33,7 @@ from .cosim import GaussTacSim, default_hand_settings
 from .errors import ConfigError
 from .mpm import MPMWorld
 from .mpm.colliders import Collider
+from .render import BatchScene
 from .transforms import as_pose_matrices
 from .tactile.readout import TactileReadout
 
@@ -72,6 +74,7 @@ class BatchedCosim:
                        for b in range(P.shape[0])]
         self.pad_names = [p.name for p in pads]
         self._readout: TactileReadout | None = None
+        self._splat = BatchScene()
         self._links = None  # (world link count, columns, world rows) of _world_links
 
     @property
@@ -133,6 +136,20 @@ class BatchedCosim:
             self._readout = TactileReadout(self.world, list(self.scenes[0].pads.values()),
                                            [s.pad_slots() for s in self.scenes])
         return self._readout.maps(device)
+
+    def render(self, viewmats, Ks, width: int, height: int, camera_env=None, **kwargs):
+        """Render every env's splat scene (:meth:`GaussTacSim.attach_gaussians`) in one
+        rasterizer call: camera c ([C, 4, 4] world -> camera ``viewmats``, OpenCV; [C, 3, 3]
+        pixel ``Ks``) sees env ``camera_env[c]`` (default: camera b, env b) and nothing of the
+        others; an env without Gaussians shows the background. ``kwargs`` as
+        :func:`~gausstac_maniskill.splat.rasterize`: ``background`` [C, H, W, 3] or a colour,
+        ``background_depth`` [C, H, W] m, ``lighting`` (one, or one per camera). Returns a
+        ``RenderOutput`` (rgb [C, H, W, 3], depth [C, H, W] m, alpha [C, H, W]) on the Taichi
+        arch's torch device. The particles are read from the world once for all envs."""
+        world = self.world
+        state = functools.cache(lambda: (world.positions(), world.deformation_gradients()))
+        posed = [s.posed_scene(state) if s.has_gaussians else None for s in self.scenes]
+        return self._splat.render(posed, viewmats, Ks, width, height, camera_env, **kwargs)
 
     def object_wrench(self, name: str) -> np.ndarray:
         """[B, 6] force [N] and torque [N·m] (about its origin) the pads exerted on rigid

@@ -16,7 +16,7 @@ grid spacing 1 mm (pad particles every 0.5 mm). Units: SI.
 """
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import torch
@@ -316,15 +316,22 @@ class GaussTacSim:
         """Whether :meth:`attach_gaussians` gave the scene something to render."""
         return getattr(self, "_scene", None) is not None
 
+    def posed_scene(self, state: Callable[[], tuple] | None = None):
+        """The splat scene (a :class:`gausstac_maniskill.render.PosedScene`) at the current state,
+        posed once per step whatever the number of cameras; ``state``: a function returning the
+        world's particle (x [N, 3], F [N, 3, 3]) when the caller reads it once for many scenes
+        (a batch), called only if this scene needs posing."""
+        if not self.has_gaussians:
+            raise ConfigError("GaussTacSim.render: call attach_gaussians(...) first")
+        if getattr(self, "_posed", None) is None:
+            self._posed = self._scene.posed(state() if state is not None else None)
+        return self._posed
+
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render the scene with the splat camera: ``viewmats`` [C, 4, 4] world-to-camera
         (OpenCV convention), ``Ks`` [C, 3, 3] pixel intrinsics; returns a ``RenderOutput``
         (``rgb`` [C, H, W, 3], ``depth`` [C, H, W] m, ``alpha`` [C, H, W])."""
-        if not self.has_gaussians:
-            raise ConfigError("GaussTacSim.render: call attach_gaussians(...) first")
-        if getattr(self, "_posed", None) is None:  # posed once per step, whatever the number of cameras
-            self._posed = self._scene.posed()
-        return self._posed.render(torch.as_tensor(viewmats, dtype=torch.float32),
+        return self.posed_scene().render(torch.as_tensor(viewmats, dtype=torch.float32),
                                   torch.as_tensor(Ks, dtype=torch.float32), width, height, **kwargs)
 
     # ------------------------------------------------------------------ readout
@@ -398,12 +405,19 @@ class GaussTacSim:
         g = self._w(name)
         return self._carried(name, self.world.positions(g), self.world.deformation_gradients(g))
 
-    def particles(self, index: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def particles(self, index: np.ndarray | None = None, state: tuple[np.ndarray, np.ndarray] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
         """World positions [P, 3] and F [P, 3, 3] of every particle of the world (pads, soft
         objects), in group order, sleeping pads carried by their links (for rendering).
         With ``index`` ([P'] ascending world particle indices) only those particles, [P', 3]
-        and [P', 3, 3]: a camera needs only the particles its Gaussians ride on."""
-        x, F = self.world.positions(), self.world.deformation_gradients()
+        and [P', 3, 3]: a camera needs only the particles its Gaussians ride on. ``state``:
+        the world's (x, F) already read (not modified), else read here."""
+        if state is None:
+            x, F = self.world.positions(), self.world.deformation_gradients()
+        else:
+            x, F = state
+            if index is None:
+                x, F = x.copy(), F.copy()
         if index is not None:
             index = np.asarray(index)
             x, F = x[index], F[index]

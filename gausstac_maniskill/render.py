@@ -36,7 +36,7 @@ from .errors import ConfigError
 from .splat import FramedGaussians, GaussianSet, PosedGaussians, SoftBinding, pose_gaussians
 from .splat.deform import particle_frames, rigid_frames
 
-__all__ = ["SceneGaussians", "PosedScene", "RigidLayer", "box_gaussians", "particle_gaussians"]
+__all__ = ["SceneGaussians", "PosedScene", "BatchScene", "RigidLayer", "box_gaussians", "particle_gaussians"]
 
 PAD_RGB = (0.55, 0.62, 0.78)      # translucent-looking blue-grey silicone (albedo, linear)
 SOFT_RGB = (0.95, 0.80, 0.25)     # foam yellow (albedo, linear)
@@ -234,8 +234,10 @@ class SceneGaussians:
                                                 soft, *(layer.framed() for layer in self.layers)])
         return self._framed
 
-    def posed(self) -> PosedScene:
-        """The scene at the simulator's current link, object and particle state, with the layers."""
+    def posed(self, state: tuple[np.ndarray, np.ndarray] | None = None) -> PosedScene:
+        """The scene at the simulator's current link, object and particle state, with the layers;
+        ``state``: the world's particle (x [N, 3], F [N, 3, 3]) already read (a batch reads it
+        once for all its envs), else read here."""
         sim = self.sim
         framed = self.framed()
         poses = []
@@ -248,7 +250,7 @@ class SceneGaussians:
             poses.append(sim.world.colliders[sim._objects[name]].pose)
         rigid, rigid_rot = rigid_frames(np.array(poses) if poses else np.zeros((0, 4, 4)))
         p = self._particles
-        x, F = sim.particles(p)  # only the particles the soft Gaussians ride on
+        x, F = sim.particles(p, state)  # only the particles the soft Gaussians ride on
         soft, soft_rot = particle_frames(x, F, rotations=self._soft_rotations)
         layers = [layer.frames() for layer in self.layers]
         frames = torch.cat([rigid, soft, *(f for f, _ in layers)])
@@ -265,3 +267,72 @@ class SceneGaussians:
         ``lighting``: a :class:`~gausstac_maniskill.splat.lighting.Lighting` shading the lit
         Gaussians; None: every colour as stored)."""
         return self.posed().render(viewmats, Ks, width, height, **kwargs)
+
+
+class BatchScene:
+    """B envs' scenes rendered in one rasterizer call (three launches whatever B).
+
+    The envs' Gaussians are concatenated once (rebuilt only when an env's own set changes,
+    e.g. a layer is added), each env's frames are concatenated per picture, and every camera
+    sees only its env's Gaussians (the rasterizer's ``gaussian_ranges``): each picture equals
+    that env's scene rendered alone.
+    """
+
+    def __init__(self):
+        self._parts: list = []  # the envs' FramedGaussians (or None) that _framed was built of
+        self._framed: FramedGaussians | None = None
+        self._ranges = torch.zeros(0, 2, dtype=torch.int64)  # [B, 2] each env's Gaussians in _framed
+
+    def _framed_of(self, posed: list) -> tuple[FramedGaussians | None, torch.Tensor]:
+        """The envs' Gaussians in one set (built again only when one env's set changed) and
+        each env's range [start, stop) in it ([B, 2], empty for an env without Gaussians)."""
+        parts = [p.gaussians if p is not None else None for p in posed]
+        if len(parts) != len(self._parts) or any(a is not b for a, b in zip(parts, self._parts)):
+            some = [g for g in parts if g is not None]
+            self._framed = FramedGaussians.cat(some) if some else None
+            sizes = torch.tensor([len(g) if g is not None else 0 for g in parts], dtype=torch.int64)
+            stops = torch.cumsum(sizes, 0)
+            self._ranges = torch.stack([stops - sizes, stops], 1)
+            self._parts = parts
+        return self._framed, self._ranges
+
+    def render(self, posed: Sequence[PosedScene | None], viewmats, Ks, width: int, height: int,
+               camera_env=None, **kwargs):
+        """Render camera c of env ``camera_env[c]`` (default: camera b of env b).
+
+        Args:
+            posed: per env, its :class:`PosedScene` at the current state, or None for an env
+                with nothing to splat (its cameras see the background only).
+            viewmats: [C, 4, 4] world -> camera (OpenCV), Ks: [C, 3, 3] pixel intrinsics.
+            width, height: image size in pixels.
+            camera_env: [C] env index of each camera (default ``arange(B)``, C = B).
+            kwargs: as :func:`~gausstac_maniskill.splat.rasterize` (``background`` [C, H, W, 3]
+                or a colour, ``background_depth`` [C, H, W], ``lighting``: one
+                :class:`~gausstac_maniskill.splat.lighting.Lighting` or one per camera, ...).
+
+        Returns:
+            The rasterizer's ``RenderOutput`` (rgb [C, H, W, 3], depth [C, H, W] m, alpha
+            [C, H, W]) on the Taichi arch's torch device.
+        """
+        from .splat.rasterizer import rasterize
+
+        posed = list(posed)
+        C, B = len(viewmats), len(posed)
+        envs = np.arange(B) if camera_env is None else np.asarray(camera_env, dtype=np.int64).ravel()
+        if envs.shape != (C,) or (C and (envs.min() < 0 or envs.max() >= B)):
+            raise ConfigError(f"BatchScene.render: camera_env must hold one env index in [0, {B}) per camera "
+                              f"({C} cameras), got {envs.tolist()}")
+        framed, ranges = self._framed_of(posed)
+        if framed is None:  # nothing to splat anywhere: an empty set renders the background
+            empty = GaussianSet.empty()
+            return rasterize(empty.means, empty.quats, empty.scales, empty.opacities, empty.sh,
+                             viewmats, Ks, width, height, **kwargs)
+        frames = torch.cat([p.frames for p in posed if p is not None])
+        rotations = None
+        if framed.sh.shape[1] > 1:  # some colour depends on the view: every frame needs its rotation
+            rotations = torch.cat([p.rotations if p.rotations is not None else
+                                   torch.eye(3).expand(p.frames.shape[0], 3, 3)
+                                   for p in posed if p is not None])
+        return framed.render(frames, rotations, torch.as_tensor(viewmats, dtype=torch.float32),
+                             torch.as_tensor(Ks, dtype=torch.float32), width, height,
+                             gaussian_ranges=ranges[torch.as_tensor(envs)], **kwargs)

@@ -849,34 +849,16 @@ class _EnvSplatSource(SplatSource):
         self.env = env
 
     def render(self, viewmats, Ks, width, height, background, background_depth, lighting=None):
+        """Every env's camera in one rasterizer call (:meth:`BatchedCosim.render`); an env
+        without Gaussians shows the background as it is."""
         env = self.env
         env._ensure_cosims()
-        rgbs, depths = [], []
-        for b, sim in enumerate(env.cosims):
-            kw = {}
-            if isinstance(background, torch.Tensor):
-                kw["background"] = background[b:b + 1]
-            else:
-                kw["background"] = background
-            if background_depth is not None:
-                kw["background_depth"] = background_depth[b:b + 1]
-            if lighting is not None:
-                kw["lighting"] = lighting[b]
-            if not sim.has_gaussians:  # nothing to splat: the background as is
-                bg = kw["background"]
-                rgb = bg.clone() if isinstance(bg, torch.Tensor) else \
-                    torch.tensor(bg, dtype=torch.float32).expand(1, height, width, 3).clone()
-                d = kw.get("background_depth", torch.full((1, height, width), float("inf")))
-                rgbs.append(rgb)
-                depths.append(d)
-                continue
-            out = sim.render(viewmats[b:b + 1], Ks[b:b + 1], width, height, **kw)
-            seen = out.alpha > 0.5
-            d_splat = out.depth / out.alpha.clamp_min(1e-6)
-            d_bg = kw.get("background_depth", torch.full_like(d_splat, float("inf")))
-            depths.append(torch.where(seen, d_splat, d_bg))
-            rgbs.append(out.rgb)
-        return torch.cat(rgbs), torch.cat(depths)
+        out = env._batch.render(viewmats, Ks, width, height, background=background,
+                                background_depth=background_depth, lighting=lighting)
+        # depth: the Gaussians' where they cover the pixel, else the background's
+        d_bg = background_depth.to(out.depth.device) if background_depth is not None else float("inf")
+        depth = torch.where(out.alpha > 0.5, out.depth / out.alpha.clamp_min(1e-6), d_bg)
+        return out.rgb, depth
 
     def _hidden_entities(self) -> list:
         """SAPIEN entities the Gaussians replace: the hand's links (when it has Gaussians) and

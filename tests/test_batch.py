@@ -166,3 +166,54 @@ def test_env_state_moves_between_the_batch_and_the_scene_alone(setup):
             tol = ROUNDING[key] * float(ref.abs().max()) + 1e-12
             np.testing.assert_allclose(after[pad][key][1].numpy(), ref.numpy(), rtol=0, atol=tol,
                                        err_msg=f"pad {pad} {key}")
+
+
+def test_batch_renders_every_env_in_one_call(setup, monkeypatch):
+    """BatchedCosim.render: every env's splat scene in one rasterizer call gives each camera
+    the picture of its env's scene rendered alone, bit for bit (guards the batched camera's
+    indexing, posing and lights; the picture's own accuracy is tested in tests/splat)."""
+    import json
+
+    from gausstac_maniskill.demo import ASSET_DIR
+    from gausstac_maniskill.render import RigidLayer, box_gaussians
+    from gausstac_maniskill.splat import MANISKILL_DEFAULT, GaussianSet, intrinsics_from_fov, load_ply, look_at
+    from gausstac_maniskill.splat import rasterizer
+
+    names, poses, settings, envs = setup
+    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings)
+    batch.add_rigid_object("ball", _balls(envs))
+    hand = load_ply(ASSET_DIR / "gaussians.ply")
+    links = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]
+    for b in (0, 1):  # env 2 has no Gaussians: its camera sees the background
+        batch.scenes[b].attach_gaussians(hand, links, {"ball": box_gaussians((R, R, R), 1.5e-3)})
+    wall = GaussianSet.create(torch.tensor([[0.0, 0.0, 0.0]]) + torch.as_tensor(poses[1, 0, :3, 3]).float(),
+                              torch.tensor([[1.0, 0.0, 0.0, 0.0]]), torch.log(torch.tensor([[0.02, 0.02, 1e-3]])),
+                              torch.tensor([3.0]), torch.tensor([[[0.5, -0.5, 0.2]]]))
+    batch.scenes[1].add_render_layer(RigidLayer(wall))  # env 1 has one more Gaussian than env 0
+    full = dict(zip(links, np.broadcast_to(np.eye(4), (len(links), 4, 4))))
+    i = names.index(INDEX)
+    for k in range(3):
+        batch.step(poses, DT, {"ball": np.stack([centre(k) for centre, _ in envs])})
+        for b in (0, 1):  # every hand link's pose for the renderer (the batch only had the pad links)
+            scene = batch.scenes[b]
+            scene._link_pose.update({n: T for n, T in full.items() if n not in scene._link_pose})
+    width, height = 64, 48
+    tips = [poses[b, i, :3, 3] for b in (0, 1, 2, 0)]
+    V = torch.stack([look_at(t + np.array([0.03, -0.05, 0.04 + 0.01 * c]), t) for c, t in enumerate(tips)])
+    K = intrinsics_from_fov(width, height, 0.8)[None].expand(4, 3, 3)
+    bg = torch.rand(4, height, width, 3, generator=torch.Generator().manual_seed(0))
+    launches = []
+    monkeypatch.setattr(rasterizer, "_project", lambda *a, _f=rasterizer._project: launches.append(_f(*a)))
+    out = batch.render(V, K, width, height, camera_env=[0, 1, 2, 0], background=bg, lighting=MANISKILL_DEFAULT)
+    assert len(launches) == 1
+    assert torch.equal(out.rgb[2], bg[2]) and float(out.alpha[2].max()) == 0.0
+    for c, b in enumerate((0, 1, 2, 0)):
+        if b == 2:
+            continue
+        alone = batch.scenes[b].render(V[c:c + 1], K[c:c + 1], width, height, background=bg[c:c + 1],
+                                       lighting=MANISKILL_DEFAULT)
+        assert float(alone.alpha[0].max()) > 0.9, "the hand should fill part of camera %d" % c
+        for key in ("rgb", "depth", "alpha"):
+            assert torch.equal(out.__dict__[key][c], alone.__dict__[key][0]), (c, key)
+    with pytest.raises(ConfigError, match=r"camera_env must hold one env index in \[0, 3\)"):
+        batch.render(V, K, width, height, camera_env=[0, 1, 3, 0])

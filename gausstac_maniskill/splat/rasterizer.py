@@ -623,9 +623,13 @@ class _Inputs:
     opacity: torch.Tensor = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        ln255o = torch.log(self.opacities * 255.0)
+        # (in float64, rounded once: torch's vectorised float32 log rounds a tensor's tail
+        # otherwise than its body, so a Gaussian's terms would depend on the set it sits in;
+        # a batch of envs' scenes must give each env's picture exactly)
+        o = self.opacities.double()
+        ln255o = torch.log(o * 255.0)
         k = torch.sqrt(2.0 * ln255o.clamp_min(0.0)) * SUPPORT_SLACK
-        self.opacity = torch.stack([self.opacities, ln255o, k], 1).contiguous()
+        self.opacity = torch.stack([o, ln255o, k], 1).float().contiguous()
 
     def __len__(self) -> int:
         return self.means.shape[0]
@@ -634,8 +638,8 @@ class _Inputs:
         """[N, 3] float32 SH degree-0 colours (linear albedo, clamped at 0) to the power
         ``exponent`` (1/gamma), kept per exponent (the arrays must not change)."""
         if exponent not in self._albedo_pow:
-            albedo = torch.clamp(SH_C0 * self.sh[:, 0] + 0.5, min=0.0)
-            self._albedo_pow[exponent] = (albedo ** exponent).contiguous()
+            albedo = torch.clamp(SH_C0 * self.sh[:, 0] + 0.5, min=0.0)  # (as the kernel: float32)
+            self._albedo_pow[exponent] = (albedo.double() ** exponent).float().contiguous()  # (see __post_init__)
         return self._albedo_pow[exponent]
 
 
