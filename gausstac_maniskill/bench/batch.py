@@ -15,6 +15,12 @@ ratio measured in this run, Taichi launches per step of both (kernels and ndarra
 the error of the batch: the largest difference of env 0's maps from the same scene alone,
 over their largest value, and the cost of one pad of the batch falling asleep or waking up
 (done in place on the device, no rebuild). Taichi arch: ``GAUSSTAC_ARCH`` (cpu by default).
+
+With ``--camera W H`` a second table follows: every env's scene (the hand's Gaussians, the
+ball's and the pads' soft ones, lit by ManiSkill's default lights) seen by one W × H camera
+per env, rendered by :meth:`BatchedCosim.render` in one rasterizer call against each env's
+scene rendered on its own (what the splat camera did before), per picture (posing
+included), and the largest difference between the two pictures (0: bit for bit).
 """
 from __future__ import annotations
 
@@ -80,6 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
     ap.add_argument("--loop-max", type=int, default=64,
                     help="run the loop of single worlds only up to this B (default: 64); above it, only the batch")
+    ap.add_argument("--camera", type=int, nargs=2, metavar=("W", "H"),
+                    help="also time the splat camera, one W × H picture per env, batched against env by env")
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
@@ -102,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
           "| batched per env [ms] | launches batched / loop | env 0 vs alone (max rel) | mean index force [N] "
           "| wake/sleep event [ms] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    cameras = []
     for B in tqdm(args.envs, desc="env counts", unit="B"):  # each row as it is measured: a cut run keeps them
         scenes = _scenes(B, names, base, sensor)
         poses = np.stack([P for P, _ in scenes])
@@ -146,7 +155,71 @@ def main(argv: list[str] | None = None) -> int:
         tqdm.write(_row(B, batch.world.last_step.active_particles, sub, (t_batch / n, h_batch / n),
                         (scale * t_loop / n, scale * h_loop / n), n_batch / n, scale * n_loop / n, err, force, est,
                         event))
+        if args.camera:
+            cameras.append(_camera_row(batch, *args.camera))
+    if cameras:
+        print(f"\nSplat camera, one {args.camera[0]} × {args.camera[1]} picture per env (posing included; "
+              f"best of 3 after a first untimed one)")
+        print("| B | Gaussians | batched [ms] | env by env [ms] | env by env / batched | launches batched / env by env "
+              "| max abs difference |")
+        print("|---|---|---|---|---|---|---|")
+        print("\n".join(cameras))
     return 0
+
+
+def _camera_row(batch, width: int, height: int) -> str:
+    """Attach the hand's and the ball's Gaussians to every env and time one picture per env,
+    batched and env by env (each scene's own render); returns the table row."""
+    import json
+
+    import torch
+
+    from ..demo import ASSET_DIR
+    from ..pose import MujocoPoseSource
+    from ..render import box_gaussians
+    from ..splat import MANISKILL_DEFAULT, intrinsics_from_fov, load_ply, look_at
+
+    src = MujocoPoseSource()
+    hand = load_ply(ASSET_DIR / "gaussians.ply")
+    links = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]
+    rest = dict(zip(src.link_names, src.link_poses()[0].double().numpy()))
+    B = batch.num_envs
+    for scene in batch.scenes:
+        scene.attach_gaussians(hand, links, {"ball": box_gaussians((R, R, R), 1.5e-3)})
+        tip = scene._link_pose["link_3.0_tip"]
+        move = tip @ np.linalg.inv(rest["link_3.0_tip"])  # the env's hand offset
+        scene._link_pose.update({n: move @ T for n, T in rest.items() if n not in scene._link_pose})
+    tips = [s._link_pose["link_3.0_tip"][:3, 3] for s in batch.scenes]
+    V = torch.stack([look_at(t + np.array([0.05, -0.12, 0.08]), t) for t in tips])
+    K = intrinsics_from_fov(width, height, 0.9)[None].expand(B, 3, 3)
+    kw = dict(background=(1.0, 1.0, 1.0), lighting=MANISKILL_DEFAULT)
+
+    def batched():
+        return batch.render(V, K, width, height, **kw).rgb
+
+    def one_by_one():
+        return torch.cat([s.render(V[b:b + 1], K[b:b + 1], width, height, **kw).rgb
+                          for b, s in enumerate(batch.scenes)])
+
+    times, launches, pictures = {}, {}, {}
+    for name, fn in (("batched", batched), ("loop", one_by_one)):
+        best = float("inf")
+        for k in range(4):
+            for s in batch.scenes:
+                s.end_step()  # a new step: posing is part of every picture
+            counter = _Launches()
+            t0 = time.perf_counter()
+            pictures[name] = fn()
+            dt = time.perf_counter() - t0
+            counter.close()
+            launches[name] = counter.n
+            if k:
+                best = min(best, dt)
+        times[name] = best
+    diff = float((pictures["batched"] - pictures["loop"]).abs().max())
+    n = len(batch._splat._framed)
+    return (f"| {B} | {n} | {times['batched'] * 1e3:.0f} | {times['loop'] * 1e3:.0f} | "
+            f"{times['loop'] / times['batched']:.2f} | {launches['batched']} / {launches['loop']} | {diff:.1e} |")
 
 
 def _wake_sleep_ms(batch) -> float:
