@@ -75,6 +75,8 @@ class BatchedCosim:
         self.pad_names = [p.name for p in pads]
         self._readout: TactileReadout | None = None
         self._splat = BatchScene()
+        self._soft_key: list | None = None  # the envs' splat scenes that _soft_rows was built for
+        self._soft_rows = None
         self._links = None  # (world link count, columns, world rows) of _world_links
 
     @property
@@ -145,11 +147,39 @@ class BatchedCosim:
         :func:`~gausstac_maniskill.splat.rasterize`: ``background`` [C, H, W, 3] or a colour,
         ``background_depth`` [C, H, W] m, ``lighting`` (one, or one per camera). Returns a
         ``RenderOutput`` (rgb [C, H, W, 3], depth [C, H, W] m, alpha [C, H, W]) on the Taichi
-        arch's torch device. The particles are read from the world once for all envs."""
-        world = self.world
-        state = functools.cache(lambda: (world.positions(), world.deformation_gradients()))
-        posed = [s.posed_scene(state) if s.has_gaussians else None for s in self.scenes]
+        arch's torch device. The particles the soft Gaussians ride on are read on the device, in
+        one launch for all envs (:meth:`_soft_frames`)."""
+        soft = functools.cache(self._soft_frames)  # read at most once, if some env needs posing
+        posed = [s.posed_scene(lambda b=b: soft()[b]) if s.has_gaussians else None
+                 for b, s in enumerate(self.scenes)]
         return self._splat.render(posed, viewmats, Ks, width, height, camera_env, **kwargs)
+
+    def _soft_frames(self) -> list:
+        """Per env (None without Gaussians), the frames [P'_b, 3, 4] of the particles its soft
+        Gaussians ride on, sleeping pads carried by their links (see
+        :func:`~gausstac_maniskill.mpm.gather.carried_frames`): one launch for every env, the
+        rows kept on the device while the envs' splat scenes stay the same."""
+        from . import backend
+        from .mpm.gather import read_particle_frames
+
+        scenes = [s.splat_scene for s in self.scenes]
+        key = [sc.framed() if sc is not None else None for sc in scenes]
+        if self._soft_key is None or any(a is not b for a, b in zip(key, self._soft_key)):
+            rows, carry, sizes = [], [], []
+            for b, sc in enumerate(scenes):
+                r, c = sc.soft_rows() if sc is not None else (np.zeros(0, np.int64), np.zeros(0, np.int32))
+                rows.append(r)
+                carry.append(c + b * (1 + len(self.pad_names)))  # env b's carries follow env b-1's
+                sizes.append(len(r))
+            dev = backend.torch_device()
+            self._soft_rows = (torch.as_tensor(np.concatenate(rows), dtype=torch.int32, device=dev),
+                               torch.as_tensor(np.concatenate(carry), dtype=torch.int32, device=dev),
+                               np.cumsum([0] + sizes))
+            self._soft_key = key
+        rows, carry, starts = self._soft_rows
+        carries = np.concatenate([s.pad_carries() for s in self.scenes])
+        frames = read_particle_frames(self.world, rows, carry, carries)
+        return [frames[starts[b]:starts[b + 1]] if sc is not None else None for b, sc in enumerate(scenes)]
 
     def object_wrench(self, name: str) -> np.ndarray:
         """[B, 6] force [N] and torque [N·m] (about its origin) the pads exerted on rigid

@@ -316,15 +316,20 @@ class GaussTacSim:
         """Whether :meth:`attach_gaussians` gave the scene something to render."""
         return getattr(self, "_scene", None) is not None
 
-    def posed_scene(self, state: Callable[[], tuple] | None = None):
+    @property
+    def splat_scene(self):
+        """The :class:`gausstac_maniskill.render.SceneGaussians` of :meth:`attach_gaussians`, or None."""
+        return getattr(self, "_scene", None)
+
+    def posed_scene(self, soft: Callable[[], torch.Tensor] | None = None):
         """The splat scene (a :class:`gausstac_maniskill.render.PosedScene`) at the current state,
-        posed once per step whatever the number of cameras; ``state``: a function returning the
-        world's particle (x [N, 3], F [N, 3, 3]) when the caller reads it once for many scenes
-        (a batch), called only if this scene needs posing."""
+        posed once per step whatever the number of cameras; ``soft``: a function returning the
+        frames [P', 3, 4] of the particles the soft Gaussians ride on, when the caller reads
+        them for many scenes at once (a batch), called only if this scene needs posing."""
         if not self.has_gaussians:
             raise ConfigError("GaussTacSim.render: call attach_gaussians(...) first")
         if getattr(self, "_posed", None) is None:
-            self._posed = self._scene.posed(state() if state is not None else None)
+            self._posed = self._scene.posed(soft() if soft is not None else None)
         return self._posed
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
@@ -405,19 +410,13 @@ class GaussTacSim:
         g = self._w(name)
         return self._carried(name, self.world.positions(g), self.world.deformation_gradients(g))
 
-    def particles(self, index: np.ndarray | None = None, state: tuple[np.ndarray, np.ndarray] | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
+    def particles(self, index: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """World positions [P, 3] and F [P, 3, 3] of every particle of the world (pads, soft
         objects), in group order, sleeping pads carried by their links (for rendering).
         With ``index`` ([P'] ascending world particle indices) only those particles, [P', 3]
-        and [P', 3, 3]: a camera needs only the particles its Gaussians ride on. ``state``:
-        the world's (x, F) already read (not modified), else read here."""
-        if state is None:
-            x, F = self.world.positions(), self.world.deformation_gradients()
-        else:
-            x, F = state
-            if index is None:
-                x, F = x.copy(), F.copy()
+        and [P', 3, 3]. (The splat camera reads its particles on the device instead:
+        :meth:`carry_rows`, :meth:`pad_carries`, :func:`gausstac_maniskill.mpm.gather.carried_frames`.)"""
+        x, F = self.world.positions(), self.world.deformation_gradients()
         if index is not None:
             index = np.asarray(index)
             x, F = x[index], F[index]
@@ -430,11 +429,41 @@ class GaussTacSim:
         return x, F
 
     def _carried(self, name: str, x: np.ndarray, F: np.ndarray):
+        D = self._carry(name)
+        if D is None:
+            return x, F
+        return (x @ D[:3, :3].T + D[:3, 3]).astype(np.float32), (D[:3, :3] @ F).astype(np.float32)
+
+    def _carry(self, name: str) -> np.ndarray | None:
+        """The rigid motion [4, 4] of pad ``name``'s link since the pad fell asleep (its particles
+        stay where they were), or None while it is awake."""
         g = self.group(name)
         if g.awake or g.sleep_pose is None:
-            return x, F
-        D = self._link_pose[self.pads[name].spec.link] @ np.linalg.inv(g.sleep_pose)
-        return (x @ D[:3, :3].T + D[:3, 3]).astype(np.float32), (D[:3, :3] @ F).astype(np.float32)
+            return None
+        return self._link_pose[self.pads[name].spec.link] @ np.linalg.inv(g.sleep_pose)
+
+    def carry_rows(self, index: np.ndarray) -> np.ndarray:
+        """[P'] int32: for each world particle of ``index`` ([P'] ascending), the row of
+        :meth:`pad_carries` that carries it: 1 + the number of its pad, 0 for a soft object's."""
+        index = np.asarray(index)
+        rows = np.zeros(len(index), np.int32)
+        for i, name in enumerate(self.pads):
+            g = self.group(name)
+            lo, hi = np.searchsorted(index, (g.start, g.stop))
+            rows[lo:hi] = 1 + i
+        return rows
+
+    def pad_carries(self) -> np.ndarray:
+        """[1 + pads, 3, 4] float32 rigid motions that move the particles to where the renderer
+        draws them: row 0 the identity; row 1 + i pad i's link motion since it fell asleep
+        (:meth:`_carry`), the identity while it is awake."""
+        out = np.zeros((1 + len(self.pads), 3, 4), np.float32)
+        out[:, :, :3] = np.eye(3)
+        for i, name in enumerate(self.pads):
+            D = self._carry(name)
+            if D is not None:
+                out[1 + i] = D[:3]
+        return out
 
     @property
     def _state_env(self):

@@ -34,7 +34,7 @@ import torch
 
 from .errors import ConfigError
 from .splat import FramedGaussians, GaussianSet, PosedGaussians, SoftBinding, pose_gaussians
-from .splat.deform import particle_frames, rigid_frames
+from .splat.deform import polar_rotation, rigid_frames
 
 __all__ = ["SceneGaussians", "PosedScene", "BatchScene", "RigidLayer", "box_gaussians", "particle_gaussians"]
 
@@ -227,6 +227,8 @@ class SceneGaussians:
             rigid = self.gaussians[torch.arange(self.n_rigid)]
             soft, particles = FramedGaussians.from_binding(self.gaussians, self.binding, lit=True)
             self._particles = particles.numpy()
+            self._carry = self.sim.carry_rows(self._particles)
+            self._rows_device = None  # (rows, carry) on the arch's device, at the first picture
             # polar(F) is only needed if a soft Gaussian's colour depends on the view direction
             self._soft_rotations = bool(soft.sh.shape[1] > 1 and soft.sh[:, 1:].abs().max() > 0)
             self._framed = FramedGaussians.cat([FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames,
@@ -234,10 +236,30 @@ class SceneGaussians:
                                                 soft, *(layer.framed() for layer in self.layers)])
         return self._framed
 
-    def posed(self, state: tuple[np.ndarray, np.ndarray] | None = None) -> PosedScene:
+    def soft_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the world particles [P'] the soft Gaussians ride on, ascending; each one's row of
+        the sim's :meth:`~gausstac_maniskill.cosim.GaussTacSim.pad_carries`, [P'] int32)."""
+        self.framed()
+        return self._particles, self._carry
+
+    def soft_frames(self) -> torch.Tensor:
+        """[P', 3, 4] frames (F_p | x_p) of :meth:`soft_rows`' particles, sleeping pads carried
+        by their links, read on the device in one launch (Taichi arch's torch device)."""
+        from .mpm.gather import read_particle_frames
+
+        self.framed()
+        if self._rows_device is None:
+            from . import backend
+
+            dev = backend.torch_device()
+            self._rows_device = (torch.as_tensor(self._particles, dtype=torch.int32, device=dev),
+                                 torch.as_tensor(self._carry, device=dev))
+        return read_particle_frames(self.sim.world, *self._rows_device, self.sim.pad_carries())
+
+    def posed(self, soft: torch.Tensor | None = None) -> PosedScene:
         """The scene at the simulator's current link, object and particle state, with the layers;
-        ``state``: the world's particle (x [N, 3], F [N, 3, 3]) already read (a batch reads it
-        once for all its envs), else read here."""
+        ``soft``: :meth:`soft_frames` when the caller read them (a batch reads every env's at
+        once), else read here. The frames lie on the soft frames' device (the Taichi arch's)."""
         sim = self.sim
         framed = self.framed()
         poses = []
@@ -248,17 +270,18 @@ class SceneGaussians:
             poses.append(sim._link_pose[name])
         for name in self.object_names:
             poses.append(sim.world.colliders[sim._objects[name]].pose)
-        rigid, rigid_rot = rigid_frames(np.array(poses) if poses else np.zeros((0, 4, 4)))
-        p = self._particles
-        x, F = sim.particles(p, state)  # only the particles the soft Gaussians ride on
-        soft, soft_rot = particle_frames(x, F, rotations=self._soft_rotations)
-        layers = [layer.frames() for layer in self.layers]
-        frames = torch.cat([rigid, soft, *(f for f, _ in layers)])
+        rigid, _ = rigid_frames(np.array(poses) if poses else np.zeros((0, 4, 4)))
+        if soft is None:
+            soft = self.soft_frames()  # only the particles the soft Gaussians ride on
+        # the rigid frames (links, objects, layers) go to the device in one copy
+        host = torch.cat([rigid, *(f for f, _ in (layer.frames() for layer in self.layers))]).to(soft.device)
+        n = rigid.shape[0]
+        frames = torch.cat([host[:n], soft, host[n:]])
         rotations = None  # SH degree 0 everywhere: colours do not depend on the view direction
-        if framed.sh.shape[1] > 1:
-            if soft_rot is None:  # no soft Gaussian's colour depends on it: any rotation will do
-                soft_rot = torch.eye(3).expand(len(p), 3, 3)
-            rotations = torch.cat([rigid_rot, soft_rot, *(r for _, r in layers)])
+        if framed.sh.shape[1] > 1:  # a rigid frame's SH turn with its rotation, a particle's with polar(F)
+            soft_rot = polar_rotation(soft[:, :, :3]) if self._soft_rotations else \
+                torch.eye(3, device=soft.device).expand(len(soft), 3, 3)  # (no soft colour depends on it)
+            rotations = torch.cat([host[:n, :, :3], soft_rot, host[n:, :, :3]])
         return PosedScene(framed, frames, rotations)
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):

@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.mpm.gather import read_particle_frames
 from gausstac_maniskill.render import RigidLayer
 from gausstac_maniskill.splat import (GaussianSet, PosedGaussians, intrinsics_from_fov, look_at, pose_gaussians,
                                       rgb_to_sh_dc)
@@ -185,8 +186,9 @@ def test_soft_gaussians_with_view_dependent_colour_turn_with_polar_F(pressed_sce
 
 
 def test_particles_of_an_index_are_those_rows_of_all_particles(pressed_scene):
-    """GaussTacSim.particles(index) (what the splat camera reads) gives the rows ``index`` of
-    particles(), sleeping pads carried by their links as there."""
+    """GaussTacSim.particles(index) gives the rows ``index`` of particles(), sleeping pads
+    carried by their links as there, and so does the splat camera's read on the device
+    (mpm.gather.read_particle_frames with the sim's carry rows)."""
     sim, _, _ = pressed_scene
     sleeping = [p for p in sim.pads if not sim.is_awake(p)]
     assert sleeping and len(sleeping) < len(sim.pads), "the scene should have awake and sleeping pads"
@@ -200,8 +202,13 @@ def test_particles_of_an_index_are_those_rows_of_all_particles(pressed_scene):
         assert np.abs(x[g.start:g.stop] - sim.world.positions(sleeping[0])).max() > 5e-3, "carried"
         idx = np.sort(np.random.default_rng(0).choice(len(x), len(x) // 3, replace=False))
         xi, Fi = sim.particles(idx)
+        # the splat camera's read on the device: the same rows, carried in float32 there
+        frames = read_particle_frames(sim.world, idx, sim.carry_rows(idx), sim.pad_carries()).cpu().numpy()
     finally:
         sim._link_pose[link] = saved
     assert xi.shape == (len(idx), 3) and Fi.shape == (len(idx), 3, 3)
     np.testing.assert_allclose(xi, x[idx], rtol=0, atol=1e-7)
     np.testing.assert_allclose(Fi, F[idx], rtol=0, atol=1e-7)
+    assert frames.shape == (len(idx), 3, 4)
+    np.testing.assert_allclose(frames[:, :, 3], xi, rtol=0, atol=1e-7)  # metres: float32 rounding
+    np.testing.assert_allclose(frames[:, :, :3], Fi, rtol=0, atol=1e-6)
