@@ -9,7 +9,10 @@ Envs sleep and wake per pad, as in a scene alone.
 
 Every env takes the same substeps: the number the most demanding env's CFL bound needs.
 An env then steps exactly as it would alone with that many substeps (to float rounding:
-the grid box and the order of the P2G sums may differ; the tests hold this).
+the grid box and the order of the P2G sums may differ; the tests hold this). Not so with
+``SolverSettings(pressure="implicit")``: the envs then share one conjugate-gradient solve of
+the cell pressures (its step lengths and its stopping test sum over every env), so an env
+matches its solve alone only to the CG tolerance; that equivalence is untested.
 
 Data flows one way: link poses [B, L, 4, 4] (torch or numpy, world frame, m) →
 :meth:`BatchedCosim.step` → MPM → tactile maps ``{pad: {map: [B, H, W(, 2)]}}``.

@@ -209,8 +209,10 @@ class GaussianSplatCamera(Camera):
             super().capture()
             # read the picture now, while the hand is hidden
             obs = super().get_obs(rgb=True, depth=True, position=False, segmentation=False)
-        d = obs["depth"][..., 0].cpu().float() / 1000.0
-        self._background = (obs["rgb"][..., :3].cpu().float() / 255.0,
+        # (kept on SAPIEN's device: the rasterizer takes it from there to the Taichi arch's,
+        # so on physx_cuda with Taichi cuda the picture never visits the host)
+        d = obs["depth"][..., 0].float() / 1000.0
+        self._background = (obs["rgb"][..., :3].float() / 255.0,
                             torch.where(d > 0, d, torch.full_like(d, float("inf"))))
         self._background_key = key
         self.background_renders += 1

@@ -33,7 +33,7 @@ import taichi as ti
 from scipy import ndimage
 
 from .colliders import local_sdf
-from .kernels import NDF, NDF2, NDI, NDI2, NDM, NDV
+from .kernels import N_COL, NDF, NDF2, NDI, NDM, NDV, Particles, Scene
 from .kinematics import pose_at
 
 __all__ = ["ActivePatch", "SHELL_CELLS"]
@@ -48,26 +48,25 @@ SEED_CELLS = 0.5
 
 
 @ti.kernel
-def rest_gap(cand: NDI, n: ti.i32, X_rest: NDV, link: NDI, radius: NDF, link_poses: NDF2, n_col: ti.i32,
-             col_poses: NDF2, col_kind: NDI, col_prm: NDF2, sdf: NDF, sdf_info: NDI2, out: NDF,
-             group: NDI, group_env: NDI, col_env: NDI):
-    """out[ii]: the smallest gap [m] between particle cand[ii]'s surface (its rest place
-    on its link, inflated by its contact radius) and any collider of its env, at the start
-    and at the end of the control step (pose rows of kinematics.py)."""
+def rest_gap(P: Particles, S: Scene, X_rest: NDV, link_poses: NDF2, col_poses: NDF2, cand: NDI, n: ti.i32,
+             out: NDF):
+    """out[ii]: the smallest gap [m] between particle p = cand[ii]'s surface (its rest place
+    X_rest on its link, inflated by its contact radius) and any collider of its env, at the
+    start and at the end of the control step (pose rows of kinematics.py)."""
     for ii in range(n):
         p = cand[ii]
         gap = 1e9
-        env = group_env[group[p]]
+        env = S.group_env[P.group[p]]
         for e in ti.static(range(2)):
-            R, t = pose_at(link_poses, link[p], float(e))
+            R, t = pose_at(link_poses, P.link[p], float(e))
             xw = R @ X_rest[p] + t
-            for c in range(n_col):
-                if col_env[c] != env:
+            for c in range(S.counts[N_COL]):
+                if S.col_env[c] != env:
                     continue
                 Rc, tc = pose_at(col_poses, c, float(e))
-                prm = ti.Vector([col_prm[c, 0], col_prm[c, 1], col_prm[c, 2], col_prm[c, 3]])
-                phi, _nrm = local_sdf(col_kind[c], prm, sdf, sdf_info, c, Rc.transpose() @ (xw - tc))
-                gap = ti.min(gap, phi - radius[p])
+                prm = ti.Vector([S.col_prm[c, 0], S.col_prm[c, 1], S.col_prm[c, 2], S.col_prm[c, 3]])
+                phi, _nrm = local_sdf(S.col_kind[c], prm, S.sdf, S.sdf_info, c, Rc.transpose() @ (xw - tc))
+                gap = ti.min(gap, phi - P.radius[p])
         out[ii] = gap
 
 

@@ -878,9 +878,8 @@ class MPMWorld:
             cand = np.concatenate([np.arange(self.groups[i].start, self.groups[i].stop, dtype=np.int32)
                                    for i in gids])
             d["patch_cand"].from_numpy(np.resize(cand, n))
-            rest_gap(d["patch_cand"], len(cand), d["X_rest"], d["link"], d["radius"], d["link_pose"],
-                     len(self.colliders), d["col_pose"], d["col_kind"], d["col_prm"], d["sdf"], d["sdf_info"],
-                     d["patch_gap"], d["group"], d["group_env"], d["col_env"])
+            rest_gap(self._pack["P"], self._pack["S"], d["X_rest"], d["link_pose"], d["col_pose"],
+                     d["patch_cand"], len(cand), d["patch_gap"])
             gap = d["patch_gap"].to_numpy()
             start = 0
             for i in gids:
