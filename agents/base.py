@@ -231,3 +231,33 @@ def load_hand_gaussians(folder: str):
     except (ValueError, KeyError) as e:
         raise AssetError(f"{links}: expected a JSON object with a 'link_names' list ({e})") from None
     return load_ply(ply), list(names)
+
+
+@lru_cache(maxsize=8)
+def load_hand_lod(folder: str):
+    """The coarser level of a hand Gaussians folder, or None: ``(fine spacing [m], coarse
+    spacing [m], coarse GaussianSet)`` from ``links.json``'s ``spacing`` and ``coarse`` entry
+    (``{"file": ..., "spacing": ...}``; the same link names and frames as ``gaussians.ply``).
+    A camera whose pixels at the hand are at least the coarse spacing draws the coarse set
+    (:class:`gausstac_maniskill.render.SceneGaussians`). Cached per process."""
+    from ..splat import load_ply
+
+    links = os.path.join(folder, "links.json")
+    _, names = load_hand_gaussians(folder)  # (checks both files)
+    with open(links) as f:
+        meta = json.load(f)
+    coarse = meta.get("coarse")
+    if coarse is None:
+        return None
+    try:
+        fine, spacing, ply = float(meta["spacing"]), float(coarse["spacing"]), os.path.join(folder, coarse["file"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise AssetError(f"{links}: 'coarse' needs 'file' and 'spacing' [m], and the file 'spacing' ({e!r})") from None
+    if not 0 < fine < spacing:
+        raise AssetError(f"{links}: coarse.spacing={spacing} must exceed spacing={fine} (metres)")
+    if not os.path.isfile(ply):
+        raise AssetError(f"{ply}: coarse hand Gaussians file not found ({links}: coarse.file)")
+    gs = load_ply(ply)
+    if len(gs) and int(gs.link_id.max()) >= len(names):
+        raise AssetError(f"{ply}: link ids reach {int(gs.link_id.max())}, but {links} names {len(names)} links")
+    return fine, spacing, gs

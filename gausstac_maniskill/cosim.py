@@ -284,7 +284,7 @@ class GaussTacSim:
         return (x - T[:3, 3]) @ T[:3, :3] - pad.rest
 
     # ------------------------------------------------------------------ rendering
-    def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None) -> None:
+    def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None, hand_lod=None) -> None:
         """Give the scene its 3D Gaussians (see :class:`gausstac_maniskill.render.SceneGaussians`).
 
         Call it with the pads and soft objects at rest (before stepping into contact):
@@ -295,10 +295,13 @@ class GaussTacSim:
             hand_links: their link names (``links.json["link_names"]``); every one of them
                 must then be in the ``link_poses`` passed to :meth:`step`.
             objects: rigid object name -> Gaussians in the object frame.
+            hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand Gaussians)``
+                (``agents.base.load_hand_lod``): cameras whose pixels at the hand span at least
+                the coarse spacing draw those instead (:class:`gausstac_maniskill.render.Detail`).
         """
         from .render import SceneGaussians
 
-        self._scene = SceneGaussians(self, hand, hand_links, objects)
+        self._scene = SceneGaussians(self, hand, hand_links, objects, hand_lod)
         self._posed = None
 
     def add_render_layer(self, layer) -> None:

@@ -148,17 +148,51 @@ class RigidLayer:
         return rigid_frames(self._pose_matrices())
 
 
+class Detail:
+    """A scene's two levels of detail of the hand (:class:`SceneGaussians` with ``hand_lod``).
+
+    The scene's Gaussians are laid out [fine hand | everything else | coarse hand], so that
+    either level is one range: ``fine`` = [0, n - n_coarse), ``coarse`` = [n_fine, n). A camera
+    draws the coarse hand when its pixel at the hand, z / fx (z: the hand's root link in the
+    camera, fx: the focal length in pixels), spans at least ``coarse_spacing`` [m]: there the
+    fine set puts several Gaussians in a pixel and the picture does not change (BENCHMARKS.md,
+    issue 13)."""
+
+    def __init__(self, fine: tuple[int, int], coarse: tuple[int, int], coarse_spacing: float):
+        self.fine, self.coarse, self.coarse_spacing = fine, coarse, float(coarse_spacing)
+
+    def ranges(self, viewmats: torch.Tensor, Ks: torch.Tensor, anchor: np.ndarray) -> torch.Tensor:
+        """[C, 2] the range each camera draws; ``anchor``: the hand root's world position [m]."""
+        V = torch.as_tensor(viewmats, dtype=torch.float64).cpu()
+        z = V[:, 2, :3] @ torch.as_tensor(anchor, dtype=torch.float64) + V[:, 2, 3]
+        pixel = z / torch.as_tensor(Ks, dtype=torch.float64).cpu()[:, 0, 0]  # metres per pixel at the hand
+        coarse = (pixel >= self.coarse_spacing)[:, None]
+        return torch.where(coarse, torch.tensor(self.coarse), torch.tensor(self.fine))
+
+
 class PosedScene:
     """A :class:`SceneGaussians` posed at one instant: its Gaussians in their frames and the
-    frames' current poses ([F, 3, 4]) and SH rotations ([F, 3, 3] or None)."""
+    frames' current poses ([F, 3, 4]) and SH rotations ([F, 3, 3] or None); with ``detail``
+    (a :class:`Detail`) and ``anchor`` (the hand root's world position [m]), each camera draws
+    the hand at the level its pixel size calls for."""
 
-    def __init__(self, gaussians: FramedGaussians, frames: torch.Tensor, rotations: torch.Tensor | None):
+    def __init__(self, gaussians: FramedGaussians, frames: torch.Tensor, rotations: torch.Tensor | None,
+                 detail: Detail | None = None, anchor: np.ndarray | None = None):
         self.gaussians, self.frames, self.rotations = gaussians, frames, rotations
+        self.detail, self.anchor = detail, anchor
+
+    def ranges(self, viewmats, Ks) -> torch.Tensor:
+        """[C, 2] the Gaussians each camera draws (all of them without levels of detail)."""
+        if self.detail is None:
+            return torch.tensor([[0, len(self.gaussians)]]).expand(len(viewmats), 2)
+        return self.detail.ranges(viewmats, Ks, self.anchor)
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render (see :meth:`FramedGaussians.render`); ``viewmats`` [C, 4, 4], ``Ks`` [C, 3, 3]."""
-        return self.gaussians.render(self.frames, self.rotations, torch.as_tensor(viewmats, dtype=torch.float32),
-                                     torch.as_tensor(Ks, dtype=torch.float32), width, height, **kwargs)
+        viewmats, Ks = torch.as_tensor(viewmats, dtype=torch.float32), torch.as_tensor(Ks, dtype=torch.float32)
+        ranges = None if self.detail is None else self.ranges(viewmats, Ks)
+        return self.gaussians.render(self.frames, self.rotations, viewmats, Ks, width, height,
+                                     gaussian_ranges=ranges, **kwargs)
 
     def world(self) -> PosedGaussians:
         """The same Gaussians in world space (full covariances)."""
@@ -173,15 +207,25 @@ class SceneGaussians:
         hand: rigid hand Gaussians in link-local frames (``link_id`` indexes ``hand_links``).
         hand_links: link names of the hand Gaussians.
         objects: rigid object name -> its Gaussians in the object frame.
+        hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand GaussianSet)``, the
+            same hand built coarser (``agents.base.load_hand_lod``); cameras whose pixels at the
+            hand are at least the coarse spacing draw it instead (:class:`Detail`).
     """
 
     def __init__(self, sim, hand: GaussianSet | None = None, hand_links: Sequence[str] = (),
-                 objects: Mapping[str, GaussianSet] | None = None):
+                 objects: Mapping[str, GaussianSet] | None = None, hand_lod: tuple | None = None):
         self.sim = sim
         self.hand_links = list(hand_links)
         sets = []
+        self.n_hand = 0
+        self.coarse_hand: GaussianSet | None = None
+        self.coarse_spacing = 0.0
         if hand is not None and len(hand):
             sets.append(self._drop_pad_regions(hand))
+            self.n_hand = len(sets[0])
+            if hand_lod is not None:
+                _, self.coarse_spacing, coarse = hand_lod
+                self.coarse_hand = self._drop_pad_regions(coarse)
         self.object_names = list(objects or {})
         for i, name in enumerate(self.object_names):
             if name not in sim._objects:
@@ -231,9 +275,20 @@ class SceneGaussians:
             self._rows_device = None  # (rows, carry) on the arch's device, at the first picture
             # polar(F) is only needed if a soft Gaussian's colour depends on the view direction
             self._soft_rotations = bool(soft.sh.shape[1] > 1 and soft.sh[:, 1:].abs().max() > 0)
-            self._framed = FramedGaussians.cat([FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames,
-                                                                               lit=True),
-                                                soft, *(layer.framed() for layer in self.layers)])
+            parts = [FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames, lit=True),
+                     soft, *(layer.framed() for layer in self.layers)]
+            offsets = None
+            self.detail = None
+            if self.coarse_hand is not None:  # last, in the links' frames (0..): [fine | rest | coarse]
+                parts.append(FramedGaussians.from_gaussians(self.coarse_hand, self.coarse_hand.link_id,
+                                                            n_rigid_frames, lit=True))
+                offsets = [0]
+                for p in parts[:-2]:
+                    offsets.append(offsets[-1] + p.n_frames)
+                offsets.append(0)
+                n = sum(len(p) for p in parts)
+                self.detail = Detail((0, n - len(self.coarse_hand)), (self.n_hand, n), self.coarse_spacing)
+            self._framed = FramedGaussians.cat(parts, frame_offsets=offsets)
         return self._framed
 
     def soft_rows(self) -> tuple[np.ndarray, np.ndarray]:
@@ -282,7 +337,8 @@ class SceneGaussians:
             soft_rot = polar_rotation(soft[:, :, :3]) if self._soft_rotations else \
                 torch.eye(3, device=soft.device).expand(len(soft), 3, 3)  # (no soft colour depends on it)
             rotations = torch.cat([host[:n, :, :3], soft_rot, host[n:, :, :3]])
-        return PosedScene(framed, frames, rotations)
+        anchor = sim._link_pose[self.hand_links[0]][:3, 3] if self.detail is not None else None
+        return PosedScene(framed, frames, rotations, self.detail, anchor)
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
         """Render; ``viewmats`` [C, 4, 4] world-to-camera (OpenCV), ``Ks`` [C, 3, 3].
@@ -345,17 +401,22 @@ class BatchScene:
         if envs.shape != (C,) or (C and (envs.min() < 0 or envs.max() >= B)):
             raise ConfigError(f"BatchScene.render: camera_env must hold one env index in [0, {B}) per camera "
                               f"({C} cameras), got {envs.tolist()}")
-        framed, ranges = self._framed_of(posed)
+        framed, env_ranges = self._framed_of(posed)
         if framed is None:  # nothing to splat anywhere: an empty set renders the background
             empty = GaussianSet.empty()
             return rasterize(empty.means, empty.quats, empty.scales, empty.opacities, empty.sh,
                              viewmats, Ks, width, height, **kwargs)
+        viewmats, Ks = torch.as_tensor(viewmats, dtype=torch.float32), torch.as_tensor(Ks, dtype=torch.float32)
+        # each camera's range: its env's, at the level of detail its pixel size calls for
+        ranges = env_ranges[torch.as_tensor(envs)].clone()
+        for e in np.unique(envs):
+            if posed[e] is not None and posed[e].detail is not None:
+                sel = torch.as_tensor(envs == e)
+                ranges[sel] = env_ranges[e, 0] + posed[e].ranges(viewmats[sel], Ks[sel])
         frames = torch.cat([p.frames for p in posed if p is not None])
         rotations = None
         if framed.sh.shape[1] > 1:  # some colour depends on the view: every frame needs its rotation
             rotations = torch.cat([p.rotations if p.rotations is not None else
                                    torch.eye(3).expand(p.frames.shape[0], 3, 3)
                                    for p in posed if p is not None])
-        return framed.render(frames, rotations, torch.as_tensor(viewmats, dtype=torch.float32),
-                             torch.as_tensor(Ks, dtype=torch.float32), width, height,
-                             gaussian_ranges=ranges[torch.as_tensor(envs)], **kwargs)
+        return framed.render(frames, rotations, viewmats, Ks, width, height, gaussian_ranges=ranges, **kwargs)

@@ -212,3 +212,34 @@ def test_particles_of_an_index_are_those_rows_of_all_particles(pressed_scene):
     assert frames.shape == (len(idx), 3, 4)
     np.testing.assert_allclose(frames[:, :, 3], xi, rtol=0, atol=1e-7)  # metres: float32 rounding
     np.testing.assert_allclose(frames[:, :, :3], Fi, rtol=0, atol=1e-6)
+
+
+def test_coarse_hand_for_cameras_whose_pixels_are_coarser(pressed_scene):
+    """With the asset's coarse level (links.json ``coarse``), a camera whose pixel at the hand
+    spans at least its spacing draws the coarse hand, and one with finer pixels the fine hand;
+    the coarse picture is the scene built on the coarse hand alone (guards the layout and the
+    choice; whether the coarse hand looks right is measured by ``bench look``)."""
+    from gausstac_maniskill.agents.base import load_hand_gaussians, load_hand_lod
+    from gausstac_maniskill.demo import ASSET_DIR
+    from gausstac_maniskill.render import SceneGaussians
+
+    sim, view, _ = pressed_scene
+    hand, links = load_hand_gaussians(str(ASSET_DIR))
+    lod = load_hand_lod(str(ASSET_DIR))
+    assert lod is not None and lod[0] < lod[1] and len(lod[2]) < len(hand) / 2
+    both = SceneGaussians(sim, hand, links, hand_lod=lod)
+    fine, coarse = SceneGaussians(sim, hand, links), SceneGaussians(sim, lod[2], links)
+    root = sim._link_pose[links[0]][:3, 3]
+    z = float(view[0, 2, :3] @ torch.as_tensor(root, dtype=torch.float32) + view[0, 2, 3])
+    # focal lengths giving a pixel of 1.5× and 0.5× the coarse spacing at the hand
+    Ks = [torch.tensor([[[z / (s * lod[1]), 0.0, 24.0], [0.0, z / (s * lod[1]), 20.0], [0.0, 0.0, 1.0]]])
+          for s in (1.5, 0.5)]
+    posed = both.posed()
+    n = len(posed.gaussians)
+    assert posed.ranges(view, Ks[0]).tolist() == [[both.n_hand, n]]
+    assert posed.ranges(view, Ks[1]).tolist() == [[0, n - len(both.coarse_hand)]]
+    for K, alone in zip(Ks, (coarse, fine)):
+        a = posed.render(view, K, 48, 40, background=(1.0, 1.0, 1.0))
+        b = alone.render(view, K, 48, 40, background=(1.0, 1.0, 1.0))
+        assert float(b.alpha.max()) > 0.5, "the hand should be in the picture"
+        assert (a.rgb - b.rgb).abs().max() < 1e-5 and (a.alpha - b.alpha).abs().max() < 1e-5

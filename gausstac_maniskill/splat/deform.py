@@ -373,8 +373,10 @@ class FramedGaussians:
                    len(particles), normals), particles
 
     @classmethod
-    def cat(cls, parts) -> "FramedGaussians":
-        """One set from several, frames numbered on (part 0's frames first, then part 1's, ...);
+    def cat(cls, parts, frame_offsets=None) -> "FramedGaussians":
+        """One set from several, frames numbered on (part 0's frames first, then part 1's, ...),
+        or part i's frame f becoming ``frame_offsets[i] + f`` (parts that share frames, e.g. two
+        levels of detail of one hand; the frame count is then the largest frame used + 1);
         lower SH degrees are zero-padded to the highest; a part without normals contributes
         zero normals (not lit) when another has some."""
         parts = list(parts)
@@ -384,6 +386,11 @@ class FramedGaussians:
         offsets = [0]
         for p in parts:
             offsets.append(offsets[-1] + p.n_frames)
+        if frame_offsets is not None:
+            if len(frame_offsets) != len(parts):
+                raise ConfigError(f"FramedGaussians.cat: {len(frame_offsets)} frame offsets for {len(parts)} parts")
+            offsets = [int(o) for o in frame_offsets]
+            offsets.append(max(o + p.n_frames for o, p in zip(offsets, parts)))
         normals = None
         if any(p.normals is not None for p in parts):
             normals = torch.cat([p.normals.to(torch.float32) if p.normals is not None else
