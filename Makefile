@@ -39,7 +39,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench resolution --tasks GaussTac-PressCube-v1 --dx 2e-3 1.5e-3 1e-3
 	$(PY) -m gausstac_maniskill.bench resolution --tasks GaussTac-GraspSqueezeSponge-v1 --dx 2e-3 1.5e-3 --settle 5 --out out/bench_resolution_sponge
 	$(PY) -m gausstac_maniskill.bench hold
-	$(PY) -m gausstac_maniskill.bench batch
+	$(PY) -m gausstac_maniskill.bench batch --camera 128 128
 	$(PY) -m gausstac_maniskill.bench scale --backend physx_cpu --envs 1 --steps 5
 
 clean:
