@@ -238,8 +238,8 @@ def load_hand_lod(folder: str):
     """The coarser level of a hand Gaussians folder, or None: ``(fine spacing [m], coarse
     spacing [m], coarse GaussianSet)`` from ``links.json``'s ``spacing`` and ``coarse`` entry
     (``{"file": ..., "spacing": ...}``; the same link names and frames as ``gaussians.ply``).
-    A camera whose pixels at the hand are at least 3/4 of the coarse spacing draws the coarse
-    set (:class:`gausstac_maniskill.render.Detail`). Cached per process."""
+    A camera whose pixels at the hand are at least the coarse spacing draws the coarse set
+    (:class:`gausstac_maniskill.render.SceneGaussians`). Cached per process."""
     from ..splat import load_ply
 
     links = os.path.join(folder, "links.json")

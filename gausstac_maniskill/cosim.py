@@ -297,7 +297,7 @@ class GaussTacSim:
             objects: rigid object name -> Gaussians in the object frame.
             hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand Gaussians)``
                 (``agents.base.load_hand_lod``): cameras whose pixels at the hand span at least
-                3/4 of the coarse spacing draw those instead (:class:`gausstac_maniskill.render.Detail`).
+                the coarse spacing draw those instead (:class:`gausstac_maniskill.render.Detail`).
         """
         from .render import SceneGaussians
 

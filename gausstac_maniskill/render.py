@@ -148,21 +148,15 @@ class RigidLayer:
         return rigid_frames(self._pose_matrices())
 
 
-#: a camera draws the coarse hand when its spacing is at most this many of its pixels at the
-#: hand. Measured against SAPIEN's render (``bench look``, BENCHMARKS.md issue 13) with the 3 mm
-#: Allegro hand: at 1.3 pixels (2.3 mm pixels) PSNR and MS-SSIM equal the 2 mm hand's; at 1.5
-#: pixels (2.0 mm) PSNR drops 0.2 dB.
-COARSE_MAX_PIXELS = 4.0 / 3.0
-
-
 class Detail:
     """A scene's two levels of detail of the hand (:class:`SceneGaussians` with ``hand_lod``).
 
     The scene's Gaussians are laid out [fine hand | everything else | coarse hand], so that
     either level is one range: ``fine`` = [0, n - n_coarse), ``coarse`` = [n_fine, n). A camera
-    draws the coarse hand when ``coarse_spacing`` [m] spans at most :data:`COARSE_MAX_PIXELS`
-    of its pixels at the hand, z / fx (z: the hand's root link in the camera, fx: the focal
-    length in pixels): there the picture does not change (BENCHMARKS.md, issue 13)."""
+    draws the coarse hand when its pixel at the hand, z / fx (z: the hand's root link in the
+    camera, fx: the focal length in pixels), spans at least ``coarse_spacing`` [m]: there the
+    fine set puts several Gaussians in a pixel and the picture does not change (BENCHMARKS.md,
+    issue 13)."""
 
     def __init__(self, fine: tuple[int, int], coarse: tuple[int, int], coarse_spacing: float):
         self.fine, self.coarse, self.coarse_spacing = fine, coarse, float(coarse_spacing)
@@ -172,7 +166,7 @@ class Detail:
         V = torch.as_tensor(viewmats, dtype=torch.float64).cpu()
         z = V[:, 2, :3] @ torch.as_tensor(anchor, dtype=torch.float64) + V[:, 2, 3]
         pixel = z / torch.as_tensor(Ks, dtype=torch.float64).cpu()[:, 0, 0]  # metres per pixel at the hand
-        coarse = (pixel * COARSE_MAX_PIXELS >= self.coarse_spacing)[:, None]
+        coarse = (pixel >= self.coarse_spacing)[:, None]
         return torch.where(coarse, torch.tensor(self.coarse), torch.tensor(self.fine))
 
 
@@ -215,7 +209,7 @@ class SceneGaussians:
         objects: rigid object name -> its Gaussians in the object frame.
         hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand GaussianSet)``, the
             same hand built coarser (``agents.base.load_hand_lod``); cameras whose pixels at the
-            hand span at least 3/4 of the coarse spacing draw it instead (:class:`Detail`).
+            hand are at least the coarse spacing draw it instead (:class:`Detail`).
     """
 
     def __init__(self, sim, hand: GaussianSet | None = None, hand_links: Sequence[str] = (),

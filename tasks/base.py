@@ -128,10 +128,10 @@ class GaussTacEnv(BaseEnv):
             ``ResolutionWarning`` says so; forces are not converged, see BENCHMARKS.md).
         mpm_sleep_margin: a pad farther than this from every object sleeps [m].
         splat_size: (width, height) of the default splat camera ``splat_camera``.
-        splat_lod: a splat camera whose pixels at the hand span at least 3/4 of the hand
-            asset's coarse spacing (``links.json`` ``coarse``: 3 mm for the Allegro hand, i.e.
-            the tasks' 128 × 128 camera) draws the coarse hand Gaussians: the same look against
-            SAPIEN, less time (BENCHMARKS.md, issue 13). ``False``: always the fine ones.
+        splat_lod: a splat camera whose pixels at the hand span at least the hand asset's
+            coarse spacing (``links.json`` ``coarse``: 3 mm for the Allegro hand, i.e. the
+            128 × 128 task camera) draws the coarse hand Gaussians: the same look against SAPIEN,
+            a quarter less time (BENCHMARKS.md, issue 13). ``False``: always the fine ones.
         render_size: (width, height) of the human render camera (``render_mode="rgb_array"``).
         splat_background: ``"sapien"`` (composite over SAPIEN's render), an RGB triple in
             [0, 1], or ``None`` (default): ``"sapien"`` without a ``scene_ply``,
