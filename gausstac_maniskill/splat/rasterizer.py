@@ -775,10 +775,13 @@ def _camera_lights(lighting, C: int, device) -> tuple[torch.Tensor, list]:
     if len(lights) != C or not all(isinstance(x, Lighting) for x in lights):
         raise ConfigError(f"lighting must be a splat.lighting.Lighting, a sequence of C = {C} of them, or "
                           f"None; got {type(lighting).__name__}")
+    if not lights:
+        return torch.zeros(0, 1, 6, dtype=torch.float32, device=device), lights
+    if all(x == lights[0] for x in lights):  # one scene's lights (every env's, as a rule): one copy
+        a = lights[0].kernel_array(device)
+        return a.expand(C, *a.shape).contiguous(), lights
     arrays = [x.kernel_array(device) for x in lights]
-    rows = max(a.shape[0] for a in arrays) if arrays else 1
-    if all(a is arrays[0] for a in arrays):  # one scene's lights: no copy
-        return arrays[0].expand(C, rows, 6).contiguous(), lights
+    rows = max(a.shape[0] for a in arrays)
     out = torch.zeros(C, rows, 6, dtype=torch.float32, device=device)
     for c, a in enumerate(arrays):
         out[c, :a.shape[0]] = a
