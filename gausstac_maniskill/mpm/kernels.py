@@ -21,7 +21,8 @@ collider has an env, and the grid arrays hold one copy of the box per env and fi
 space; they never share a node, and a particle tests only its own env's colliders.
 
 Particle-to-grid without atomics (the CPU's way): particles are counting-sorted into
-*slabs* two cells thick along the grid's longest axis. A particle whose stencil base
+*slabs* two cells thick along the longer of the grid's x and y axes (z varies fastest in
+memory: z slabs would share cache lines between threads). A particle whose stencil base
 cell is b touches nodes b..b+2, so slabs s and s+2 never write the same node; the even
 slabs are scattered in parallel, then the odd ones. Within a slab particles are
 visited in a fixed order, which makes a substep bit-reproducible for any number
@@ -105,23 +106,46 @@ def link_motion_at(link_frames: ti.template(), l, xi, dt):
     return (R1 @ (R0.transpose() @ (xi - t0)) + t1 - xi) / dt, omega, t0
 
 
+# Taichi 1.7's CPU backend hands a range-for to its threads in blocks of at least 512
+# iterations (its "adaptive" block size; neither loop_config(block_dim=...) nor
+# cpu_block_dim_adaptive=False changed that here), so a loop over the ~10 slabs of a pad ran
+# on one thread. A serial-by-design loop over a few heavy items (slabs, chunks) therefore
+# spreads them TASK_SPREAD iterations apart: each block holds one item, the other iterations
+# do nothing. The work and its order are the same; only the threads that take it change.
+TASK_SPREAD = 512
+
+
+@ti.func
+def spread_tasks(n_items):
+    """Loop count that puts each of ``n_items`` heavy items in a thread block of its own."""
+    return n_items * TASK_SPREAD
+
+
+@ti.func
+def spread_item(q):
+    """Item of spread iteration q (see :func:`spread_tasks`), or -1 for a filler iteration."""
+    return q // TASK_SPREAD if q % TASK_SPREAD == 0 else -1
+
+
 @ti.func
 def chunk_bounds(active: ti.template(), n: ti.template(), x: ti.template(),
         inv_dx: ti.template(), nchunk: ti.template(), out: ti.template()):
     """Per chunk of particles, min/max of the stencil base cell (out[c] = lo xyz, hi xyz)."""
-    ti.loop_config(block_dim=1)
-    for c in range(nchunk):
-        lo = ti.Vector([BIG, BIG, BIG])
-        hi = ti.Vector([-BIG, -BIG, -BIG])
-        start = c * n // nchunk
-        end = (c + 1) * n // nchunk
-        for ii in range(start, end):
-            base = ti.cast(ti.floor(x[active[ii]] * inv_dx - 0.5), ti.i32)
-            lo = ti.min(lo, base)
-            hi = ti.max(hi, base)
-        for d in ti.static(range(3)):
-            out[c, d] = lo[d]
-            out[c, 3 + d] = hi[d]
+    ti.loop_config(block_dim=TASK_SPREAD)
+    for q in range(spread_tasks(nchunk)):  # a thread block per chunk
+        c = spread_item(q)
+        if c >= 0:
+            lo = ti.Vector([BIG, BIG, BIG])
+            hi = ti.Vector([-BIG, -BIG, -BIG])
+            start = c * n // nchunk
+            end = (c + 1) * n // nchunk
+            for ii in range(start, end):
+                base = ti.cast(ti.floor(x[active[ii]] * inv_dx - 0.5), ti.i32)
+                lo = ti.min(lo, base)
+                hi = ti.max(hi, base)
+            for d in ti.static(range(3)):
+                out[c, d] = lo[d]
+                out[c, 3 + d] = hi[d]
 
 
 @ti.func
@@ -151,13 +175,29 @@ def sort_into_slabs(active: ti.template(), n: ti.template(), x: ti.template(),
 
 
 @ti.func
-def slab_range(atomic: ti.template(), slab_start: ti.template(), color: ti.template(), h):
-    """Sorted particles [lo, hi) of outer iteration h of a scatter loop: slab 2h + color,
-    or (``atomic``) the single particle h."""
-    lo, hi = h, h + 1
+def scatter_tasks(atomic: ti.template(), slab_start: ti.template(), n_slabs, color: ti.template()):
+    """Loop count of a scatter loop: every sorted particle (``atomic``), or the slabs of
+    colour ``color`` (slab 2h + color), spread a block apart (:func:`spread_tasks`)."""
+    n = 0
+    if ti.static(atomic):
+        n = slab_start[n_slabs]
+    else:
+        n = spread_tasks((n_slabs - color + 1) // 2)
+    return n
+
+
+@ti.func
+def slab_range(atomic: ti.template(), slab_start: ti.template(), color: ti.template(), q):
+    """Sorted particles [lo, hi) of iteration q of a scatter loop (:func:`scatter_tasks`): slab
+    2h + color for h = spread_item(q), empty for a filler iteration, or (``atomic``) the single
+    particle q."""
+    lo, hi = q, q + 1
     if ti.static(not atomic):
-        s = 2 * h + color
-        lo, hi = slab_start[s], slab_start[s + 1]
+        h = spread_item(q)
+        lo, hi = 0, 0
+        if h >= 0:
+            s = 2 * h + color
+            lo, hi = slab_start[s], slab_start[s + 1]
     return lo, hi
 
 
@@ -229,9 +269,9 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
     """
     origin = ti.Vector([ox, oy, oz])
     for color in ti.static(range(1 if ti.static(atomic) else 2)):
-        ti.loop_config(block_dim=128 if ti.static(atomic) else 1)
-        for h in range(slab_start[n_slabs] if ti.static(atomic) else (n_slabs - color + 1) // 2):
-            lo, hi = slab_range(atomic, slab_start, color, h)
+        ti.loop_config(block_dim=128 if ti.static(atomic) else TASK_SPREAD)
+        for q in range(scatter_tasks(atomic, slab_start, n_slabs, color)):
+            lo, hi = slab_range(atomic, slab_start, color, q)
             for ii in range(lo, hi):
                 p = order[ii]
                 base, fx, w = stencil(x[p], inv_dx, origin)
@@ -298,7 +338,7 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
         walls: ti.template(),
         n_walls: ti.template(), grid_contact: ti.template(), n_col: ti.template(),
         col_kind: ti.template(), col_prm: ti.template(), col_frames: ti.template(),
-        col_mu: ti.template(), col_sticky: ti.template(), sdf: ti.template(),
+        col_friction: ti.template(), sdf: ti.template(),
         sdf_info: ti.template(), col_impulse: ti.template(), col_env: ti.template()):
     """Momentum -> velocity, damping, then boundary conditions per node (gravity is in P2G).
 
@@ -347,10 +387,10 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
                             if vn < 0.0:
                                 vt = vrel - vn * nrm
                                 vtn = vt.norm()
-                                if col_sticky[c] or vtn <= -col_mu[c] * vn:
+                                if col_friction[c, 1] > 0.0 or vtn <= -col_friction[c, 0] * vn:
                                     vt = vec3(0.0)
                                 else:
-                                    vt *= 1.0 + col_mu[c] * vn / vtn
+                                    vt *= 1.0 + col_friction[c, 0] * vn / vtn
                                 new_vel = vc + vt
                                 dp = m * (new_vel - vel)
                                 ti.atomic_add(col_impulse[c, 0], -dp[0])
@@ -610,9 +650,9 @@ def volume_scatter(order: ti.template(), slab_start: ti.template(), n_slabs: ti.
     is solved on cells (``mat.CELL_P``) take no part."""
     origin = ti.Vector([ox, oy, oz])
     for color in ti.static(range(1 if ti.static(atomic) else 2)):
-        ti.loop_config(block_dim=128 if ti.static(atomic) else 1)
-        for h in range(slab_start[n_slabs] if ti.static(atomic) else (n_slabs - color + 1) // 2):
-            lo, hi = slab_range(atomic, slab_start, color, h)
+        ti.loop_config(block_dim=128 if ti.static(atomic) else TASK_SPREAD)
+        for q in range(scatter_tasks(atomic, slab_start, n_slabs, color)):
+            lo, hi = slab_range(atomic, slab_start, color, q)
             for ii in range(lo, hi):
                 p = order[ii]
                 if kind[p] == DYNAMIC and mat_table[matid[p], mat.CELL_P] <= 0.0:
@@ -698,8 +738,8 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
         grid_m: ti.template(), grid_mk: ti.template(),
         grid_dp: ti.template(), n_col: ti.template(), col_kind: ti.template(),
-        col_prm: ti.template(), col_frames: ti.template(), col_mu: ti.template(),
-        col_sticky: ti.template(), sdf: ti.template(), sdf_info: ti.template(),
+        col_prm: ti.template(), col_frames: ti.template(), col_friction: ti.template(),
+        sdf: ti.template(), sdf_info: ti.template(),
         max_push: ti.template(), reach: ti.template(), group: ti.template(), group_copy: ti.template(),
         ncell: ti.template(), two_field: ti.template(), atomic: ti.template(), anchor: ti.template(),
         group_env: ti.template(), col_env: ti.template()):
@@ -736,9 +776,9 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
     """
     origin = ti.Vector([ox, oy, oz])
     for color in ti.static(range(1 if ti.static(atomic) else 2)):
-        ti.loop_config(block_dim=128 if ti.static(atomic) else 1)
-        for h in range(slab_start[n_slabs] if ti.static(atomic) else (n_slabs - color + 1) // 2):
-            lo, hi = slab_range(atomic, slab_start, color, h)
+        ti.loop_config(block_dim=128 if ti.static(atomic) else TASK_SPREAD)
+        for q in range(scatter_tasks(atomic, slab_start, n_slabs, color)):
+            lo, hi = slab_range(atomic, slab_start, color, q)
             for ii in range(lo, hi):
                 p = order[ii]
                 if kind[p] == DYNAMIC:
@@ -781,9 +821,9 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                     want *= max_push / wn
                                     wn = max_push
                                 dvt = want
-                                slides = not col_sticky[c] and wn > col_mu[c] * dvn
+                                slides = col_friction[c, 1] <= 0.0 and wn > col_friction[c, 0] * dvn
                                 if slides:  # Coulomb
-                                    dvt = (col_mu[c] * dvn / wn) * want
+                                    dvt = (col_friction[c, 0] * dvn / wn) * want
                                 vp = vp + dvn * nrm + dvt
                                 contact_id[p] = c
                                 # sliding or a new contact: anchor where it ends this substep
@@ -987,11 +1027,14 @@ def slot_sum(step: ti.template(), G: ti.template(), geo, coef, atomic: ti.templa
             ti.atomic_add(G.cg_sum[0], step(G, k, geo, coef))
         total = G.cg_sum[0]
     else:
-        for ch in range(NCHUNK):
-            s = 0.0
-            for k in range(ch * n // NCHUNK, (ch + 1) * n // NCHUNK):
-                s += step(G, k, geo, coef)
-            G.cg_sum[ch] = s
+        ti.loop_config(block_dim=TASK_SPREAD)
+        for q in range(spread_tasks(NCHUNK)):  # a thread block per chunk
+            ch = spread_item(q)
+            if ch >= 0:
+                s = 0.0
+                for k in range(ch * n // NCHUNK, (ch + 1) * n // NCHUNK):
+                    s += step(G, k, geo, coef)
+                G.cg_sum[ch] = s
         for ch in ti.static(range(NCHUNK)):
             total += G.cg_sum[ch]
     return total
@@ -1135,21 +1178,23 @@ def reset_contact(active: NDI, n: ti.i32, impulse: NDV, contact_id: NDI):
 def chunk_health(active: NDI, n: ti.i32, x: NDV, v: NDV, F: NDM, kind: NDI, nchunk: ti.i32,
                  first_bad: NDI, vmax: NDF):
     """Per chunk: first particle with a non-finite x, v or F (or -1), and max |v|."""
-    ti.loop_config(block_dim=1)
-    for c in range(nchunk):
-        bad = -1
-        vm = 0.0
-        start = c * n // nchunk
-        end = (c + 1) * n // nchunk
-        for ii in range(start, end):
-            p = active[ii]
-            s = x[p].sum() + v[p].sum() + F[p].sum()
-            if bad < 0 and not (s == s and ti.abs(s) < 1e30):
-                bad = p
-            if kind[p] == DYNAMIC:
-                vm = ti.max(vm, v[p].norm())
-        first_bad[c] = bad
-        vmax[c] = vm
+    ti.loop_config(block_dim=TASK_SPREAD)
+    for q in range(spread_tasks(nchunk)):  # a thread block per chunk
+        c = spread_item(q)
+        if c >= 0:
+            bad = -1
+            vm = 0.0
+            start = c * n // nchunk
+            end = (c + 1) * n // nchunk
+            for ii in range(start, end):
+                p = active[ii]
+                s = x[p].sum() + v[p].sum() + F[p].sum()
+                if bad < 0 and not (s == s and ti.abs(s) < 1e30):
+                    bad = p
+                if kind[p] == DYNAMIC:
+                    vm = ti.max(vm, v[p].norm())
+            first_bad[c] = bad
+            vmax[c] = vm
 
 
 @ti.kernel
@@ -1209,7 +1254,7 @@ Scene = ti.types.argpack(
     group_env=NDI, group_copy=NDI,  # ... its env, its box copy in the grid arrays (field · N_ENVS + env)
     env_relax=NDF,  # per env: relaxation rate ζ [1/s] of its quasi-static nodes (the largest of its awake groups)
     link_frames=NDF2, walls=NDF2,  # kinematics frame rows of links; slip walls (axis, position, side)
-    col_kind=NDI, col_prm=NDF2, col_frames=NDF2, col_mu=NDF, col_sticky=NDI,
+    col_kind=NDI, col_prm=NDF2, col_frames=NDF2, col_friction=NDF2,  # colliders; friction rows (μ, 1 if sticky)
     sdf=NDF, sdf_info=NDI2, col_impulse=NDF2, col_env=NDI)  # ... and each collider's env
 Order = ti.types.argpack(
     order=NDI, slab_start=NDI,  # awake particles sorted by slab, first index of each slab
@@ -1300,11 +1345,10 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
             lo[d] = ti.min(lo[d], W.bounds[c, d])
             hi[d] = ti.max(hi[d], W.bounds[c, 3 + d])
     dims = hi - lo + 3 + 2 * margin
-    axis = 0
-    if dims[1] > dims[axis]:
-        axis = 1
-    if dims[2] > dims[axis]:
-        axis = 2
+    # slabs across the longer of the grid's two slow axes (x, y; the layout is z-fastest): two
+    # threads' slabs then write separate runs of memory. Slabs along z interleave their nodes
+    # in the same cache lines, and that false sharing cost the CPU's second thread all its gain.
+    axis = 0 if dims[0] >= dims[1] else 1
     n_slabs = (hi[axis] - lo[axis]) // 2 + 1
     if n_slabs < 1 or n_slabs + 1 > SLAB_CAP:  # too wide, or int overflow from a NaN position
         n_slabs = -1
@@ -1368,7 +1412,7 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     grid_update(ntot, ncell, ox, oy, oz, ny, nz, dx, dt, damping, S.env_relax, n_env,
                 G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
                 1 if ti.static(contact_mode == 2) else 0, n_col, S.col_kind, S.col_prm, S.col_frames,
-                S.col_mu, S.col_sticky, S.sdf, S.sdf_info, S.col_impulse, S.col_env)
+                S.col_friction, S.sdf, S.sdf_info, S.col_impulse, S.col_env)
     nx = O.active_box[3]
     # cells the bond's ghost nodes visit: none without a bond. A loop count, not an `if` around
     # the loop: Taichi runs a loop under a run-time `if` serially (one GPU thread, 4.5 ms a
@@ -1386,7 +1430,7 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     if ti.static(contact_mode == 1):
         contact_scatter(O.order, O.slab_start, n_slabs, P.x, P.kind, P.mass, P.radius, P.impulse,
                         P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp,
-                        n_col, S.col_kind, S.col_prm, S.col_frames, S.col_mu, S.col_sticky, S.sdf, S.sdf_info,
+                        n_col, S.col_kind, S.col_prm, S.col_frames, S.col_friction, S.sdf, S.sdf_info,
                         max_push, reach, P.group, S.group_copy, ncell, two_field, atomic, P.anchor, S.group_env,
                         S.col_env)
         contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls,

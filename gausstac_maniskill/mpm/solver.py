@@ -1122,20 +1122,18 @@ class MPMWorld:
         nc = max(len(self.colliders), 1)
         kinds = np.zeros(nc, np.int32)
         prm = np.zeros((nc, 4), np.float32)
-        mu = np.zeros(nc, np.float32)
-        sticky = np.zeros(nc, np.int32)
+        friction = np.zeros((nc, 2), np.float32)  # (μ, 1 if sticky)
         info = np.zeros((nc, 4), np.int32)
         sdf_parts, offset = [], 0
         for i, c in enumerate(self.colliders):
-            kinds[i], prm[i], mu[i], sticky[i] = c.kind, c.params(), c.friction, int(c.sticky)
+            kinds[i], prm[i], friction[i] = c.kind, c.params(), (c.friction, float(c.sticky))
             if isinstance(c, MeshCollider):
                 info[i] = (offset, *c.sdf.shape)
                 sdf_parts.append(c.sdf.ravel())
                 offset += c.sdf.size
         upload("col_kind", kinds, ti.i32)
         upload("col_prm", prm, ti.f32)
-        upload("col_mu", mu, ti.f32)
-        upload("col_sticky", sticky, ti.i32)
+        upload("col_friction", friction, ti.f32)
         upload("sdf_info", info, ti.i32)
         upload("sdf", np.concatenate(sdf_parts) if sdf_parts else np.zeros(1, np.float32), ti.f32)
         d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
@@ -1204,7 +1202,7 @@ class MPMWorld:
                 link_poses=d["link_pose"], col_poses=d["col_pose"], kin=d["active_kin"], active_box=d["box"])
         pk["S"] = K.Scene(**{k: d[k] for k in (
             "counts", "consts", "mat_table", "group_qs", "group_frames", "group_field", "group_env", "group_copy",
-            "env_relax", "link_frames", "walls", "col_kind", "col_prm", "col_frames", "col_mu", "col_sticky", "sdf",
+            "env_relax", "link_frames", "walls", "col_kind", "col_prm", "col_frames", "col_friction", "sdf",
             "sdf_info", "col_impulse", "col_env")})
         pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
 
