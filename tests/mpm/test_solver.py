@@ -336,3 +336,21 @@ def test_atomic_scatter_matches_slab_scatter(monkeypatch):
     monkeypatch.setenv("GAUSSTAC_SCATTER", "fast")
     with pytest.raises(ConfigError, match="GAUSSTAC_SCATTER"):
         pad_world()
+
+
+def test_slabs_run_across_a_slow_axis_of_the_grid():
+    """The CPU scatter's slabs run along x or y, never along z, even for a body longest in z:
+    the grid is z-fastest in memory, so two threads' z slabs would write the same cache
+    lines. Guards the slab rule of ``prepare`` (a code path, not physics); the slabs still
+    partition the particles."""
+    from gausstac_maniskill.mpm import kernels as K
+
+    world = pad_world(size=(0.004, 0.006, 0.02))  # tallest along z
+    world.step(1e-3)
+    box = world._dev["box"].to_numpy()
+    nx, ny, nz, n_slabs, axis = box[3], box[4], box[5], box[6], box[7]
+    assert nz > max(nx, ny)
+    assert axis == 1 and n_slabs >= 2  # y, the longer slow axis
+    starts = world._dev["slab_start"].to_numpy()[: n_slabs + 1]
+    assert starts[0] == 0 and starts[-1] == world._n_active and np.all(np.diff(starts) >= 0)
+    assert K.TASK_SPREAD >= 512  # Taichi 1.7's smallest CPU block: one slab per thread block
