@@ -281,16 +281,6 @@ def collider_contact(kinds: ti.template(), prms: ti.template(), frames: ti.templ
     return phi, R1 @ n_local, v
 
 
-@ti.func
-def collider_phi_start(kinds: ti.template(), prms: ti.template(), frames: ti.template(),
-                       sdf: ti.template(), info: ti.template(), k, x):
-    """φ [m] at world point x of collider k at the start of the substep (where it is now)."""
-    R0, t0, _R1, _t1 = frame_at(frames, k)
-    prm = ti.Vector([prms[k, 0], prms[k, 1], prms[k, 2], prms[k, 3]])
-    phi, _n = local_sdf(kinds[k], prm, sdf, info, k, R0.transpose() @ (x - t0))
-    return phi
-
-
 @ti.kernel
 def _sdf_query(points: ti.types.ndarray(dtype=ti.math.vec3, ndim=1), kind: ti.i32,
                prm: ti.types.ndarray(dtype=ti.f32, ndim=2), pose: ti.types.ndarray(dtype=ti.f32, ndim=2),

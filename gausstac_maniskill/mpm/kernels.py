@@ -34,7 +34,7 @@ order: not bit-reproducible).
 import taichi as ti
 
 from . import materials as mat
-from .colliders import collider_contact, collider_phi_start
+from .colliders import collider_contact
 from .kinematics import frame_at, pose_at, quat_to_mat, write_frames
 
 vec3 = ti.math.vec3
@@ -55,7 +55,6 @@ FILL = 0.9  # two fields touch at a node once their volumes fill this share of i
 SHARE = 0.1  # ... and each brings at least this share (the node lies at both surfaces)
 SOFT_CONTACT = -2  # contact_id of a particle touched by the other field (colliders are >= 0)
 BIG = 1 << 29
-HOLD_GAIN = 0.25  # integral gain of the held contact push (contact_scatter); at 1.0 the pad's contact rang
 NCHUNK = 16  # particle chunks of the bounds/health reductions (rows of their output arrays)
 BOND_STRETCH = 2.0  # a bound particle's principal stretches stay in [1/BOND_STRETCH, BOND_STRETCH] (limit_stretch)
 MAX_STRETCH = 3.0  # ... and a free particle's in [1/MAX_STRETCH, MAX_STRETCH]
@@ -773,19 +772,6 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
     |d_t|/Δt exceeds μ times the normal velocity change the particle slides (Coulomb),
     its friction opposes the drift, and its anchor moves to where it is predicted to end
     the substep. A particle that leaves contact forgets its anchor.
-
-    The normal push had the same flaw, and takes the same cure. Putting the predicted position
-    on the surface asks for the Δv that the particle alone would need, and only part of it comes
-    back through the shared nodes; in equilibrium the particle then rested *inside* the
-    collider, by a depth of order Δt² times its elastic acceleration: a share of a cell that
-    grows with the Courant number (index pad, 5 mm sphere 1 mm deep, dx = 1 mm: -4.7 / -10.9 /
-    -36 µm at Courant 0.2 / 0.4 / 0.8, and the held force 8 % lower at 0.8 than at 0.2). So a
-    particle in contact also keeps a held push a [m/s²] (``anchor[p][4]``): each substep adds
-    -HOLD_GAIN · φ(x)/Δt² to it, φ(x) the particle's present depth (negative inside) against the
-    collider where it now is, and the normal change asked for is -φ(x + Δt v*)/Δt + a Δt,
-    clamped to [0, ``max_push``] (never a pull). It is the contact's integral term: it stops
-    changing only where the particle rests on the surface. It is clamped to ±``max_push``/Δt
-    (no wind-up) and forgotten with the contact.
     Slab-ordered like :func:`p2g` (atomic-free and deterministic), or atomic.
     """
     origin = ti.Vector([ox, oy, oz])
@@ -806,7 +792,6 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                 near = True
                     stuck_to = -1  # collider whose anchor the particle keeps after this substep
                     slid = False
-                    push = 0.0  # its held push [m/s²]
                     if near:
                         base, fx, w = stencil(x[p], inv_dx, origin)
                         off = field_offset(group_copy, group, p, ncell)
@@ -822,15 +807,10 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                                             c, x[p] + dt * vp, dt)
                             gap = phi - radius[p]
                             if gap < 0.0:
-                                anchored = ti.cast(anchor[p][3], ti.i32) == c
-                                # the held push: integral of the particle's present depth in the collider
-                                now = collider_phi_start(col_kind, col_prm, col_frames, sdf, sdf_info, c,
-                                                         x[p]) - radius[p]
-                                held = (anchor[p][4] if anchored else 0.0) - HOLD_GAIN * now / (dt * dt)
-                                held = ti.min(ti.max(held, -max_push / dt), max_push / dt)  # no wind-up
-                                dvn = ti.min(ti.max(-gap / dt + held * dt, 0.0), max_push)
+                                dvn = ti.min(-gap / dt, max_push)
                                 vrel = vp - vc
                                 want = -(vrel - vrel.dot(nrm) * nrm)  # stop the slip (first contact)
+                                anchored = ti.cast(anchor[p][3], ti.i32) == c
                                 if anchored:  # back onto the anchor
                                     _R0, _t0, R1, t1 = frame_at(col_frames, c)
                                     a = ti.Vector([anchor[p][0], anchor[p][1], anchor[p][2]])
@@ -849,13 +829,10 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                 # sliding or a new contact: anchor where it ends this substep
                                 slid = slid or slides or not anchored
                                 stuck_to = c
-                                push = held
                         if stuck_to >= 0 and slid:
                             _R0, _t0, R1, t1 = frame_at(col_frames, stuck_to)
                             a = R1.transpose() @ (x[p] + dt * vp - t1)
-                            anchor[p] = ti.Vector([a[0], a[1], a[2], ti.cast(stuck_to, ti.f32), push])
-                        elif stuck_to >= 0:
-                            anchor[p][4] = push
+                            anchor[p] = ti.Vector([a[0], a[1], a[2], ti.cast(stuck_to, ti.f32)])
                         if contact_id[p] >= 0:
                             J = mass[p] * (vp - v0)
                             free = 0.0
@@ -868,7 +845,6 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                             impulse[p] += free * J
                     if stuck_to < 0:
                         anchor[p][3] = -1.0
-                        anchor[p][4] = 0.0
 
 
 @ti.func
@@ -1257,7 +1233,7 @@ DX, GX, GY, GZ, DAMPING, REACH, MARGIN, FIELD_MU, BOND = range(9)
 Particles = ti.types.argpack(  # member names are unique over the packs (Taichi flattens them)
     x=NDV, v=NDV, C=NDM, F=NDM, tau=NDM, Jp=NDF,  # state: position [m], velocity, APIC C, F, τ [Pa], plastic J
     impulse=NDV, contact_id=NDI,  # contact impulse [N s] of this control step, collider touched
-    anchor=NDV5,  # contact memory: stuck point in its collider's frame [m], that collider (-1: none), held push [m/s²]
+    anchor=NDV4,  # static friction: stuck point in its collider's frame [m], and that collider (-1: none)
     mass=NDF, vol=NDF, radius=NDF,  # mass [kg], rest volume [m³], contact radius [m]
     kind=NDI, link=NDI, matid=NDI, group=NDI,  # DYNAMIC | KINEMATIC, link, material row, group
     bond=NDV4)  # bound particles: normal of the bond surface (link frame), signed distance [m] (0: none)

@@ -18,7 +18,7 @@ def forget_row(P: ti.template(), p):
     """No contact impulse, no collider touched, no static-friction anchor."""
     P.impulse[p] = vec3(0.0)
     P.contact_id[p] = -1
-    P.anchor[p] = ti.Vector([0.0, 0.0, 0.0, -1.0, 0.0])
+    P.anchor[p] = ti.math.vec4(0.0, 0.0, 0.0, -1.0)
 
 
 @ti.kernel

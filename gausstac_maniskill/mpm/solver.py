@@ -86,9 +86,8 @@ _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anch
 
 
 def no_anchor(n: int) -> np.ndarray:
-    """Contact memory of ``n`` particles that touch nothing ([n, 5]: anchor point, collider -1,
-    held push 0; see :func:`kernels.contact_scatter`)."""
-    out = np.zeros((n, 5), np.float32)
+    """Static-friction anchors of ``n`` particles that stick to nothing ([n, 4]: point, collider -1)."""
+    out = np.zeros((n, 4), np.float32)
     out[:, 3] = -1.0
     return out
 
@@ -1082,7 +1081,7 @@ class MPMWorld:
             for key in ("x", "v", "impulse", "X0"):
                 upload(key, h[key], ti.f32, (3,))
             upload("bond", h["bond"], ti.f32, (4,))
-            upload("anchor", h["anchor"], ti.f32, (5,))
+            upload("anchor", h["anchor"], ti.f32, (4,))
             for key in ("C", "F", "tau"):
                 upload(key, h[key], ti.f32, (3, 3))
             for key in ("Jp", "mass", "vol", "radius"):
@@ -1280,9 +1279,6 @@ class MPMWorld:
         parts = dict(state.get("particles", {}))
         if len(rows) and "anchor" not in parts and "x" in parts:  # saved before anchors: nothing sticks
             parts["anchor"] = no_anchor(len(parts["x"]))
-        a = parts.get("anchor")
-        if a is not None and np.ndim(a) == 2 and np.shape(a)[1] == 4:  # saved before the held push: none held
-            parts["anchor"] = np.concatenate([a, np.zeros((len(a), 1), np.float32)], 1)
         for k in _STATE_FIELDS if len(rows) else ():
             need = (len(rows),) + self._host[k].shape[1:]
             if k not in parts or parts[k].shape != need:

@@ -229,20 +229,6 @@ def test_state_dict_round_trip_is_bit_exact_and_deterministic():
     assert np.array_equal(world.positions(), x_a)  # bit-identical continuation
 
 
-def test_a_state_saved_before_the_held_push_loads_with_none_held():
-    """States saved while the contact memory had 4 columns (anchor point, collider) still load:
-    the held push (column 4) starts from 0, the anchors are kept."""
-    world = pad_world(dx=1.5e-3)
-    press(world, depth=0.6e-3, steps=3)
-    state = world.state_dict()
-    anchor = state["particles"]["anchor"]
-    assert anchor.shape[1] == 5 and np.any(anchor[:, 4] != 0)  # the press holds a push
-    old = {**state, "particles": {**state["particles"], "anchor": anchor[:, :4].copy()}}
-    world.load_state_dict(old)
-    again = world.state_dict()["particles"]["anchor"]
-    assert np.array_equal(again[:, :4], anchor[:, :4]) and not np.any(again[:, 4])
-
-
 def test_sleeping_group_is_bit_identical_and_costs_no_grid():
     s = SolverSettings(dx=1.5e-3, gravity=(0, 0, -9.81))
     world = MPMWorld(s)
