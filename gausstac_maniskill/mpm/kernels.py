@@ -509,10 +509,12 @@ def elastic_stress(nh_only: ti.template(), F, jp, mi, mat_table: ti.template()):
 
 @ti.func
 def write_binding_frames(link_frames: ti.template(), group_bind: ti.template(), group_link: ti.template(),
-        n_groups, group_frames: ti.template()):
+        n_groups, group_frames: ti.template(), serial: ti.template()):
     """Frame rows of each group's *binding rotation* Q = R Rbᵀ at the substep's start and
     end: its link's rotation relative to the pose the group was bound at, the rigid part
-    of a bound particle's deformation gradient (translations 0; identity if unbound)."""
+    of a bound particle's deformation gradient (translations 0; identity if unbound).
+    ``serial`` as in :func:`~gausstac_maniskill.mpm.kinematics.write_frames`."""
+    ti.loop_config(serialize=serial)
     for g in range(n_groups):
         Q0 = ti.Matrix.identity(ti.f32, 3)
         Q1 = ti.Matrix.identity(ti.f32, 3)
@@ -1333,9 +1335,11 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
     if ti.static(atomic):  # a top-level loop (parallel); inside a runtime branch it would run serially
         for ii in range(n):
             W.order[ii] = W.active[ii]
-    write_frames(W.link_poses, W.counts[N_LINKS], alpha0, alpha1, W.link_frames)
-    write_frames(W.col_poses, W.counts[N_COL], alpha0, alpha1, W.col_frames)
-    write_binding_frames(W.link_frames, W.group_bind, W.group_link, W.counts[N_GROUPS], W.group_frames)
+    # the CPU (slab scatter) writes the few frame rows in one thread: no hand-over to its threads
+    write_frames(W.link_poses, W.counts[N_LINKS], alpha0, alpha1, W.link_frames, ti.static(not atomic))
+    write_frames(W.col_poses, W.counts[N_COL], alpha0, alpha1, W.col_frames, ti.static(not atomic))
+    write_binding_frames(W.link_frames, W.group_bind, W.group_link, W.counts[N_GROUPS], W.group_frames,
+                         ti.static(not atomic))
     kinematic_update(W.kin, W.counts[N_KIN], W.x, W.v, W.C, W.X0, W.link, W.link_frames, dt)
     chunk_bounds(W.active, n, W.x, inv_dx, NCHUNK, W.bounds)
     lo = ti.Vector([BIG, BIG, BIG])
