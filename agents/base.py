@@ -234,6 +234,23 @@ def load_hand_gaussians(folder: str):
 
 
 @lru_cache(maxsize=8)
+def load_hand_closed_links(folder: str) -> tuple:
+    """The links of a hand Gaussians folder whose Gaussians lie on closed surfaces with their
+    normals pointing out (``links.json``'s ``closed_links``, written by ``gausstac build-asset``;
+    empty if absent): the splat camera skips those facing away. Cached per process."""
+    links = os.path.join(folder, "links.json")
+    _, names = load_hand_gaussians(folder)  # (checks both files)
+    with open(links) as f:
+        closed = json.load(f).get("closed_links", [])
+    if not isinstance(closed, list) or not all(isinstance(n, str) for n in closed):
+        raise AssetError(f"{links}: 'closed_links' must be a list of link names, got {closed!r}")
+    unknown = sorted(set(closed) - set(names))
+    if unknown:
+        raise AssetError(f"{links}: closed_links {unknown} are not in link_names")
+    return tuple(closed)
+
+
+@lru_cache(maxsize=8)
 def load_hand_lod(folder: str):
     """The coarser level of a hand Gaussians folder, or None: ``(fine spacing [m], coarse
     spacing [m], coarse GaussianSet)`` from ``links.json``'s ``spacing`` and ``coarse`` entry

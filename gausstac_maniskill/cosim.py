@@ -284,7 +284,8 @@ class GaussTacSim:
         return (x - T[:3, 3]) @ T[:3, :3] - pad.rest
 
     # ------------------------------------------------------------------ rendering
-    def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None, hand_lod=None) -> None:
+    def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None, hand_lod=None,
+                         closed_links: Sequence[str] = ()) -> None:
         """Give the scene its 3D Gaussians (see :class:`gausstac_maniskill.render.SceneGaussians`).
 
         Call it with the pads and soft objects at rest (before stepping into contact):
@@ -298,10 +299,13 @@ class GaussTacSim:
             hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand Gaussians)``
                 (``agents.base.load_hand_lod``): cameras whose pixels at the hand span at least
                 the coarse spacing draw those instead (:class:`gausstac_maniskill.render.Detail`).
+            closed_links: hand links whose Gaussians lie on closed surfaces with their normals
+                pointing out (``links.json["closed_links"]``): the splat camera skips those
+                facing away (see :class:`gausstac_maniskill.render.SceneGaussians`).
         """
         from .render import SceneGaussians
 
-        self._scene = SceneGaussians(self, hand, hand_links, objects, hand_lod)
+        self._scene = SceneGaussians(self, hand, hand_links, objects, hand_lod, closed_links)
         self._posed = None
 
     def add_render_layer(self, layer) -> None:

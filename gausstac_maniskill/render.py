@@ -210,12 +210,26 @@ class SceneGaussians:
         hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand GaussianSet)``, the
             same hand built coarser (``agents.base.load_hand_lod``); cameras whose pixels at the
             hand are at least the coarse spacing draw it instead (:class:`Detail`).
+        closed_links: hand links whose Gaussians lie on closed surfaces with their shortest axis
+            as the outward normal (``links.json["closed_links"]``, written by ``gausstac
+            build-asset`` after :func:`~gausstac_maniskill.splat.surface.closed_outward`):
+            they are one-sided, i.e. not drawn when they face away from the camera (a nearer
+            front side hides them; *Back faces* in :mod:`gausstac_maniskill.splat.rasterizer`),
+            except on links carrying a soft pad, whose surface is open where the pad replaces it.
     """
 
     def __init__(self, sim, hand: GaussianSet | None = None, hand_links: Sequence[str] = (),
-                 objects: Mapping[str, GaussianSet] | None = None, hand_lod: tuple | None = None):
+                 objects: Mapping[str, GaussianSet] | None = None, hand_lod: tuple | None = None,
+                 closed_links: Sequence[str] = ()):
         self.sim = sim
         self.hand_links = list(hand_links)
+        unknown = sorted(set(closed_links) - set(self.hand_links))
+        if unknown:
+            raise ConfigError(f"closed_links {unknown} are not among the hand links {self.hand_links}")
+        # a link whose surface gives way to a soft pad is open there: only the others stay closed
+        padded = {pad.spec.link for pad in sim.pads.values()}
+        self._closed = torch.tensor([self.hand_links.index(n) for n in closed_links if n not in padded],
+                                    dtype=torch.int64)
         sets = []
         self.n_hand = 0
         self.coarse_hand: GaussianSet | None = None
@@ -275,13 +289,15 @@ class SceneGaussians:
             self._rows_device = None  # (rows, carry) on the arch's device, at the first picture
             # polar(F) is only needed if a soft Gaussian's colour depends on the view direction
             self._soft_rotations = bool(soft.sh.shape[1] > 1 and soft.sh[:, 1:].abs().max() > 0)
-            parts = [FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames, lit=True),
+            parts = [FramedGaussians.from_gaussians(rigid, rigid.link_id, n_rigid_frames, lit=True,
+                                                    one_sided=self._one_sided(rigid, self.n_hand)),
                      soft, *(layer.framed() for layer in self.layers)]
             offsets = None
             self.detail = None
             if self.coarse_hand is not None:  # last, in the links' frames (0..): [fine | rest | coarse]
-                parts.append(FramedGaussians.from_gaussians(self.coarse_hand, self.coarse_hand.link_id,
-                                                            n_rigid_frames, lit=True))
+                coarse = self.coarse_hand
+                parts.append(FramedGaussians.from_gaussians(coarse, coarse.link_id, n_rigid_frames, lit=True,
+                                                            one_sided=self._one_sided(coarse, len(coarse))))
                 offsets = [0]
                 for p in parts[:-2]:
                     offsets.append(offsets[-1] + p.n_frames)
@@ -290,6 +306,14 @@ class SceneGaussians:
                 self.detail = Detail((0, n - len(self.coarse_hand)), (self.n_hand, n), self.coarse_spacing)
             self._framed = FramedGaussians.cat(parts, frame_offsets=offsets)
         return self._framed
+
+    def _one_sided(self, rigid: GaussianSet, n_hand: int) -> torch.Tensor | None:
+        """[len(rigid)] bool: the first ``n_hand`` (hand) Gaussians on a closed link; None if none."""
+        if not len(self._closed):
+            return None
+        mask = torch.isin(rigid.link_id, self._closed)
+        mask[n_hand:] = False  # (objects' frames follow the links': their ids are not links)
+        return mask
 
     def soft_rows(self) -> tuple[np.ndarray, np.ndarray]:
         """(the world particles [P'] the soft Gaussians ride on, ascending; each one's row of

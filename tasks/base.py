@@ -62,7 +62,7 @@ from mani_skill.utils import common
 from mani_skill.utils.structs.pose import Pose
 
 from .. import backend
-from ..agents.base import GaussTacAgent, load_hand_gaussians, load_hand_lod
+from ..agents.base import GaussTacAgent, load_hand_closed_links, load_hand_gaussians, load_hand_lod
 from ..config import Material
 from ..batch import BatchedCosim
 from ..cosim import GaussTacSim, default_hand_settings
@@ -132,6 +132,9 @@ class GaussTacEnv(BaseEnv):
             coarse spacing (``links.json`` ``coarse``: 3 mm for the Allegro hand, i.e. the
             128 × 128 task camera) draws the coarse hand Gaussians: the same look against SAPIEN,
             a quarter less time (BENCHMARKS.md, issue 13). ``False``: always the fine ones.
+        splat_cull: the splat camera skips the hand's Gaussians that face away from it, on the
+            links the asset marks closed (``links.json`` ``closed_links``): a nearer front side
+            hides them (BENCHMARKS.md, issue 13). ``False``: draw every Gaussian.
         render_size: (width, height) of the human render camera (``render_mode="rgb_array"``).
         splat_background: ``"sapien"`` (composite over SAPIEN's render), an RGB triple in
             [0, 1], or ``None`` (default): ``"sapien"`` without a ``scene_ply``,
@@ -189,7 +192,7 @@ class GaussTacEnv(BaseEnv):
                  mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
                  splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
-                 pad_reaction: bool = False, splat_lod: bool = True, **kwargs):
+                 pad_reaction: bool = False, splat_lod: bool = True, splat_cull: bool = True, **kwargs):
         backend.ensure_init()
         _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
@@ -200,6 +203,7 @@ class GaussTacEnv(BaseEnv):
         self.render_size = tuple(int(v) for v in render_size)
         self.record_mpm_state = bool(record_mpm_state)
         self.splat_lod = bool(splat_lod)
+        self.splat_cull = bool(splat_cull)
         if pad_reaction not in (False, True, "implicit", "explicit"):
             raise ConfigError(f"pad_reaction={pad_reaction!r}: use False, True (= 'implicit') or 'explicit'")
         #: how the pads' reaction reaches their links: None, "implicit" or "explicit"
@@ -468,10 +472,11 @@ class GaussTacEnv(BaseEnv):
         t0 = time.perf_counter()
         agent = type(self.agent)
         hand = None
-        hand_lod = None
+        hand_lod, closed = None, ()
         if agent.gausstac_gaussians:
             hand = load_hand_gaussians(agent.gausstac_gaussians)
             hand_lod = load_hand_lod(agent.gausstac_gaussians) if self.splat_lod else None
+            closed = load_hand_closed_links(agent.gausstac_gaussians) if self.splat_cull else ()
         objects = self._object_poses()
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
                                    urdf=agent.pad_urdf(), settings=self.mpm_settings,
@@ -494,7 +499,7 @@ class GaussTacEnv(BaseEnv):
                     or self._scene_layer is not None or self._captured:
                 sim.attach_gaussians(hand[0] if hand else None, hand[1] if hand else (),
                                      {n: o.gaussians for n, o in self._rigid.items() if o.gaussians is not None},
-                                     hand_lod=hand_lod)
+                                     hand_lod=hand_lod, closed_links=closed)
                 self._add_captured_layers(sim, b)
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
         self._contacts = np.zeros((self.num_envs, len(self._pad_links) if self.pad_reaction else 0,

@@ -243,3 +243,42 @@ def test_coarse_hand_for_cameras_whose_pixels_are_coarser(pressed_scene):
         b = alone.render(view, K, 48, 40, background=(1.0, 1.0, 1.0))
         assert float(b.alpha.max()) > 0.5, "the hand should be in the picture"
         assert (a.rgb - b.rgb).abs().max() < 1e-5 and (a.alpha - b.alpha).abs().max() < 1e-5
+
+
+def test_closed_links_skip_the_hand_faces_turned_away(pressed_scene):
+    """With the shipped asset's ``closed_links`` the hand's Gaussians are one-sided: the pressed
+    fingertip's picture keeps its colour and depth away from the outlines (the nearer side
+    hides the far one), with fewer (Gaussian, tile) keys. Only the hand's Gaussians are
+    one-sided, and not on the links that carry a pad (their surface is open where the pad
+    replaces it): the ball's, the pads' and the layer's are always drawn. Whether the outlines
+    get closer to SAPIEN's is measured by ``bench look`` (BENCHMARKS.md, issue 13)."""
+    from gausstac_maniskill.agents.base import load_hand_closed_links
+    from gausstac_maniskill.demo import ASSET_DIR
+    from gausstac_maniskill.render import SceneGaussians
+
+    sim, view, Ks = pressed_scene
+    hand, links = sim._scene.gaussians[torch.arange(sim._scene.n_hand)], sim._scene.hand_links
+    closed = load_hand_closed_links(str(ASSET_DIR))
+    one = SceneGaussians(sim, hand, links, closed_links=closed)
+    two = SceneGaussians(sim, hand, links)
+    sided = one.framed().one_sided
+    assert two.framed().one_sided is None
+    padded = torch.isin(hand.link_id, torch.tensor([links.index(p.spec.link) for p in sim.pads.values()]))
+    assert padded.any() and torch.equal(sided[:one.n_hand], ~padded) and not sided[one.n_hand:].any()
+    wide = look_at([0.25, -0.2, 0.25], sim._link_pose[links[0]][:3, 3])[None]  # the whole hand
+    for v in (view, wide):
+        a = one.render(v, Ks, 64, 48, background=(1.0, 1.0, 1.0), timings=True)
+        b = two.render(v, Ks, 64, 48, background=(1.0, 1.0, 1.0), timings=True)
+        assert a.stats["n_keys"] < 0.8 * b.stats["n_keys"], (a.stats, b.stats)
+        outside = (b.alpha <= 0.999).float()[:, None]
+        inside = torch.nn.functional.max_pool2d(outside, 5, stride=1, padding=2)[:, 0] == 0
+        assert inside.sum() > 100
+        # no hole: a culled surface that was not hidden would show the white background
+        # (colour) or the far side, a finger's width deeper (depth)
+        assert (a.alpha - b.alpha).abs()[inside].max() < 0.01
+        assert (a.rgb - b.rgb).abs().max(-1).values[inside].max() < 0.02
+        dz = (a.normalized_depth() - b.normalized_depth()).abs()[inside]  # m
+        # (where grazing front discs leave gaps, the far side's discs had a small weight)
+        assert dz.mean() < 5e-4 and dz.max() < 1e-2, (dz.mean(), dz.max())
+    with pytest.raises(ConfigError, match="not among the hand links"):
+        SceneGaussians(sim, hand, links, closed_links=["no_such_link"])

@@ -8,7 +8,10 @@ An asset is a folder with
   integer properties ``link_id`` (index into ``links.json``'s ``link_names``) and
   ``group`` (-1 rigid, ``k >= 0`` inside pad region ``k``);
 * ``links.json`` — link names in ``link_id`` order, the source URDF, Gaussians
-  per link, the spacing used, pad names in ``group`` order.
+  per link, the spacing used, pad names in ``group`` order, and (URDF builds) the
+  ``closed_links`` whose meshes bound solids with outward normals
+  (:func:`.surface.closed_outward`): their Gaussians' local z is the outward normal, so
+  the splat camera may skip those facing away.
 
 Two ways to build one:
 
@@ -48,7 +51,7 @@ from ..urdf import URDFModel, default_hand_urdf, parse_urdf
 from .align import ScanAlignment, align_point_clouds, assign_links, load_scan
 from .gaussians import GaussianSet, quat_to_rotmat, rotmat_to_quat, save_ply
 from .sh import rotate_sh
-from .surface import (IN_PLANE_SCALE, NORMAL_SCALE, OPACITY_LOGIT, gaussians_from_points,
+from .surface import (IN_PLANE_SCALE, NORMAL_SCALE, OPACITY_LOGIT, closed_outward, gaussians_from_points,
                       gaussians_from_surface, load_link_meshes, sample_surface_blue_noise)
 
 __all__ = [
@@ -147,13 +150,14 @@ def build_from_urdf(urdf: str | os.PathLike | None = None, spacing: float = DEFA
     rng = np.random.default_rng(seed)
     meshes = load_link_meshes(model, links)
     sets, sources = [], {}
+    closed = [name for name in links if closed_outward(meshes[name])]
     for i, name in enumerate(_progress(links, progress, "gaussians per link")):
         p, nm, c = sample_surface_blue_noise(meshes[name], spacing, rng)
         group = _pad_groups(pad_regions, name, p, pad_names)
         sets.append(gaussians_from_surface(p, nm, c, spacing, link_id=i, group=group))
         sources[name] = sorted({m.source for m in meshes[name]})
     meta = {"source": "urdf", "spacing": float(spacing), "seed": int(seed),
-            "colour_sources": sources,
+            "colour_sources": sources, "closed_links": closed,
             "splat": {"in_plane_sigma": IN_PLANE_SCALE * spacing,
                       "normal_sigma": NORMAL_SCALE * spacing,
                       "opacity_logit": OPACITY_LOGIT}}

@@ -319,6 +319,9 @@ class FramedGaussians:
         normals: [N, 3] normals in their frames, the zero vector for a Gaussian that scene
             lighting leaves as it is, or None (no Gaussian is lit); see
             :mod:`~gausstac_maniskill.splat.lighting`.
+        one_sided: [N] bool or None: Gaussians on closed surfaces whose ``normals`` point
+            outward, culled when they face away from the camera (needs ``normals``; see
+            *Back faces* in :mod:`~gausstac_maniskill.splat.rasterizer`).
     """
 
     means: torch.Tensor
@@ -328,6 +331,7 @@ class FramedGaussians:
     sh: torch.Tensor
     n_frames: int
     normals: torch.Tensor | None = None
+    one_sided: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         from .rasterizer import _gaussian_inputs
@@ -335,17 +339,20 @@ class FramedGaussians:
         self.n_frames = int(self.n_frames)
         self._inputs = _gaussian_inputs(self.means, None, None, self.opacities, self.sh, self.covars, None,
                                         self.frame_ids, self.n_frames, frame_rotations=True,
-                                        normals=self.normals)
+                                        normals=self.normals, one_sided=self.one_sided)
 
     def __len__(self) -> int:
         return self.means.shape[0]
 
     @classmethod
     def from_gaussians(cls, gaussians: GaussianSet, frame_ids=None, n_frames: int | None = None,
-                       lit: bool = False) -> "FramedGaussians":
+                       lit: bool = False, one_sided=None) -> "FramedGaussians":
         """A :class:`GaussianSet` in frames ``frame_ids`` (default: its ``link_id``); ``lit``:
         its flat Gaussians get normals (:func:`~gausstac_maniskill.splat.lighting.surface_normals`),
-        i.e. scene lighting shades them (their colours are albedo)."""
+        i.e. scene lighting shades them (their colours are albedo). ``one_sided`` ([N] bool,
+        with ``lit``): Gaussians whose shortest axis, sign included, is the outward normal of a
+        closed surface (surfaces sampled from closed meshes, see
+        :func:`~gausstac_maniskill.splat.surface.closed_outward`); culled when facing away."""
         from .lighting import surface_normals
         from .rasterizer import _cov6
 
@@ -353,8 +360,12 @@ class FramedGaussians:
         if n_frames is None:
             n_frames = int(ids.max()) + 1 if len(ids) else 1
         normals = surface_normals(gaussians.quats, gaussians.scales) if lit else None
+        if one_sided is not None:
+            if not lit:
+                raise ConfigError("FramedGaussians.from_gaussians: one_sided needs lit=True (the normals)")
+            one_sided = torch.as_tensor(one_sided, dtype=torch.bool) & (normals.norm(dim=1) > 0)
         return cls(gaussians.means, _cov6(gaussians.covariances()), ids, gaussians.opacities, gaussians.sh,
-                   n_frames, normals)
+                   n_frames, normals, one_sided)
 
     @classmethod
     def from_binding(cls, gaussians: GaussianSet, binding: SoftBinding, lit: bool = False
@@ -378,7 +389,7 @@ class FramedGaussians:
         or part i's frame f becoming ``frame_offsets[i] + f`` (parts that share frames, e.g. two
         levels of detail of one hand; the frame count is then the largest frame used + 1);
         lower SH degrees are zero-padded to the highest; a part without normals contributes
-        zero normals (not lit) when another has some."""
+        zero normals (not lit) when another has some, and is two-sided when another has one-sided ones."""
         parts = list(parts)
         if not parts:
             raise ConfigError("FramedGaussians.cat needs at least one set")
@@ -391,15 +402,18 @@ class FramedGaussians:
                 raise ConfigError(f"FramedGaussians.cat: {len(frame_offsets)} frame offsets for {len(parts)} parts")
             offsets = [int(o) for o in frame_offsets]
             offsets.append(max(o + p.n_frames for o, p in zip(offsets, parts)))
-        normals = None
+        normals = one_sided = None
         if any(p.normals is not None for p in parts):
             normals = torch.cat([p.normals.to(torch.float32) if p.normals is not None else
                                  torch.zeros(len(p), 3, device=p.means.device) for p in parts])
+        if any(p.one_sided is not None for p in parts):
+            one_sided = torch.cat([p.one_sided.to(p.means.device) if p.one_sided is not None else
+                                   torch.zeros(len(p), dtype=torch.bool, device=p.means.device) for p in parts])
         return cls(torch.cat([p.means for p in parts]), torch.cat([p.covars for p in parts]),
                    torch.cat([p.frame_ids.to(torch.int64) + o for p, o in zip(parts, offsets)]),
                    torch.cat([p.opacities for p in parts]),
                    torch.cat([torch.nn.functional.pad(p.sh, (0, 0, 0, k - p.sh.shape[1])) for p in parts]),
-                   offsets[-1], normals)
+                   offsets[-1], normals, one_sided)
 
     def render(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None, viewmats, Ks,
                width: int, height: int, *, background=None, background_depth=None, near: float = 0.01,

@@ -77,6 +77,17 @@ c^(1/γ) — the diffuse part of SAPIEN's shaders, with the SH colour as linear 
 Gaussian with the zero normal keeps its SH colour (a captured scene's baked lighting). See
 :mod:`gausstac_maniskill.splat.lighting`.
 
+Back faces
+----------
+A Gaussian marked ``one_sided`` lies on a closed surface whose outward normal is its
+``normals[g]``, sign included (surfaces sampled from closed, outward-wound meshes, e.g. a
+hand asset's links). Behind a closed opaque surface there is always a front side nearer the
+camera, so such a Gaussian is culled in the projection when it faces away:
+n·v > :data:`BACKFACE_COS` |n||v|, with n = cof(M)·n⁰ and v the view ray (camera to
+Gaussian). The bound leaves those near the silhouette (n nearly perpendicular to v) drawn.
+Roughly half of a closed surface faces away: its keys are neither sorted nor visited by the
+tiles (BENCHMARKS.md, issue 13). Gaussians that are not ``one_sided`` are always drawn.
+
 Batches
 -------
 With ``gaussian_ranges`` [C, 2], camera c sees only Gaussians [start, stop): B envs' scenes
@@ -133,6 +144,9 @@ DILATION = 0.3  #: px² added to the 2D covariance's diagonal (anti-aliasing)
 FOV_CLAMP = 1.3  #: the Jacobian is evaluated at x/z clamped to 1.3 tan(fov/2)
 K_MAX = math.sqrt(2.0 * math.log(255.0))  #: support radius (in σ) of an opaque Gaussian
 SUPPORT_SLACK = 1.001  #: the support radius k is taken this much larger (rounding; the α test decides)
+#: a one-sided Gaussian is culled when n·v > BACKFACE_COS |n||v| (see *Back faces*)
+BACKFACE_COS = 0.0
+NEVER_CULLED = 2.0  #: the cosine bound of a Gaussian that is not one-sided (n·v <= |n||v| < 2|n||v|)
 
 # One record per (camera, Gaussian), written by _project, read by the tiles: screen centre,
 # conic (Σ'⁻¹: a, b, c), opacity, depth z, colour and the support bound -ln(255 o) on the
@@ -183,6 +197,16 @@ def _sh_to_rgb(sh: ti.template(), g: ti.i32, degree: ti.i32, d: ti.math.vec3) ->
 
 
 @ti.func
+def _cofactor_times(M: ti.math.mat3, n0: ti.math.vec3) -> ti.math.vec3:
+    """cof(M)·n⁰ = det(M) M⁻ᵀ n⁰: a normal carried by the frame x -> M x + t (the normal of the
+    plane pushed forward by M); the columns of cof(M) are m1×m2, m2×m0, m0×m1."""
+    m0 = ti.math.vec3(M[0, 0], M[1, 0], M[2, 0])
+    m1 = ti.math.vec3(M[0, 1], M[1, 1], M[2, 1])
+    m2 = ti.math.vec3(M[0, 2], M[1, 2], M[2, 2])
+    return n0[0] * m1.cross(m2) + n0[1] * m2.cross(m0) + n0[2] * m0.cross(m1)
+
+
+@ti.func
 def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.math.vec3,
            lights: ti.template(), c: ti.i32, albedo_pow: ti.template(), g: ti.i32,
            grey: ti.template()) -> ti.math.vec3:
@@ -192,11 +216,7 @@ def _shade(albedo: ti.math.vec3, n0: ti.math.vec3, M: ti.math.mat3, view: ti.mat
     scene) rows: (A, 1/gamma, 0, 0), then (lᵢ toward the light, Eᵢ/π). ``grey``: the ambient and every light are grey,
     so the light is one number L and c^(1/gamma) = albedo^(1/gamma) · L^(1/gamma), with
     albedo^(1/gamma) of Gaussian g read from ``albedo_pow`` (one power instead of three)."""
-    # n = cof(M) n0, cof(M) = det(M) M⁻ᵀ with columns m1×m2, m2×m0, m0×m1 (normals move with it)
-    m0 = ti.math.vec3(M[0, 0], M[1, 0], M[2, 0])
-    m1 = ti.math.vec3(M[0, 1], M[1, 1], M[2, 1])
-    m2 = ti.math.vec3(M[0, 2], M[1, 2], M[2, 2])
-    n = n0[0] * m1.cross(m2) + n0[1] * m2.cross(m0) + n0[2] * m0.cross(m1)
+    n = _cofactor_times(M, n0)  # (normals move with cof(M))
     rgb = albedo
     len2 = n.norm_sqr()
     if len2 > 0.0:  # (a singular frame has no normal: the colour is left as it is)
@@ -237,7 +257,7 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
              viewmats: _f32_3, cams: _f32_2, seen: _i32_2, width: ti.i32, height: ti.i32,
              near: ti.f32, far: ti.f32,
              use_cov: ti.template(), framed: ti.template(), rot_mode: ti.template(),
-             lit: ti.template(), grey: ti.template(), rec: _f32_3, bins: _i32_3):
+             lit: ti.template(), grey: ti.template(), cull: ti.template(), rec: _f32_3, bins: _i32_3):
     """EWA projection of camera c's Gaussians into camera c: the j-th of the Gaussians
     [seen[c, 0], seen[c, 1]) (all of them, or camera c's env's) writes rec[c, j] and
     bins[c, j] (bins[c, j, B_TILES] = 0 if culled or past the range).
@@ -248,7 +268,9 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
     ``sh_rot[frame_id[g]]`` (2); ``lit``: Gaussians with a non-zero ``normals[g]`` (in
     their frame) are shaded with ``lights`` [C, 1 + L, 6] (see *Lighting*); ``grey``: grey lights and
     ``albedo_pow`` [N, 3] holds each Gaussian's albedo^(1/gamma) (see :func:`_shade`).
-    ``opac`` [N, 3]: each Gaussian's opacity and support terms (see :attr:`_Inputs.opacity`).
+    ``opac`` [N, 4]: each Gaussian's opacity, support terms and back-face bound (see
+    :attr:`_Inputs.opacity`); ``cull``: some Gaussians are one-sided (bound < 1): culled when
+    their normal (``normals[g]``, in their frame) faces away (see *Back faces*).
     ``cams`` [C, 12]: the per-camera constants of :func:`_camera_constants`. Only entries
     of Gaussians that touch a tile are written.
     """
@@ -270,7 +292,17 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
             mu = M @ mu + ti.math.vec3(frames[f, 0, 3], frames[f, 1, 3], frames[f, 2, 3])
         p = W @ mu + t  # camera-space centre
         o = opac[g, 0]
-        if p.z > near and p.z < far and o >= ALPHA_MIN:
+        view = mu - ti.math.vec3(cams[c, 8], cams[c, 9], cams[c, 10])  # camera centre -> Gaussian, world
+        drawn = p.z > near and p.z < far and o >= ALPHA_MIN
+        if ti.static(cull):
+            bound = opac[g, 3]
+            if drawn and bound < 1.0:  # one-sided: culled when its outward normal faces away
+                n = ti.math.vec3(normals[g, 0], normals[g, 1], normals[g, 2])
+                if ti.static(framed):
+                    n = _cofactor_times(M, n)  # (det M > 0: links and deformation gradients)
+                if n.dot(view) > bound * ti.sqrt(n.norm_sqr() * view.norm_sqr()):
+                    drawn = False
+        if drawn:
             fx, fy, cx, cy = cams[c, 0], cams[c, 1], cams[c, 2], cams[c, 3]
             # perspective Jacobian at the centre, with x/z, y/z clamped to 1.3 tan(fov/2)
             # (the half-fov measured from the principal point on each side)
@@ -330,7 +362,6 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
                         rec[c, j, R_THR] = -ln255o - 1e-4
                         # view direction (camera centre -> Gaussian), world frame; a rotated
                         # SH frame (link, polar(F)) R is evaluated at Rᵀ dir
-                        view = mu - ti.math.vec3(cams[c, 8], cams[c, 9], cams[c, 10])
                         dirn = view
                         if degree > 0:  # (a constant colour needs no direction)
                             dirn = view.normalized()
@@ -600,10 +631,14 @@ class _Inputs:
     [N] int32 or None (world coordinates); ``rot_mode``: 0 no SH rotation, 1 per Gaussian
     (``sh_rot`` [N, 3, 3]); per-frame rotations come with the frames (:func:`_rasterize`);
     ``normals`` [N, 3] (in the Gaussians' frames, zero rows: not lit) or None (none lit).
-    ``opacity`` [N, 3]: the opacity o and the terms of the opacity-aware support (see *Support*
+    ``one_sided`` [N] bool or None: Gaussians culled when their normal faces away (see *Back
+    faces* in the module docstring; needs ``normals``).
+    ``opacity`` [N, 4]: the opacity o and the terms of the opacity-aware support (see *Support*
     in the module docstring), which depend on o alone: ln(255 o) and k = sqrt(2 ln(255 o)),
     the latter 0.1 % larger so that the box never clips a pixel that the α test would keep
-    (rounding); ``max(ln(255 o), 0)`` under the root (o < 1/255 is culled anyway).
+    (rounding); ``max(ln(255 o), 0)`` under the root (o < 1/255 is culled anyway); then the
+    back-face bound: :data:`BACKFACE_COS` for a one-sided Gaussian, :data:`NEVER_CULLED`
+    otherwise.
     """
 
     means: torch.Tensor
@@ -619,6 +654,7 @@ class _Inputs:
     frame_id: torch.Tensor | None
     n_frames: int
     normals: torch.Tensor | None = None
+    one_sided: torch.Tensor | None = None
     _albedo_pow: dict = field(default_factory=dict, repr=False)
     opacity: torch.Tensor = field(init=False, repr=False)
 
@@ -629,7 +665,10 @@ class _Inputs:
         o = self.opacities.double()
         ln255o = torch.log(o * 255.0)
         k = torch.sqrt(2.0 * ln255o.clamp_min(0.0)) * SUPPORT_SLACK
-        self.opacity = torch.stack([o, ln255o, k], 1).float().contiguous()
+        bound = torch.full_like(o, NEVER_CULLED)
+        if self.one_sided is not None:
+            bound[self.one_sided.to(o.device)] = BACKFACE_COS
+        self.opacity = torch.stack([o, ln255o, k, bound], 1).float().contiguous()
 
     def __len__(self) -> int:
         return self.means.shape[0]
@@ -645,7 +684,7 @@ class _Inputs:
 
 def _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations,
                      frame_ids=None, n_frames: int = 0, frame_rotations: bool = False,
-                     normals=None) -> _Inputs:
+                     normals=None, one_sided=None) -> _Inputs:
     """Check and convert the per-Gaussian arguments of :func:`rasterize` (ConfigError if bad);
     ``frame_rotations``: whether per-frame SH rotations will come with the frames."""
     if not isinstance(means, torch.Tensor) or means.dim() != 2 or means.shape[1] != 3:
@@ -700,8 +739,15 @@ def _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations,
         frame_ids = frame_ids.to(device=dev, dtype=torch.int32).contiguous()
     if normals is not None:
         normals = _check_shape("normals", normals, (n, 3), "[N, 3]").to(**f32).contiguous()
+    if one_sided is not None:
+        if normals is None:
+            raise ConfigError("one_sided needs normals (each one-sided Gaussian's outward normal)")
+        one_sided = _check_shape("one_sided", one_sided, (n,), "[N] bool")
+        if one_sided.dtype != torch.bool:
+            raise ConfigError(f"one_sided must be a bool tensor, got {one_sided.dtype}")
+        one_sided = one_sided.to(dev) if bool(one_sided.any()) else None
     return _Inputs(means, quats, scales, cov6, covars is not None, opacities, sh, degree, sh_rot,
-                   rot_mode, frame_ids, n_frames, normals)
+                   rot_mode, frame_ids, n_frames, normals, one_sided)
 
 
 def _frame_inputs(frames, frame_rotations, n_frames: int | None, device) -> tuple:
@@ -859,13 +905,14 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     frames = frames if framed else _dummy((1, 3, 4), torch.float32, dev)
     seen, n_seen = _camera_ranges(gaussian_ranges, C, n, dev)
     lit = lighting is not None and g.normals is not None
+    cull = g.one_sided is not None
     lights, grey = _dummy((1, 1, 6), torch.float32, dev), False
     if lighting is not None:
         lights, scenes = _camera_lights(lighting, C, dev)
         # grey lights of one gamma on constant colours: the kernel takes one power per
         # Gaussian (see _shade)
         grey = lit and g.degree == 0 and all(x.is_grey and x.gamma == scenes[0].gamma for x in scenes)
-    normals = g.normals if lit else _dummy((1, 3), torch.float32, dev)
+    normals = g.normals if lit or cull else _dummy((1, 3), torch.float32, dev)
     albedo_pow = g.albedo_pow(1.0 / scenes[0].gamma) if grey else _dummy((1, 3), torch.float32, dev)
 
     tiles_x = (width + TILE - 1) // TILE
@@ -881,7 +928,7 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     if n_seen:
         _project(g.means, g.quats, g.scales, g.cov6, g.opacity, g.sh, g.degree, sh_rot, frame_id, frames,
                  normals, lights, albedo_pow, viewmats, cams, seen, width, height, float(near), float(far),
-                 g.use_cov, framed, rot_mode, lit, grey, rec, bins)
+                 g.use_cov, framed, rot_mode, lit, grey, cull, rec, bins)
     sync()
     t_proj = time.perf_counter()
 
@@ -925,8 +972,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
               sh_rotations: torch.Tensor | None = None,
               frames: torch.Tensor | None = None, frame_ids: torch.Tensor | None = None,
               frame_rotations: torch.Tensor | None = None,
-              normals: torch.Tensor | None = None, lighting=None,
-              background=None, background_depth: torch.Tensor | None = None,
+              normals: torch.Tensor | None = None, one_sided: torch.Tensor | None = None,
+              lighting=None, background=None, background_depth: torch.Tensor | None = None,
               gaussian_ranges: torch.Tensor | None = None,
               near: float = 0.01, far: float = 1e4,
               timings: bool = False) -> RenderOutput:
@@ -957,6 +1004,9 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
         normals: optional [N, 3] normals (world, or in the Gaussians' frames with
             ``frames``; any length, sign free), the zero vector for a Gaussian that is
             not to be lit; see :func:`~gausstac_maniskill.splat.lighting.surface_normals`.
+        one_sided: optional [N] bool: Gaussians on closed surfaces whose ``normals`` point
+            outward; they are culled when they face away from the camera (see *Back faces*
+            above). Needs ``normals``.
         lighting: optional :class:`~gausstac_maniskill.splat.lighting.Lighting` (every
             camera), or a sequence of C of them (camera c's scene's); shades the Gaussians
             with a normal (needs ``normals``), see *Lighting* above.
@@ -993,7 +1043,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
             frames, frame_rotations = _frame_inputs(frames, frame_rotations, None, dev)
             n_frames = frames.shape[0]
         g = _gaussian_inputs(means, quats, scales, opacities, sh, covars, sh_rotations, frame_ids,
-                             n_frames, frame_rotations is not None, normals)
+                             n_frames, frame_rotations is not None, normals, one_sided)
         return _rasterize(g, frames, frame_rotations, viewmats, Ks, width, height, background,
                           background_depth, near, far, timings, lighting, gaussian_ranges)
 

@@ -44,6 +44,7 @@ __all__ = [
     "colored_mesh",
     "load_link_meshes",
     "sample_surface_blue_noise",
+    "closed_outward",
     "gaussians_from_surface",
     "gaussians_from_points",
 ]
@@ -254,6 +255,26 @@ def sample_surface_blue_noise(meshes: Sequence[ColoredMesh], spacing: float,
         drop = np.where(d0 > d1, pairs[:, 0], pairs[:, 1])
         keep[drop] = False
     return p[keep], nm[keep], np.clip(c[keep], 0.0, 1.0)
+
+
+def closed_outward(meshes: Sequence[ColoredMesh]) -> bool:
+    """Whether the union of ``meshes`` (one link's) bounds solids with its face normals
+    pointing out of them: after merging coincident vertices (texture seams split them)
+    every edge joins two faces, the winding is consistent, and each connected part encloses a
+    positive volume. Gaussians sampled on such a surface with their face normal as local z
+    (:func:`gaussians_from_surface`) may be culled when that normal faces away from the
+    camera: a nearer front side always hides them (see *Back faces* in
+    :mod:`~gausstac_maniskill.splat.rasterizer`)."""
+    import trimesh
+
+    if not meshes:
+        return False
+    merged = trimesh.util.concatenate([cm.mesh for cm in meshes])
+    merged = trimesh.Trimesh(merged.vertices, merged.faces, process=False)
+    merged.merge_vertices(merge_tex=True, merge_norm=True)
+    if not (merged.is_watertight and merged.is_winding_consistent):
+        return False
+    return all(float(part.volume) > 0.0 for part in merged.split(only_watertight=False))
 
 
 def _frames_from_normals(normals: np.ndarray) -> np.ndarray:

@@ -213,3 +213,59 @@ def test_scan_of_gaussians_round_trips_to_link_frames(asset, hand_model, rigid_m
     assert (quat_to_rotmat(res.quats) - quat_to_rotmat(src.quats)).abs().max() < 1e-2
     assert (res.sh - sh[torch.as_tensor(order[good])]).abs().max() < 1e-2
 
+
+
+# --------------------------------------------------------------------------- closed links
+def test_closed_links_carry_outward_normals(asset, hand_meshes):
+    """Every Allegro link mesh bounds a solid with outward face normals, so the build lists
+    every link as closed; a Gaussian's local z is then its face's *outward* normal, sign
+    included (what lets the splat camera skip those facing away)."""
+    from gausstac_maniskill.splat.surface import closed_outward
+
+    assert asset.meta["closed_links"] == [n for n in asset.link_names if closed_outward(hand_meshes[n])]
+    assert asset.meta["closed_links"] == asset.link_names
+    g = asset.gaussians
+    z = quat_to_rotmat(g.quats.double())[:, :, 2].numpy()
+    for i, name in enumerate(asset.link_names):
+        sel = (g.link_id == i).numpy()
+        m = _posed_link_mesh(hand_meshes, name, np.eye(4))
+        _, _, tri = m.nearest.on_surface(g.means.double().numpy()[sel])
+        dots = np.einsum("ij,ij->i", z[sel], m.face_normals[tri])
+        assert np.mean(dots > 0.99) > 0.95, name
+
+
+@pytest.mark.parametrize("file", ["gaussians.ply", "gaussians_3mm.ply"])
+def test_shipped_hand_lists_only_closed_links_with_outward_normals(file, hand_meshes):
+    """The shipped Allegro asset (both levels of detail): ``closed_links`` names links whose
+    meshes are closed and outward, and their Gaussians' local z points out of the mesh."""
+    from gausstac_maniskill.agents.base import load_hand_closed_links
+    from gausstac_maniskill.demo import ASSET_DIR
+    from gausstac_maniskill.splat.surface import closed_outward
+
+    closed = load_hand_closed_links(str(ASSET_DIR))
+    names = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]
+    assert closed and all(closed_outward(hand_meshes[n]) for n in closed)
+    g = load_ply(ASSET_DIR / file)
+    z = quat_to_rotmat(g.quats.double())[:, :, 2].numpy()
+    for name in closed:
+        sel = (g.link_id == names.index(name)).numpy()
+        m = _posed_link_mesh(hand_meshes, name, np.eye(4))
+        _, _, tri = m.nearest.on_surface(g.means.double().numpy()[sel])
+        assert np.mean(np.einsum("ij,ij->i", z[sel], m.face_normals[tri]) > 0.99) > 0.95, (file, name)
+
+
+def test_bad_closed_links_name_the_file(tmp_path):
+    import shutil
+
+    from gausstac_maniskill.agents.base import load_hand_closed_links
+    from gausstac_maniskill.demo import ASSET_DIR
+
+    for bad, match in (("link_3.0", "must be a list"), (["no_such_link"], "not in link_names")):
+        folder = tmp_path / str(len(match))
+        folder.mkdir()
+        shutil.copy(ASSET_DIR / "gaussians.ply", folder / "gaussians.ply")
+        info = json.loads((ASSET_DIR / "links.json").read_text())
+        info["closed_links"] = bad
+        (folder / "links.json").write_text(json.dumps(info))
+        with pytest.raises(AssetError, match=rf"{folder / 'links.json'}.*{match}"):
+            load_hand_closed_links(str(folder))

@@ -118,3 +118,24 @@ def test_links_without_visuals_or_mesh_files_are_refused(plate, tmp_path):
                                          r"filename='package://pkg/meshes/missing_finger\.obj'"):
         load_link_meshes(parse_urdf(tmp_path / "m.urdf"))
 
+
+
+def test_closed_outward_needs_a_closed_outward_surface():
+    """A box is closed with outward normals; turned inside out, or with a face missing, or
+    split along a texture seam (duplicated vertices, still closed), the answer follows."""
+    from gausstac_maniskill.splat.surface import closed_outward, colored_mesh
+
+    box = trimesh.creation.box((0.02, 0.01, 0.03))
+    assert closed_outward([colored_mesh(box)])
+    inverted = box.copy()
+    inverted.invert()
+    assert not closed_outward([colored_mesh(inverted)])
+    assert not closed_outward([colored_mesh(trimesh.Trimesh(box.vertices, box.faces[:-1]))])
+    seams = trimesh.Trimesh(box.vertices[box.faces].reshape(-1, 3), np.arange(3 * len(box.faces)).reshape(-1, 3),
+                            process=False)  # every face with its own vertices
+    assert not seams.is_watertight and closed_outward([colored_mesh(seams)])
+    two = box.copy()
+    two.apply_translation([0.1, 0, 0])
+    assert closed_outward([colored_mesh(box), colored_mesh(two)])
+    assert not closed_outward([colored_mesh(box), colored_mesh(inverted)])
+    assert not closed_outward([])
