@@ -874,13 +874,16 @@ class _EnvSplatSource(SplatSource):
         return out.rgb, depth
 
     def _hidden_entities(self) -> list:
-        """SAPIEN entities the Gaussians replace: the hand's links (when it has Gaussians) and
-        the captured objects' actors (CPU sim; none on the GPU sim)."""
+        """SAPIEN entities the Gaussians replace: the hand's links (when it has Gaussians), the
+        MPM rigid objects that have Gaussians and the captured objects' actors (CPU sim; none on
+        the GPU sim). A moving object drawn by its Gaussians then leaves SAPIEN's background
+        picture unchanged, so it is taken once and reused."""
         env = self.env
         entities = []
         if not env.gpu_sim_enabled:
             if type(env.agent).gausstac_gaussians:
                 entities += [obj.entity for link in env.agent.robot.links for obj in link._objs]
+            entities += [ent for o in env._rigid.values() if o.gaussians is not None for ent in o.actor._objs]
             entities += [ent for o in env._captured.values() for ent in o.actor._objs]
         return entities
 

@@ -15,7 +15,16 @@ pytestmark = pytest.mark.sapien
 
 
 class _TwoCameras(PressCubeEnv):
-    """PressCube with a plain SAPIEN camera next to the splat camera (same pose and size)."""
+    """PressCube with a plain SAPIEN camera next to the splat camera (same pose and size), and a
+    yellow marker box in view that has no Gaussians (SAPIEN draws it in the background)."""
+
+    def _load_scene(self, options: dict):
+        super()._load_scene(options)
+        b = self.scene.create_actor_builder()
+        b.add_box_visual(half_size=[0.01, 0.01, 0.01],
+                         material=sapien.render.RenderMaterial(base_color=[0.9, 0.8, 0.1, 1]))
+        b.initial_pose = sapien.Pose(p=[0.13, 0.1, 0.03])
+        self.marker = b.build_kinematic(name="marker")
 
     @property
     def _default_sensor_configs(self):
@@ -71,7 +80,9 @@ def test_splat_depth_agrees_with_sapien_on_the_hand(env):
 
 def test_background_is_reused_until_something_in_it_moves(env):
     """SAPIEN's background picture is taken again only when the camera or a visible SAPIEN
-    entity moved (or after a reset); a reused picture gives the same image as a fresh one."""
+    entity moved (or after a reset); a reused picture gives the same image as a fresh one. An
+    object drawn by its Gaussians (the cube) is hidden from that picture: it may move without
+    a new one."""
     from gausstac_maniskill.tasks.base import batched_pose
 
     cam = env._sensors["splat_camera"]
@@ -84,17 +95,26 @@ def test_background_is_reused_until_something_in_it_moves(env):
     fresh = rgb()
     assert cam.background_renders == n + 1
     assert torch.equal(fresh, first)  # the reused picture is the one SAPIEN takes now
-    # the cube moves (2 cm): the background is taken again, and the image changes
+    # the cube (drawn by its Gaussians, which follow it at the next step) moves 2 cm: the
+    # background stays
     p, q = env.block.pose.p.clone(), env.block.pose.q.clone()
     try:
         env.block.set_pose(batched_pose(p + torch.tensor([0.0, 0.0, 0.02]), q))
+        rgb()
+        assert cam.background_renders == n + 1
+    finally:
+        env.block.set_pose(batched_pose(p, q))
+    # the marker (drawn by SAPIEN) moves 2 cm: the background is taken again, the image changes
+    p, q = env.marker.pose.p.clone(), env.marker.pose.q.clone()
+    try:
+        env.marker.set_pose(batched_pose(p + torch.tensor([0.0, 0.0, 0.02]), q))
         moved = rgb()
         assert cam.background_renders == n + 2
         assert (moved.int() - first.int()).abs().max() > 50
         rgb()
         assert cam.background_renders == n + 2  # still again: reused at the new place
     finally:
-        env.block.set_pose(batched_pose(p, q))
+        env.marker.set_pose(batched_pose(p, q))
     assert torch.equal(rgb(), first) and cam.background_renders == n + 3
     # the camera moves: taken again
     local = cam.camera.get_local_pose()
