@@ -17,7 +17,6 @@ other link are the agent's own.
 from __future__ import annotations
 
 import difflib
-import json
 import os
 from functools import lru_cache
 from typing import Mapping, Sequence
@@ -27,6 +26,8 @@ from mani_skill.agents.registration import REGISTERED_AGENTS, register_agent
 
 from ..config import PadSpec
 from ..errors import AssetError, ConfigError
+# the hand Gaussians folder's readers (re-exported: agents name their folder here)
+from ..splat.asset import load_hand_closed_links, load_hand_gaussians, load_hand_lod  # noqa: F401
 from ..urdf import link_names
 
 __all__ = ["GaussTacAgent", "add_gausstac_pads", "core_meshes", "core_urdf", "load_hand_gaussians"]
@@ -213,68 +214,3 @@ def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str,
     if register:
         register_agent(override=True)(cls)
     return cls
-
-
-@lru_cache(maxsize=8)
-def load_hand_gaussians(folder: str):
-    """``(GaussianSet, link names)`` of a hand Gaussians folder (cached per process)."""
-    from ..splat import load_ply
-
-    ply, links = os.path.join(folder, "gaussians.ply"), os.path.join(folder, "links.json")
-    for path in (ply, links):
-        if not os.path.isfile(path):
-            raise AssetError(f"{path}: hand Gaussians file not found (GaussTacAgent.gausstac_gaussians); "
-                             "build it with `gausstac build-asset --urdf <hand.urdf> --out <folder>`")
-    try:
-        with open(links) as f:
-            names = json.load(f)["link_names"]
-    except (ValueError, KeyError) as e:
-        raise AssetError(f"{links}: expected a JSON object with a 'link_names' list ({e})") from None
-    return load_ply(ply), list(names)
-
-
-@lru_cache(maxsize=8)
-def load_hand_closed_links(folder: str) -> tuple:
-    """The links of a hand Gaussians folder whose Gaussians lie on closed surfaces with their
-    normals pointing out (``links.json``'s ``closed_links``, written by ``gausstac build-asset``;
-    empty if absent): the splat camera skips those facing away. Cached per process."""
-    links = os.path.join(folder, "links.json")
-    _, names = load_hand_gaussians(folder)  # (checks both files)
-    with open(links) as f:
-        closed = json.load(f).get("closed_links", [])
-    if not isinstance(closed, list) or not all(isinstance(n, str) for n in closed):
-        raise AssetError(f"{links}: 'closed_links' must be a list of link names, got {closed!r}")
-    unknown = sorted(set(closed) - set(names))
-    if unknown:
-        raise AssetError(f"{links}: closed_links {unknown} are not in link_names")
-    return tuple(closed)
-
-
-@lru_cache(maxsize=8)
-def load_hand_lod(folder: str):
-    """The coarser level of a hand Gaussians folder, or None: ``(fine spacing [m], coarse
-    spacing [m], coarse GaussianSet)`` from ``links.json``'s ``spacing`` and ``coarse`` entry
-    (``{"file": ..., "spacing": ...}``; the same link names and frames as ``gaussians.ply``).
-    A camera whose pixels at the hand are at least the coarse spacing draws the coarse set
-    (:class:`gausstac_maniskill.render.SceneGaussians`). Cached per process."""
-    from ..splat import load_ply
-
-    links = os.path.join(folder, "links.json")
-    _, names = load_hand_gaussians(folder)  # (checks both files)
-    with open(links) as f:
-        meta = json.load(f)
-    coarse = meta.get("coarse")
-    if coarse is None:
-        return None
-    try:
-        fine, spacing, ply = float(meta["spacing"]), float(coarse["spacing"]), os.path.join(folder, coarse["file"])
-    except (KeyError, TypeError, ValueError) as e:
-        raise AssetError(f"{links}: 'coarse' needs 'file' and 'spacing' [m], and the file 'spacing' ({e!r})") from None
-    if not 0 < fine < spacing:
-        raise AssetError(f"{links}: coarse.spacing={spacing} must exceed spacing={fine} (metres)")
-    if not os.path.isfile(ply):
-        raise AssetError(f"{ply}: coarse hand Gaussians file not found ({links}: coarse.file)")
-    gs = load_ply(ply)
-    if len(gs) and int(gs.link_id.max()) >= len(names):
-        raise AssetError(f"{ply}: link ids reach {int(gs.link_id.max())}, but {links} names {len(names)} links")
-    return fine, spacing, gs

@@ -47,17 +47,18 @@ def _rotation_between(a, b) -> np.ndarray:
 
 
 def load_hand_gaussians(asset_dir: Path = ASSET_DIR):
-    """The hand's Gaussians (link-local) and their link names, built on first use."""
-    from .splat import load_ply
+    """The hand's Gaussians (link-local), their link names and the closed links (whose
+    Gaussians face out: the camera skips those facing away), built on first use."""
+    from .splat.asset import load_hand_closed_links
+    from .splat.asset import load_hand_gaussians as load
 
-    ply, links = asset_dir / "gaussians.ply", asset_dir / "links.json"
-    if not ply.exists() or not links.exists():
+    if not (asset_dir / "gaussians.ply").exists() or not (asset_dir / "links.json").exists():
         from .splat import build
 
         print(f"[demo] building the hand Gaussians asset in {asset_dir} (first run only)")
         build.main(["--out", str(asset_dir)])
-    names = json.loads(links.read_text())["link_names"]
-    return load_ply(ply), names
+    hand, names = load(str(asset_dir))
+    return hand, names, load_hand_closed_links(str(asset_dir))
 
 
 def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int = 240) -> dict:
@@ -135,8 +136,9 @@ def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int
     path += lin(path[-1], path[-1] - down * 12e-3, 5 * n)                # release
 
     # Gaussians: hand (rigid, link-local), cube (object frame), pads + sponge (soft, automatic)
-    hand, hand_links = load_hand_gaussians()
-    sim.attach_gaussians(hand, hand_links, {"cube": box_gaussians(cube_half, 1.5e-3 if not fast else 2.5e-3)})
+    hand, hand_links, closed = load_hand_gaussians()
+    sim.attach_gaussians(hand, hand_links, {"cube": box_gaussians(cube_half, 1.5e-3 if not fast else 2.5e-3)},
+                         closed_links=closed)
     n_gauss = len(sim._scene.gaussians)
     target = 0.5 * sponge_c + np.array([0.0, 0.0, 0.005])
     eye = target + 0.20 * finger_dir + 0.09 * np.array([0, 0, 1.0]) - 0.03 * side
