@@ -24,8 +24,6 @@ def test_shipped_allegro_folder():
 
 
 def test_bad_closed_links_name_the_file(tmp_path):
-    import shutil
-
     from gausstac_maniskill.demo import ASSET_DIR
 
     for bad, match in (("link_3.0", "must be a list"), (["no_such_link"], "not in link_names")):
