@@ -236,7 +236,16 @@ class GaussTacSim:
         self._posed = None
 
     def _update_sleep(self) -> None:
-        """Wake pads near an object (collider or soft group), put the others to sleep."""
+        """Wake pads near an object (collider or soft group), put the others to sleep.
+
+        A pad is near when the region it sweeps over the coming step, from its start pose (where
+        its particles are) to its end pose, comes within ``sleep_margin`` of an object. That
+        region lies inside spheres on the segment between the two positions of the pad's
+        bounding-sphere centre, at most its radius apart, grown by half their spacing and by the
+        centre's departure from the segment (at most the turn's angle times the centre's distance
+        from the link origin). A pad that crosses an object within one step therefore wakes,
+        although both of its end poses may be clear of it. Objects are taken at their end poses
+        (an object that crosses a still pad within one step is not seen)."""
         soft_boxes = []
         if self._soft:
             for g in self._soft:
@@ -246,11 +255,17 @@ class GaussTacSim:
             T = self._link_pose[pad.spec.link]
             c_local, r = pad.bounding_sphere()
             c = T[:3, :3] @ c_local + T[:3, 3]
+            S = self.world.link_pose(self._w(pad.spec.link))  # the step's start pose
+            c0 = S[:3, :3] @ c_local + S[:3, 3]
+            n = max(1, int(np.ceil(np.linalg.norm(c - c0) / r)))
+            centres = c0 + np.linspace(0.0, 1.0, n + 1)[:, None] * (c - c0)
+            turn = np.arccos(np.clip((np.trace(S[:3, :3].T @ T[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+            r = r + 0.5 * float(np.linalg.norm(c - c0)) / n + float(turn) * float(np.linalg.norm(c_local))
             near = False
             for idx in self._objects.values():
-                near |= _distance(self.world.colliders[idx], c) - r < self.sleep_margin
+                near |= min(_distance(self.world.colliders[idx], p) for p in centres) - r < self.sleep_margin
             for lo, hi in soft_boxes:
-                d = float(np.linalg.norm(np.maximum(np.maximum(lo - c, c - hi), 0.0)))
+                d = float(np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1).min())
                 near |= d - r < self.sleep_margin
             if not near and self._awake[name]:
                 x = self.world.positions(self._w(name)).astype(np.float64)

@@ -285,3 +285,22 @@ def test_maps_return_to_rest_while_the_object_stays_near(hand_poses):
     assert float(maps[INDEX]["force"].sum()) == 0.0
     depth, shear = float(maps[INDEX]["depth"].abs().max()), float(maps[INDEX]["shear"].abs().max())
     assert depth < 1e-5 and shear < 1e-5, (depth, shear)
+
+
+def test_pad_that_crosses_an_object_within_a_step_wakes(hand_poses):
+    """The hand starts 4 cm to one side of a ball that sits on the index pad, and is sent 4 cm
+    to the other side in one step: both end poses are clear of the ball, but the pad's path
+    crosses it, so the pad wakes for that step. Sent further away instead, it sleeps on."""
+    def shifted(dx):
+        return {n: make_pose([dx, 0.0, 0.0]) @ T for n, T in hand_poses.items()}
+
+    for end, awake in ((0.04, True), (-0.08, False)):
+        sim = GaussTacSim(allegro_pad_specs(), shifted(-0.04), settings=default_hand_settings(dx=2e-3))
+        add_ball(sim, hand_poses, friction=0.0)  # on the pad of the unshifted hand
+        assert not sim.is_awake(INDEX), "4 cm from the ball: asleep"
+        sim.begin_step(shifted(end))
+        assert sim.is_awake(INDEX) == awake, end
+        if awake:  # the end pose alone is clear of the ball, like the start
+            far = GaussTacSim(allegro_pad_specs(), shifted(end), settings=default_hand_settings(dx=2e-3))
+            add_ball(far, hand_poses, friction=0.0)
+            assert not far.is_awake(INDEX)
