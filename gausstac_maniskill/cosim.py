@@ -238,14 +238,16 @@ class GaussTacSim:
     def _update_sleep(self) -> None:
         """Wake pads near an object (collider or soft group), put the others to sleep.
 
-        A pad is near when the region it sweeps over the coming step, from its start pose (where
-        its particles are) to its end pose, comes within ``sleep_margin`` of an object. That
-        region lies inside spheres on the segment between the two positions of the pad's
-        bounding-sphere centre, at most its radius apart, grown by half their spacing and by the
-        centre's departure from the segment (at most the turn's angle times the centre's distance
-        from the link origin). A pad that crosses an object within one step therefore wakes,
-        although both of its end poses may be clear of it. Objects are taken at their end poses
-        (an object that crosses a still pad within one step is not seen)."""
+        A pad is near when the region it sweeps over the coming step, relative to an object,
+        comes within ``sleep_margin`` of that object; both move from their start poses (where
+        the pad's particles are, where the collider was) to their end poses. Seen from the
+        object's end pose, the pad's bounding-sphere centre travels from its start position
+        (carried along with the object's motion) to its end position; the region lies inside
+        spheres on that segment, at most the pad's radius apart, grown by half their spacing and
+        by the centre's departure from the segment (at most each body's turn angle times the
+        centre's distance from that body's origin). A pad that crosses an object within one
+        step, or an object that crosses a pad, therefore wakes the pad, although both end poses
+        may be clear. Soft objects are taken where their particles are."""
         soft_boxes = []
         if self._soft:
             for g in self._soft:
@@ -257,16 +259,19 @@ class GaussTacSim:
             c = T[:3, :3] @ c_local + T[:3, 3]
             S = self.world.link_pose(self._w(pad.spec.link))  # the step's start pose
             c0 = S[:3, :3] @ c_local + S[:3, 3]
-            n = max(1, int(np.ceil(np.linalg.norm(c - c0) / r)))
-            centres = c0 + np.linspace(0.0, 1.0, n + 1)[:, None] * (c - c0)
-            turn = np.arccos(np.clip((np.trace(S[:3, :3].T @ T[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
-            r = r + 0.5 * float(np.linalg.norm(c - c0)) / n + float(turn) * float(np.linalg.norm(c_local))
+            r += _turn(S, T) * float(np.linalg.norm(c_local))
             near = False
             for idx in self._objects.values():
-                near |= min(_distance(self.world.colliders[idx], p) for p in centres) - r < self.sleep_margin
-            for lo, hi in soft_boxes:
-                d = float(np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1).min())
-                near |= d - r < self.sleep_margin
+                col = self.world.colliders[idx]
+                O0, O1 = self.world.collider_start_pose(idx), col.pose
+                start = O1[:3, :3] @ (O0[:3, :3].T @ (c0 - O0[:3, 3])) + O1[:3, 3]  # c0 as the object sees it
+                centres, reach = _sweep(start, c, r + _turn(O0, O1) * float(np.linalg.norm(c0 - O0[:3, 3])))
+                near |= min(_distance(col, p) for p in centres) - reach < self.sleep_margin
+            if soft_boxes:
+                centres, reach = _sweep(c0, c, r)
+                for lo, hi in soft_boxes:
+                    d = float(np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1).min())
+                    near |= d - reach < self.sleep_margin
             if not near and self._awake[name]:
                 x = self.world.positions(self._w(name)).astype(np.float64)
                 settled = self._relative_speed(name, x) * self.world.last_dt_ctrl < 0.2 * REST_TOLERANCE
@@ -558,6 +563,19 @@ class GaussTacSim:
         self._awake = dict(state["awake"])
         self._maps = {}
         self._posed = None
+
+
+def _turn(A: np.ndarray, B: np.ndarray) -> float:
+    """Angle [rad] of the rotation from pose A's orientation to pose B's (4x4 each)."""
+    return float(np.arccos(np.clip((np.trace(A[:3, :3].T @ B[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def _sweep(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, float]:
+    """Spheres that hold a sphere of ``radius`` [m] moved along the segment a -> b: centres
+    at most ``radius`` apart on it ([n + 1, 3]) and their radius, grown by half the spacing."""
+    length = float(np.linalg.norm(b - a))
+    n = max(1, int(np.ceil(length / max(radius, 1e-9))))
+    return a + np.linspace(0.0, 1.0, n + 1)[:, None] * (b - a), radius + 0.5 * length / n
 
 
 def _distance(collider: Collider, point: np.ndarray) -> float:

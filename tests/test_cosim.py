@@ -290,7 +290,8 @@ def test_maps_return_to_rest_while_the_object_stays_near(hand_poses):
 def test_pad_that_crosses_an_object_within_a_step_wakes(hand_poses):
     """The hand starts 4 cm to one side of a ball that sits on the index pad, and is sent 4 cm
     to the other side in one step: both end poses are clear of the ball, but the pad's path
-    crosses it, so the pad wakes for that step. Sent further away instead, it sleeps on."""
+    crosses it, so the pad wakes for that step. Sent further away instead, it sleeps on. The
+    same holds when the ball crosses a still pad."""
     def shifted(dx):
         return {n: make_pose([dx, 0.0, 0.0]) @ T for n, T in hand_poses.items()}
 
@@ -304,3 +305,12 @@ def test_pad_that_crosses_an_object_within_a_step_wakes(hand_poses):
             far = GaussTacSim(allegro_pad_specs(), shifted(end), settings=default_hand_settings(dx=2e-3))
             add_ball(far, hand_poses, friction=0.0)
             assert not far.is_awake(INDEX)
+    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=2e-3))
+    W, R = apex_frame(sim, hand_poses), 6e-3
+    away = lambda dx: make_pose(W[:3, 3] + W[:3, 2] * R + [dx, 0.0, 0.0])  # noqa: E731 (dx = 0: touching)
+    sim.add_rigid_object("ball", Sphere(radius=R, pose=away(-0.04)))
+    assert not sim.is_awake(INDEX)
+    for end, awake in ((-0.08, False), (0.04, True)):
+        sim.begin_step(hand_poses, {"ball": away(end)})
+        assert sim.is_awake(INDEX) == awake, end
+        sim.begin_step(hand_poses, {"ball": away(-0.04)})  # (back: nothing stepped)

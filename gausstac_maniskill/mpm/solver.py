@@ -620,6 +620,13 @@ class MPMWorld:
             raise ConfigError(f"set_link_poses: expected shape {(len(idx), 4, 4)}, got {arr.shape}")
         self._link_next[idx] = as_pose_matrices(arr, "set_link_poses poses")
 
+    def collider_start_pose(self, index: int) -> np.ndarray:
+        """World pose (4x4) of collider ``index`` at the end of the last step, where the next
+        step moves it from (its target is ``colliders[index].pose``)."""
+        if not 0 <= index < len(self.colliders):
+            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
+        return self._col_prev[index].copy()
+
     def set_collider_pose(self, index: int, pose) -> None:
         """Target world pose (4x4) of collider ``index`` at the end of the next control step."""
         if not 0 <= index < len(self.colliders):
