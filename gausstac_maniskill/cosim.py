@@ -27,7 +27,7 @@ from .mpm import MPMWorld
 from .mpm.colliders import Collider
 from .tactile import Pad, build_pad, pad_mesh
 from .tactile.readout import TactileReadout
-from .transforms import as_pose_matrix
+from .transforms import as_pose_matrix, turn_angle
 from .urdf import default_hand_urdf
 
 __all__ = ["GaussTacSim", "default_hand_settings"]
@@ -259,13 +259,14 @@ class GaussTacSim:
             c = T[:3, :3] @ c_local + T[:3, 3]
             S = self.world.link_pose(self._w(pad.spec.link))  # the step's start pose
             c0 = S[:3, :3] @ c_local + S[:3, 3]
-            r += _turn(S, T) * float(np.linalg.norm(c_local))
+            r += float(turn_angle(S, T)) * float(np.linalg.norm(c_local))
             near = False
             for idx in self._objects.values():
                 col = self.world.colliders[idx]
                 O0, O1 = self.world.collider_start_pose(idx), col.pose
                 start = O1[:3, :3] @ (O0[:3, :3].T @ (c0 - O0[:3, 3])) + O1[:3, 3]  # c0 as the object sees it
-                centres, reach = _sweep(start, c, r + _turn(O0, O1) * float(np.linalg.norm(c0 - O0[:3, 3])))
+                grown = r + float(turn_angle(O0, O1)) * float(np.linalg.norm(c0 - O0[:3, 3]))  # the object's turn
+                centres, reach = _sweep(start, c, grown)
                 near |= min(_distance(col, p) for p in centres) - reach < self.sleep_margin
             if soft_boxes:
                 centres, reach = _sweep(c0, c, r)
@@ -563,11 +564,6 @@ class GaussTacSim:
         self._awake = dict(state["awake"])
         self._maps = {}
         self._posed = None
-
-
-def _turn(A: np.ndarray, B: np.ndarray) -> float:
-    """Angle [rad] of the rotation from pose A's orientation to pose B's (4x4 each)."""
-    return float(np.arccos(np.clip((np.trace(A[:3, :3].T @ B[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
 
 
 def _sweep(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, float]:

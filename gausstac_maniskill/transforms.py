@@ -173,6 +173,13 @@ def rotation_about(axis, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
+def turn_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """[...] angle [rad] of the rotation that turns pose a's orientation into pose b's
+    ([..., 4, 4] or [..., 3, 3] each): arccos((trace(Rₐᵀ R_b) - 1) / 2)."""
+    cos = (np.einsum("...ji,...ji->...", a[..., :3, :3], b[..., :3, :3]) - 1.0) / 2.0  # trace(aᵀ b)
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
 def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Points [n, 3] (metres) moved by the 4x4 rigid transform ``T``: ``R p + t`` per row."""
     return points @ T[:3, :3].T + T[:3, 3]

@@ -56,3 +56,14 @@ def test_pose_batches_are_checked_in_one_pass_and_name_the_bad_one():
     bad[0, 1, :3, :3] *= -1.0  # a reflection
     with pytest.raises(ConfigError, match=r"poses at index \[0, 1\]: the upper-left 3x3 block is not a rotation"):
         as_pose_matrices(bad, "poses")
+
+
+def test_turn_angle_is_the_rotation_angle_between_two_poses():
+    """turn_angle(a, b) is the angle of the rotation Rₐᵀ R_b, batched, in [0, π]."""
+    from gausstac_maniskill.transforms import make_pose, rotation_about, turn_angle
+
+    a = make_pose([0.1, 0.0, 0.0], rotation_about([0.0, 1.0, 0.0], 0.3))
+    angles = [0.0, 0.2, 1.5, np.pi]
+    b = np.stack([a @ make_pose([0.0, 0.5, 0.0], rotation_about([1.0, 1.0, 0.0], t)) for t in angles])
+    np.testing.assert_allclose(turn_angle(a[None], b), angles, atol=1e-6)
+    assert float(turn_angle(a, a)) == 0.0

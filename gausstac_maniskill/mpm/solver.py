@@ -61,7 +61,7 @@ import taichi as ti
 from .. import backend
 from ..config import Material, SolverSettings, _finite
 from ..errors import ConfigError, SimulationError
-from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix
+from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix, turn_angle
 from . import kernels as K
 from .rows import forget_contact, move_rigidly, put_at_rest
 from .colliders import Collider, MeshCollider
@@ -1357,9 +1357,7 @@ def _twists(a: np.ndarray, b: np.ndarray, dt: float) -> np.ndarray:
 def _surface_travel(a: np.ndarray, b: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """[N] bound on how far a point within ``radius`` [N] of the origin moves from pose a
     [N, 4, 4] to pose b [m]: the origin's travel plus the turn's angle times the radius."""
-    cos = (np.einsum("nji,nji->n", a[:, :3, :3], b[:, :3, :3]) - 1.0) / 2.0  # trace(aᵀ b)
-    angle = np.arccos(np.clip(cos, -1.0, 1.0))
-    return np.linalg.norm(b[:, :3, 3] - a[:, :3, 3], axis=1) + angle * radius
+    return np.linalg.norm(b[:, :3, 3] - a[:, :3, 3], axis=1) + turn_angle(a, b) * radius
 
 
 def _bond_table(name: str, pts: np.ndarray, kin: np.ndarray, spacing: float, distance, normal) -> np.ndarray:

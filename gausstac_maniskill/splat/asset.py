@@ -16,10 +16,9 @@ __all__ = ["load_hand_gaussians", "load_hand_closed_links", "load_hand_lod"]
 
 
 @lru_cache(maxsize=8)
-def load_hand_gaussians(folder: str):
-    """``(GaussianSet, link names)`` of a hand Gaussians folder (cached per process)."""
-    from .gaussians import load_ply
-
+def _links_json(folder: str) -> tuple[str, dict, list]:
+    """(path of ``links.json``, its object, its link names), read once per process; both
+    files of the folder must exist."""
     ply, links = os.path.join(folder, "gaussians.ply"), os.path.join(folder, "links.json")
     for path in (ply, links):
         if not os.path.isfile(path):
@@ -27,10 +26,20 @@ def load_hand_gaussians(folder: str):
                              "build it with `gausstac build-asset --urdf <hand.urdf> --out <folder>`")
     try:
         with open(links) as f:
-            names = json.load(f)["link_names"]
-    except (ValueError, KeyError) as e:
+            meta = json.load(f)
+        names = list(meta["link_names"])
+    except (ValueError, KeyError, TypeError) as e:
         raise AssetError(f"{links}: expected a JSON object with a 'link_names' list ({e})") from None
-    return load_ply(ply), list(names)
+    return links, meta, names
+
+
+@lru_cache(maxsize=8)
+def load_hand_gaussians(folder: str):
+    """``(GaussianSet, link names)`` of a hand Gaussians folder (cached per process)."""
+    from .gaussians import load_ply
+
+    _, _, names = _links_json(folder)
+    return load_ply(os.path.join(folder, "gaussians.ply")), names
 
 
 @lru_cache(maxsize=8)
@@ -38,10 +47,8 @@ def load_hand_closed_links(folder: str) -> tuple:
     """The links of a hand Gaussians folder whose Gaussians lie on closed surfaces with their
     normals pointing out (``links.json``'s ``closed_links``, written by ``gausstac build-asset``;
     empty if absent): the splat camera skips those facing away. Cached per process."""
-    links = os.path.join(folder, "links.json")
-    _, names = load_hand_gaussians(folder)  # (checks both files)
-    with open(links) as f:
-        closed = json.load(f).get("closed_links", [])
+    links, meta, names = _links_json(folder)
+    closed = meta.get("closed_links", [])
     if not isinstance(closed, list) or not all(isinstance(n, str) for n in closed):
         raise AssetError(f"{links}: 'closed_links' must be a list of link names, got {closed!r}")
     unknown = sorted(set(closed) - set(names))
@@ -59,10 +66,7 @@ def load_hand_lod(folder: str):
     (:class:`gausstac_maniskill.render.SceneGaussians`). Cached per process."""
     from .gaussians import load_ply
 
-    links = os.path.join(folder, "links.json")
-    _, names = load_hand_gaussians(folder)  # (checks both files)
-    with open(links) as f:
-        meta = json.load(f)
+    links, meta, names = _links_json(folder)
     coarse = meta.get("coarse")
     if coarse is None:
         return None
