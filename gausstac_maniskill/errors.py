@@ -25,3 +25,9 @@ class ResolutionWarning(UserWarning):
 class AssetWarning(UserWarning):
     """An input file loads but looks wrong: mis-scaled, very large, or with values that
     suggest a different convention. The message names the file, the field and a fix."""
+
+
+class SimulationWarning(UserWarning):
+    """The simulation met a state it cannot resolve physically (a pad torn from its link
+    by an object pushed into its core) and recovered from it; the message says what it
+    did and at which step."""

@@ -102,11 +102,12 @@ def carry_rigidly(lst: NDI, n: ti.i32, dt: ti.f32, link_poses: NDF2, x: NDV, v: 
 
 
 @ti.kernel
-def groups_in_contact(active: NDI, n: ti.i32, contact_id: NDI, group: NDI, out: NDI):
-    """out[g] = 1 where a particle of group g touched a collider or the other field this step."""
+def groups_in_contact(active: NDI, n: ti.i32, contact_id: NDI, group: NDI, colliders_only: ti.template(), out: NDI):
+    """out[g] = 1 where a particle of group g touched a collider (or, unless ``colliders_only``,
+    the other field) this step."""
     for ii in range(n):
         p = active[ii]
-        if contact_id[p] != -1:
+        if contact_id[p] >= 0 or (not colliders_only and contact_id[p] != -1):
             out[group[p]] = 1
 
 

@@ -52,6 +52,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 import weakref
 from dataclasses import dataclass
 
@@ -60,7 +61,7 @@ import taichi as ti
 
 from .. import backend
 from ..config import Material, SolverSettings, _finite
-from ..errors import ConfigError, SimulationError
+from ..errors import ConfigError, SimulationError, SimulationWarning
 from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix, turn_angle
 from . import kernels as K
 from .rows import forget_contact, move_rigidly, put_at_rest
@@ -111,6 +112,7 @@ class Group:
     sleep_pose: np.ndarray | None = None  # link pose when the group fell asleep
     patch_state: int = 0  # active patch (mpm.patch): 0 at rest, 1 patched in contact, 2 released (whole)
     env: int = 0  # the env (scene) of a batched world it belongs to: it touches only that env's groups and colliders
+    tear: float = 0.0  # quasi-static: a particle this far [m] from its rest place has lost its core (0: no check)
 
     @property
     def stop(self) -> int:
@@ -318,9 +320,13 @@ class MPMWorld:
             raise ConfigError(f"add_group({name!r}): quasi_static=True needs kinematic particles; a free "
                               f"group keeps its physical inertia (it must fall and move at its real mass)")
         scale = self.settings.mass_scaling if quasi_static else 1.0
-        relax = 0.0
+        relax = tear = 0.0
         if quasi_static:
-            relax = _relaxation_rate(pts, kin, material, scale) if relaxation is None else relaxation
+            layer = _layer_thickness(pts, kin)
+            # farther than the layer's largest stretch, plus the grid stencil's reach, from its rest
+            # place, a particle cannot be held by its core any more (_rest_torn)
+            tear = K.MAX_STRETCH * layer + 2.0 * self.settings.dx
+            relax = _relaxation_rate(layer, material, scale) if relaxation is None else relaxation
             relax = _finite(f"add_group({name!r}): relaxation", relax)
             if relax < 0.0:
                 raise ConfigError(f"add_group({name!r}): relaxation={relax!r} must be a rate >= 0 [1/s]")
@@ -356,7 +362,7 @@ class MPMWorld:
         self._host["group_bind"] = np.concatenate(
             [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])
         group = Group(name, self._n, n, material, lidx, int(kin.sum()), h, bool(quasi_static), scale, relax,
-                      int(field), env=env)
+                      int(field), env=env, tear=tear)
         self._group_at[name] = len(self.groups)
         self.groups.append(group)
         self._n += n
@@ -783,19 +789,16 @@ class MPMWorld:
         d = self._dev
         twists = _twists(self._link_prev, self._link_next, float(dt))
         if self._n_active:
-            # not in an env whose colliders were touched in the last step: there the jump would
-            # reach the object as a pseudo-mass impulse (a 62 g cube was kicked to 0.1 m/s);
-            # pseudo-inertia stays then
-            touching = np.zeros(self.num_envs, bool)
-            np.logical_or.at(touching, np.asarray(self._col_env, np.int64),
-                             np.any(self._col_impulse != 0, axis=1))
+            # groups that touched a collider in the last step keep their velocity (follow_links)
             change = np.zeros((max(len(twists), 1), 9), np.float32)
-            free = ~touching[np.asarray(self._link_env, np.int64)]
-            change[:len(twists)][free] = np.concatenate([twists - self._link_twist, self._link_prev[:, :3, 3]], 1)[free]
+            change[:len(twists)] = np.concatenate([twists - self._link_twist, self._link_prev[:, :3, 3]], 1)
             if np.any(change[:, :6]) and any(g.awake and g.quasi_static for g in self.groups):
                 d["twist_change"].from_numpy(change)
+                d["group_touched"].fill(0)
+                groups_in_contact(d["active"], self._n_active, d["contact_id"], d["group"], True,
+                                  d["group_touched"])
                 K.follow_links(d["active"], self._n_active, d["v"], d["C"], d["x"], d["kind"], d["link"],
-                               d["group"], d["group_qs"], d["twist_change"])
+                               d["group"], d["group_qs"], d["group_touched"], d["twist_change"])
             K.reset_contact(d["active"], self._n_active, d["impulse"], d["contact_id"])
         d["col_impulse"].fill(0.0)
         d["pair_impulse"].fill(0.0)
@@ -831,14 +834,45 @@ class MPMWorld:
         n_slot = self._pair_impulse.shape[1]
         pairs = d["pair_impulse"].to_numpy().astype(np.float64)
         self._pair_impulse = pairs[: len(self.link_names) * n_slot].reshape(len(self.link_names), n_slot, 7)
+        torn = self._torn_groups() if self._n_active else []
         self._link_prev = self._link_next.copy()
         self._link_twist = twists
         self._col_prev = self._collider_poses()
         self._last_dt_ctrl = float(dt)
         self.time += float(dt)
         self.step_count += 1
+        self._rest_torn(torn, driver)
         self.last_step = StepInfo(n_sub, dt_sub, time.perf_counter() - t0, self._n_active, cells)
         return self.last_step
+
+    def _torn_groups(self) -> list[tuple[Group, int]]:
+        """Awake quasi-static groups with particles beyond their ``tear`` distance from their
+        rest places after this step, and how many (:func:`kernels.torn_particles`)."""
+        if not any(g.awake and g.tear > 0.0 for g in self.groups):
+            return []
+        d = self._dev
+        d["torn"].fill(0)
+        K.torn_particles(self._pack["P"], d["X_rest" if self._patch is not None else "X0"], d["active"],
+                         self._n_active, d["link_pose"], d["group_tear"], d["torn"])
+        counts = d["torn"].to_numpy()
+        return [(g, int(counts[i])) for i, g in enumerate(self.groups) if g.awake and counts[i] > 0]
+
+    def _rest_torn(self, torn: list[tuple[Group, int]], driver: float) -> None:
+        """Put torn groups back on their rest shape, and say so. An object pushed into a pad's
+        core by the pose source (a link driven through it faster than the rigid solver holds it
+        out) leaves the layer no elastic state: contact pushes it out while its core is inside,
+        and the part pushed beyond the grid stencil of its core stays detached, reading a
+        depth the pad cannot have (a 13.6 m/s strike on GraspLiftCube's cube did this). An
+        object that drags a stuck layer farther than it stretches does the same."""
+        for g, count in torn:
+            warnings.warn(SimulationWarning(
+                f"group {g.name!r}: {count} of its {g.count - g.n_kinematic} soft particles were torn more than "
+                f"{g.tear * 1e3:.3g} mm from their rest places on link {self.link_names[g.link]!r} at step "
+                f"{self.step_count} (t={self.time:.4g} s; link surfaces moved up to {driver:.3g} m/s), farther than "
+                f"any elastic state of its layer reaches: an object was driven into its core, or dragged the "
+                f"layer off it. The group was put back on its rest shape; its contact and maps of this step "
+                f"are not physical."), stacklevel=3)
+            self.rest_group(g.name)
 
     # ------------------------------------------------------------------ internals
     def _prepare(self, a0: float, a1: float, dt: float):
@@ -934,7 +968,7 @@ class MPMWorld:
         once its contact ends it is simulated whole until put back at rest (state 2)."""
         d = self._dev
         d["patch_contact"].from_numpy(np.zeros(max(len(self.groups), 1), np.int32))
-        groups_in_contact(d["active"], self._n_active, d["contact_id"], d["group"], d["patch_contact"])
+        groups_in_contact(d["active"], self._n_active, d["contact_id"], d["group"], False, d["patch_contact"])
         touched = d["patch_contact"].to_numpy()
         for i in self._patched:
             g = self.groups[i]
@@ -1118,6 +1152,9 @@ class MPMWorld:
         d["vmax_chunk"] = ti.ndarray(ti.f32, shape=K.NCHUNK)
         upload("mat_table", material_table(self.materials, self.settings.pressure), ti.f32)
         upload("group_qs", np.array([int(g.quasi_static) for g in self.groups] or [0], np.int32), ti.i32)
+        upload("group_tear", np.array([g.tear for g in self.groups] or [0.0], np.float32), ti.f32)
+        d["torn"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
+        d["group_touched"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
         upload("group_field", np.array([g.field for g in self.groups] or [0], np.int32), ti.i32)
         upload("group_env", np.array([g.env for g in self.groups] or [0], np.int32), ti.i32)
         # the grid holds one box per env and awake field: each group's copy (_refresh_active)
@@ -1389,18 +1426,23 @@ def _bond_table(name: str, pts: np.ndarray, kin: np.ndarray, spacing: float, dis
     return out
 
 
-def _relaxation_rate(pts: np.ndarray, kin: np.ndarray, material: Material, scale: float) -> float:
-    """Relaxation rate ζ = ω1 [1/s], the lowest shear frequency of a layer, ω1 = (π/2)·c_s/L:
-    L is the largest distance [m] of a dynamic particle from the kinematic core (the layer
-    thickness of a pad) and c_s = √(μ/(ρ·scale)) the shear wave speed with the pseudo-mass."""
+def _layer_thickness(pts: np.ndarray, kin: np.ndarray) -> float:
+    """L [m]: the largest distance of a dynamic particle from the kinematic core (the layer
+    thickness of a pad; 0 without dynamic particles)."""
     from scipy.spatial import cKDTree
 
     dyn = pts[~kin]
-    if not len(dyn):
+    return float(cKDTree(pts[kin]).query(dyn)[0].max()) if len(dyn) else 0.0
+
+
+def _relaxation_rate(L: float, material: Material, scale: float) -> float:
+    """Relaxation rate ζ = ω1 [1/s], the lowest shear frequency of a layer of thickness L [m]
+    (:func:`_layer_thickness`), ω1 = (π/2)·c_s/L, c_s = √(μ/(ρ·scale)) the shear wave speed
+    with the pseudo-mass (0 for no layer)."""
+    if L <= 0.0:
         return 0.0
-    L = float(cKDTree(pts[kin]).query(dyn)[0].max())
     c_s = math.sqrt(material.mu / (material.density * scale))
-    return (math.pi / 2.0) * c_s / max(L, 1e-9)
+    return (math.pi / 2.0) * c_s / L
 
 
 def _renumber(parts: dict, new_id: np.ndarray) -> None:

@@ -80,7 +80,8 @@ def test_batched_envs_step_like_each_scene_alone():
         alone, acol, taken = _run([sc], steps, dt, substeps)
         assert taken == substeps
         a, b = _readout(alone, 0, acol[0]), _readout(batch, e, cols[e])
-        np.testing.assert_allclose(b["x"], a["x"], rtol=0, atol=2e-9, err_msg=f"env {e} positions")
+        # float32 rounding (the stencil is taken from each box's own origin): ~10 ulp at 4 mm
+        np.testing.assert_allclose(b["x"], a["x"], rtol=0, atol=3e-9, err_msg=f"env {e} positions")
         np.testing.assert_allclose(b["F"], a["F"], rtol=0, atol=2e-5, err_msg=f"env {e} F")
         scale = max(np.abs(a["wrench"][:3]).max(), 1e-6)
         np.testing.assert_allclose(b["wrench"], a["wrench"], rtol=0, atol=1e-4 * scale, err_msg=f"env {e} wrench")

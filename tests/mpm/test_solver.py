@@ -6,8 +6,8 @@ import pytest
 from helpers import pad_world
 
 from gausstac_maniskill.config import Material, SolverSettings
-from gausstac_maniskill.errors import ConfigError, SimulationError
-from gausstac_maniskill.mpm import HalfSpace, MPMWorld, Sphere, box_particles
+from gausstac_maniskill.errors import ConfigError, SimulationError, SimulationWarning
+from gausstac_maniskill.mpm import Box, HalfSpace, MPMWorld, Sphere, box_particles
 from gausstac_maniskill.transforms import make_pose, rotation_about
 
 
@@ -279,6 +279,36 @@ def test_cfl_substeps_scale_with_wave_speed():
     assert 1.8 < n_stiff / n_soft < 2.2  # c ∝ √E
     scaled = pad_world(material=Material(E=4e5, nu=0.3), mass_scaling=4.0)
     assert scaled.plan_substeps(1e-3)[0] <= n_soft + 1  # mass scaling by 4 halves c
+
+
+def test_pad_torn_from_its_core_is_put_back_at_rest_with_a_warning():
+    """A sticky block pressed into a pad and dragged 40 mm within one step takes the layer
+    along, farther from its core than any stretch of the layer reaches. The solver says so
+    (SimulationWarning naming the group) and puts the pad back on its rest shape; without
+    that (kernels.torn_particles, MPMWorld._rest_torn) the layer stays detached where the
+    block left it and reads a depth the pad cannot have. The press before it, a real load,
+    raises no warning. This guards the recovery, not a physical result."""
+    import warnings
+
+    world = pad_world(dx=2e-3, size=(0.02, 0.02, 0.008))
+    n0 = world.num_particles
+    h = 5e-3
+    c = world.add_collider(Box(half_extents=(h, h, h), pose=make_pose([0, 0, h]), sticky=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SimulationWarning)
+        for k in range(5):
+            world.set_collider_pose(c, make_pose([0, 0, h - 1.5e-3 * (k + 1) / 5]))
+            world.step(0.01)
+    assert world.collider_wrench(c)[0][2] > 0.1  # pressed
+    world.set_collider_pose(c, make_pose([0.04, 0, h - 1.5e-3]))
+    with pytest.warns(SimulationWarning, match=r"group 'pad': \d+ of its \d+ soft particles were torn .* link 'base'"):
+        world.step(0.01)
+    assert_healthy(world, n0)
+    np.testing.assert_allclose(world.positions("pad"), world.rest_positions("pad"), atol=1e-7)  # base link at identity
+    world.set_collider_pose(c, make_pose([0.04, 0, 0.05]))
+    world.step(0.01)
+    assert_healthy(world, n0)
+    assert np.abs(world.positions("pad") - world.rest_positions("pad")).max() < 1e-4
 
 
 def test_impossible_step_is_refused_with_advice():
