@@ -313,12 +313,12 @@ class GaussTacSim:
         their soft Gaussians are placed on the current particles.
 
         Args:
-            hand: rigid hand Gaussians, link-local (e.g. ``load_ply(assets/.../gaussians.ply)``).
+            hand: rigid hand Gaussians, link-local (``splat.asset.load_hand_gaussians(folder)[0]``).
             hand_links: their link names (``links.json["link_names"]``); every one of them
                 must then be in the ``link_poses`` passed to :meth:`step`.
             objects: rigid object name -> Gaussians in the object frame.
             hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand Gaussians)``
-                (``agents.base.load_hand_lod``): cameras whose pixels at the hand span at least
+                (``splat.asset.load_hand_lod``): cameras whose pixels at the hand span at least
                 the coarse spacing draw those instead (:class:`gausstac_maniskill.render.Detail`).
             closed_links: hand links whose Gaussians lie on closed surfaces with their normals
                 pointing out (``links.json["closed_links"]``): the splat camera skips those

@@ -170,22 +170,19 @@ def main(argv: list[str] | None = None) -> int:
 def _camera_row(batch, width: int, height: int) -> str:
     """Attach the hand's and the ball's Gaussians to every env and time one picture per env,
     batched and env by env (each scene's own render); returns the table row."""
-    import json
-
     import torch
 
-    from ..demo import ASSET_DIR
+    from ..demo import load_hand_gaussians
     from ..pose import MujocoPoseSource
     from ..render import box_gaussians
-    from ..splat import MANISKILL_DEFAULT, intrinsics_from_fov, load_ply, look_at
+    from ..splat import MANISKILL_DEFAULT, intrinsics_from_fov, look_at
 
     src = MujocoPoseSource()
-    hand = load_ply(ASSET_DIR / "gaussians.ply")
-    links = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]
+    hand, links, closed = load_hand_gaussians()
     rest = dict(zip(src.link_names, src.link_poses()[0].double().numpy()))
     B = batch.num_envs
     for scene in batch.scenes:
-        scene.attach_gaussians(hand, links, {"ball": box_gaussians((R, R, R), 1.5e-3)})
+        scene.attach_gaussians(hand, links, {"ball": box_gaussians((R, R, R), 1.5e-3)}, closed_links=closed)
         tip = scene._link_pose["link_3.0_tip"]
         move = tip @ np.linalg.inv(rest["link_3.0_tip"])  # the env's hand offset
         scene._link_pose.update({n: move @ T for n, T in rest.items() if n not in scene._link_pose})
