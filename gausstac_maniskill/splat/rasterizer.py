@@ -17,7 +17,11 @@ that it runs well on a CPU:
    emit one 64-bit key ``(camera·tiles + tile) << 32 | float_bits(depth)`` per
    (Gaussian, tile) with a value (the Gaussian and the part of its box inside
    the tile), a single stable ``torch.sort``, then each tile's [start, end)
-   range in the sorted list (``torch.searchsorted`` of the tile numbers).
+   range in the sorted list (``torch.searchsorted`` of the tile numbers). On the
+   CPU, PyTorch sorts 1-D integers from ``RADIX_SORT_FROM`` elements on with a radix
+   sort (FBGEMM's, stable) and below that with a comparison sort, 3.3× slower at
+   32 000 keys; from ``RADIX_PAD_FROM`` keys the list is padded up to that size with
+   keys past the last tile (sorted to the end, never read).
 3. **Rasterise** (one thread per camera × tile): the tile walks its Gaussians
    front to back. A Gaussian whose box part covers no unfinished pixel (a 16-bit
    mask per row) is passed over without reading its record; otherwise the rows
@@ -154,6 +158,8 @@ NEVER_CULLED = 2.0  #: the cosine bound of a Gaussian that is not one-sided (n·
 # entry: number of tiles touched (0: culled), x0 | x1 << 16, y0 | y1 << 16 (the pixel box
 # [x0, x1) × [y0, y1)) and the depth's bits.
 REC = 16
+RADIX_SORT_FROM = 32768  #: (CPU) PyTorch's 1-D integer sort is a radix sort from this many elements on
+RADIX_PAD_FROM = 10_000  #: (CPU) key counts from which padding to RADIX_SORT_FROM is faster (BENCHMARKS.md, 2026-11-25)
 R_U, R_V, R_A, R_B, R_C, R_O, R_Z, R_R, R_G, R_BL, R_THR = range(11)
 B_TILES, B_X, B_Y, B_Z = range(4)
 
@@ -936,8 +942,10 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     ends = torch.cumsum(bins[:, :, B_TILES].reshape(-1), 0, dtype=torch.int64)
     n_keys = int(ends[-1]) if n_seen else 0
     if n_keys:
-        keys = torch.empty(n_keys, dtype=torch.int64, device=dev)
-        vals = torch.empty(n_keys, dtype=torch.int64, device=dev)
+        n_sort = RADIX_SORT_FROM if dev.type == "cpu" and RADIX_PAD_FROM <= n_keys < RADIX_SORT_FROM else n_keys
+        keys = torch.empty(n_sort, dtype=torch.int64, device=dev)
+        vals = torch.empty(n_sort, dtype=torch.int64, device=dev)
+        keys[n_keys:] = n_tile_total << 32  # padding: past the last tile
         _emit_keys(ends, bins, tiles_x, tiles_x * tiles_y, keys, vals)
         keys, order = torch.sort(keys, stable=True)
         vals = vals.index_select(0, order)  # (a quarter of the time of vals[order])
