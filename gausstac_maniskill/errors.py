@@ -29,5 +29,5 @@ class AssetWarning(UserWarning):
 
 class SimulationWarning(UserWarning):
     """The simulation met a state it cannot resolve physically (a pad torn from its link
-    by an object pushed into its core) and recovered from it; the message says what it
-    did and at which step."""
+    by an object pushed into its core, or dragged off it) and recovered from it; the message
+    says what it did and at which step."""

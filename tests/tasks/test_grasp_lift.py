@@ -108,9 +108,10 @@ def test_zero_absolute_action_strikes_the_cube_and_stays_finite():
     from z = 0.2 m to the origin and turns it 90 deg, so the thumb strikes the cube at 13.6 m/s
     within the first 10 ms SAPIEN step, and PhysX lets its core 11 mm into the cube. This
     stopped with the pads torn apart ("particles flying apart") at the second SAPIEN step
-    until the contact's recovery of old penetration was bounded (kernels.RECOVERY), pads
-    followed their link's jumps away from contacts (kernels.follow_links) and a torn pad was
-    put back at rest with a warning (MPMWorld._rest_torn)."""
+    until the contact's recovery of old penetration was bounded (kernels.RECOVERY), only a
+    pad that touched a collider stopped following its link's jumps (kernels.follow_links; it
+    was every pad of the env) and a torn pad was put back at rest with a warning
+    (MPMWorld._rest_torn)."""
     import warnings
 
     env = _make()
