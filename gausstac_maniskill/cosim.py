@@ -317,9 +317,10 @@ class GaussTacSim:
             hand_links: their link names (``links.json["link_names"]``); every one of them
                 must then be in the ``link_poses`` passed to :meth:`step`.
             objects: rigid object name -> Gaussians in the object frame.
-            hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand Gaussians)``
-                (``splat.asset.load_hand_lod``): cameras whose pixels at the hand span at least
-                the coarse spacing draw those instead (:class:`gausstac_maniskill.render.Detail`).
+            hand_lod: ``(fine spacing [m], ((spacing [m], hand Gaussians), ...))``, coarser
+                levels finest first (``splat.asset.load_hand_lod``): a camera whose pixels at the
+                hand are as wide as a level's splats draws that level instead
+                (:class:`gausstac_maniskill.render.Detail`).
             closed_links: hand links whose Gaussians lie on closed surfaces with their normals
                 pointing out (``links.json["closed_links"]``): the splat camera skips those
                 facing away (see :class:`gausstac_maniskill.render.SceneGaussians`).

@@ -149,25 +149,39 @@ class RigidLayer:
 
 
 class Detail:
-    """A scene's two levels of detail of the hand (:class:`SceneGaussians` with ``hand_lod``).
+    """A scene's levels of detail of the hand (:class:`SceneGaussians` with ``hand_lod``).
 
-    The scene's Gaussians are laid out [fine hand | everything else | coarse hand], so that
-    either level is one range: ``fine`` = [0, n - n_coarse), ``coarse`` = [n_fine, n). A camera
-    draws the coarse hand when its pixel at the hand, z / fx (z: the hand's root link in the
-    camera, fx: the focal length in pixels), spans at least ``coarse_spacing`` [m]: there the
-    fine set puts several Gaussians in a pixel and the picture does not change (BENCHMARKS.md,
-    issue 13)."""
+    The scene's Gaussians are laid out [fine hand | everything else | level 1 | level 2 | ...]
+    (levels coarser and coarser). A camera draws the fine hand and the rest, one range
+    [0, n_fine + n_rest), or the rest and level k, two ranges. It draws the coarsest level
+    whose splats are no wider than its pixel at the hand: ``IN_PLANE_SCALE · spacing``, the
+    splats' in-plane σ (:mod:`gausstac_maniskill.splat.surface`), at most z / fx (z: the hand's
+    root link in the camera, fx: the focal length in pixels). There the picture keeps its look
+    and its depth (BENCHMARKS.md, issue 13: at 1.09 spacings per pixel the hand's mean depth
+    error grows by 0.26 mm, at 1.3 its median by 1 mm)."""
 
-    def __init__(self, fine: tuple[int, int], coarse: tuple[int, int], coarse_spacing: float):
-        self.fine, self.coarse, self.coarse_spacing = fine, coarse, float(coarse_spacing)
+    def __init__(self, n_fine: int, n_rest: int, levels: Sequence[tuple[int, int, float]]):
+        """``levels``: (start, stop, spacing [m]) of each coarser level, finest first."""
+        from .splat.surface import IN_PLANE_SCALE
 
-    def ranges(self, viewmats: torch.Tensor, Ks: torch.Tensor, anchor: np.ndarray) -> torch.Tensor:
-        """[C, 2] the range each camera draws; ``anchor``: the hand root's world position [m]."""
+        self.fine = (0, n_fine + n_rest)
+        self.rest = (n_fine, n_fine + n_rest)
+        self.levels = [(int(a), int(b)) for a, b, _ in levels]
+        self.sigmas = torch.tensor([IN_PLANE_SCALE * s for _, _, s in levels], dtype=torch.float64)
+
+    def level(self, viewmats: torch.Tensor, Ks: torch.Tensor, anchor: np.ndarray) -> torch.Tensor:
+        """[C] the level each camera draws: 0 the fine hand, k > 0 ``levels[k - 1]``;
+        ``anchor``: the hand root's world position [m]."""
         V = torch.as_tensor(viewmats, dtype=torch.float64).cpu()
         z = V[:, 2, :3] @ torch.as_tensor(anchor, dtype=torch.float64) + V[:, 2, 3]
         pixel = z / torch.as_tensor(Ks, dtype=torch.float64).cpu()[:, 0, 0]  # metres per pixel at the hand
-        coarse = (pixel >= self.coarse_spacing)[:, None]
-        return torch.where(coarse, torch.tensor(self.coarse), torch.tensor(self.fine))
+        return (self.sigmas[None, :] <= pixel[:, None]).sum(1)  # the σ grow with k
+
+    def ranges(self, viewmats: torch.Tensor, Ks: torch.Tensor, anchor: np.ndarray) -> torch.Tensor:
+        """[C, 2, 2] the two ranges [start, stop) each camera draws (see :meth:`level`)."""
+        table = torch.tensor([[self.fine, (self.fine[1], self.fine[1])]]
+                             + [[self.rest, lv] for lv in self.levels], dtype=torch.int64)
+        return table[self.level(viewmats, Ks, anchor)]
 
 
 class PosedScene:
@@ -182,9 +196,11 @@ class PosedScene:
         self.detail, self.anchor = detail, anchor
 
     def ranges(self, viewmats, Ks) -> torch.Tensor:
-        """[C, 2] the Gaussians each camera draws (all of them without levels of detail)."""
+        """[C, 2, 2] the two ranges [start, stop) of Gaussians each camera draws (all of them,
+        and an empty one, without levels of detail)."""
         if self.detail is None:
-            return torch.tensor([[0, len(self.gaussians)]]).expand(len(viewmats), 2)
+            n = len(self.gaussians)
+            return torch.tensor([[[0, n], [n, n]]]).expand(len(viewmats), 2, 2)
         return self.detail.ranges(viewmats, Ks, self.anchor)
 
     def render(self, viewmats, Ks, width: int, height: int, **kwargs):
@@ -207,9 +223,10 @@ class SceneGaussians:
         hand: rigid hand Gaussians in link-local frames (``link_id`` indexes ``hand_links``).
         hand_links: link names of the hand Gaussians.
         objects: rigid object name -> its Gaussians in the object frame.
-        hand_lod: ``(fine spacing [m], coarse spacing [m], coarse hand GaussianSet)``, the
-            same hand built coarser (``agents.base.load_hand_lod``); cameras whose pixels at the
-            hand are at least the coarse spacing draw it instead (:class:`Detail`).
+        hand_lod: ``(fine spacing [m], ((spacing [m], GaussianSet), ...))``, the same hand
+            built coarser (``splat.asset.load_hand_lod``), finest first; a camera whose pixels
+            at the hand are as wide as a level's splats draws that level instead
+            (:class:`Detail`).
         closed_links: hand links whose Gaussians lie on closed surfaces with their shortest axis
             as the outward normal (``links.json["closed_links"]``, written by ``gausstac
             build-asset`` after :func:`~gausstac_maniskill.splat.surface.closed_outward`):
@@ -232,14 +249,12 @@ class SceneGaussians:
                                     dtype=torch.int64)
         sets = []
         self.n_hand = 0
-        self.coarse_hand: GaussianSet | None = None
-        self.coarse_spacing = 0.0
+        self.hand_levels: list[tuple[float, GaussianSet]] = []  # (spacing [m], Gaussians), finest first
         if hand is not None and len(hand):
             sets.append(self._drop_pad_regions(hand))
             self.n_hand = len(sets[0])
             if hand_lod is not None:
-                _, self.coarse_spacing, coarse = hand_lod
-                self.coarse_hand = self._drop_pad_regions(coarse)
+                self.hand_levels = [(float(sp), self._drop_pad_regions(g)) for sp, g in hand_lod[1]]
         self.object_names = list(objects or {})
         for i, name in enumerate(self.object_names):
             if name not in sim._objects:
@@ -294,16 +309,19 @@ class SceneGaussians:
                      soft, *(layer.framed() for layer in self.layers)]
             offsets = None
             self.detail = None
-            if self.coarse_hand is not None:  # last, in the links' frames (0..): [fine | rest | coarse]
-                coarse = self.coarse_hand
-                parts.append(FramedGaussians.from_gaussians(coarse, coarse.link_id, n_rigid_frames, lit=True,
-                                                            one_sided=self._one_sided(coarse, len(coarse))))
+            if self.hand_levels:  # last, in the links' frames (0..): [fine | rest | level 1 | ...]
                 offsets = [0]
-                for p in parts[:-2]:
+                for p in parts[:-1]:
                     offsets.append(offsets[-1] + p.n_frames)
-                offsets.append(0)
-                n = sum(len(p) for p in parts)
-                self.detail = Detail((0, n - len(self.coarse_hand)), (self.n_hand, n), self.coarse_spacing)
+                n_rest = sum(len(p) for p in parts) - self.n_hand
+                start, levels = self.n_hand + n_rest, []
+                for spacing, g in self.hand_levels:
+                    parts.append(FramedGaussians.from_gaussians(g, g.link_id, n_rigid_frames, lit=True,
+                                                                one_sided=self._one_sided(g, len(g))))
+                    offsets.append(0)
+                    levels.append((start, start + len(g), spacing))
+                    start += len(g)
+                self.detail = Detail(self.n_hand, n_rest, levels)
             self._framed = FramedGaussians.cat(parts, frame_offsets=offsets)
         return self._framed
 
@@ -431,8 +449,9 @@ class BatchScene:
             return rasterize(empty.means, empty.quats, empty.scales, empty.opacities, empty.sh,
                              viewmats, Ks, width, height, **kwargs)
         viewmats, Ks = torch.as_tensor(viewmats, dtype=torch.float32), torch.as_tensor(Ks, dtype=torch.float32)
-        # each camera's range: its env's, at the level of detail its pixel size calls for
-        ranges = env_ranges[torch.as_tensor(envs)].clone()
+        # each camera's two ranges: its env's, at the level of detail its pixel size calls for
+        stops = env_ranges[torch.as_tensor(envs), 1:]
+        ranges = torch.stack([env_ranges[torch.as_tensor(envs)], torch.cat([stops, stops], 1)], 1)
         for e in np.unique(envs):
             if posed[e] is not None and posed[e].detail is not None:
                 sel = torch.as_tensor(envs == e)

@@ -128,10 +128,13 @@ class GaussTacEnv(BaseEnv):
             ``ResolutionWarning`` says so; forces are not converged, see BENCHMARKS.md).
         mpm_sleep_margin: a pad farther than this from every object sleeps [m].
         splat_size: (width, height) of the default splat camera ``splat_camera``.
-        splat_lod: a splat camera whose pixels at the hand span at least the hand asset's
-            coarse spacing (``links.json`` ``coarse``: 3 mm for the Allegro hand, i.e. the
-            128 × 128 task camera) draws the coarse hand Gaussians: the same look against SAPIEN,
-            a quarter less time (BENCHMARKS.md, issue 13). ``False``: always the fine ones.
+        splat_lod: a splat camera draws the coarsest of the hand asset's levels of detail
+            (``links.json`` ``levels``: 2.5 and 3 mm for the Allegro hand, against 2 mm) whose
+            splats (in-plane σ = 0.9 spacing) are no wider than its pixels at the hand: the
+            2.5 mm hand in PressCube, SlideCube and SqueezeSponge (2.3 mm pixels), the 3 mm
+            hand in the other tasks' 128 × 128 cameras (3.5–3.8 mm). Nearly the same look and
+            depth against SAPIEN, 1.1–1.3× less time (BENCHMARKS.md, issue 13). ``False``:
+            always the fine hand.
         splat_cull: the splat camera skips the hand's Gaussians that face away from it, on the
             links the asset marks closed (``links.json`` ``closed_links``): a nearer front side
             hides them (BENCHMARKS.md, issue 13). ``False``: draw every Gaussian.

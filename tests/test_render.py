@@ -214,33 +214,41 @@ def test_particles_of_an_index_are_those_rows_of_all_particles(pressed_scene):
     np.testing.assert_allclose(frames[:, :, :3], Fi, rtol=0, atol=1e-6)
 
 
-def test_coarse_hand_for_cameras_whose_pixels_are_coarser(pressed_scene):
-    """With the asset's coarse level (links.json ``coarse``), a camera whose pixel at the hand
-    spans at least its spacing draws the coarse hand, and one with finer pixels the fine hand;
-    the coarse picture is the scene built on the coarse hand alone (guards the layout and the
-    choice; whether the coarse hand looks right is measured by ``bench look``)."""
+def test_hand_level_of_detail_follows_the_pixel_size(pressed_scene):
+    """With the asset's levels (links.json ``levels``), a camera draws the coarsest level whose
+    splats (in-plane σ) are no wider than its pixel at the hand, and the fine hand when its
+    pixels are finer than every level's; each picture is the scene built on that level alone
+    (guards the layout, the two ranges per camera and the choice; whether a level looks right
+    is measured by ``bench look`` and ``tests/test_sensors.py``)."""
     from gausstac_maniskill.agents.base import load_hand_gaussians, load_hand_lod
     from gausstac_maniskill.demo import ASSET_DIR
     from gausstac_maniskill.render import SceneGaussians
+    from gausstac_maniskill.splat.surface import IN_PLANE_SCALE
 
     sim, view, _ = pressed_scene
     hand, links = load_hand_gaussians(str(ASSET_DIR))
-    lod = load_hand_lod(str(ASSET_DIR))
-    assert lod is not None and lod[0] < lod[1] and len(lod[2]) < len(hand) / 2
-    both = SceneGaussians(sim, hand, links, hand_lod=lod)
-    fine, coarse = SceneGaussians(sim, hand, links), SceneGaussians(sim, lod[2], links)
+    fine_spacing, levels = load_hand_lod(str(ASSET_DIR))
+    assert len(levels) == 2 and fine_spacing < levels[0][0] < levels[1][0]
+    assert len(hand) > len(levels[0][1]) > len(levels[1][1]) > len(hand) / 3
+    both = SceneGaussians(sim, hand, links, hand_lod=(fine_spacing, levels))
+    alone = [SceneGaussians(sim, g, links) for g in (hand, levels[0][1], levels[1][1])]
     root = sim._link_pose[links[0]][:3, 3]
     z = float(view[0, 2, :3] @ torch.as_tensor(root, dtype=torch.float32) + view[0, 2, 3])
-    # focal lengths giving a pixel of 1.5× and 0.5× the coarse spacing at the hand
-    Ks = [torch.tensor([[[z / (s * lod[1]), 0.0, 24.0], [0.0, z / (s * lod[1]), 20.0], [0.0, 0.0, 1.0]]])
-          for s in (1.5, 0.5)]
+    s1, s2 = (IN_PLANE_SCALE * sp for sp, _ in levels)
+    # pixels at the hand finer than level 1's splats, between level 1's and 2's, coarser than 2's
+    pixels = (0.9 * s1, 0.5 * (s1 + s2), 1.2 * s2)
+    Ks = [torch.tensor([[[z / p, 0.0, 24.0], [0.0, z / p, 20.0], [0.0, 0.0, 1.0]]]) for p in pixels]
     posed = both.posed()
-    n = len(posed.gaussians)
-    assert posed.ranges(view, Ks[0]).tolist() == [[both.n_hand, n]]
-    assert posed.ranges(view, Ks[1]).tolist() == [[0, n - len(both.coarse_hand)]]
-    for K, alone in zip(Ks, (coarse, fine)):
+    n, n_fine = len(posed.gaussians), both.n_hand
+    n_rest = n - n_fine - len(both.hand_levels[0][1]) - len(both.hand_levels[1][1])
+    end1 = n_fine + n_rest + len(both.hand_levels[0][1])
+    expect = [[[0, n_fine + n_rest], [n_fine + n_rest] * 2],
+              [[n_fine, n_fine + n_rest], [n_fine + n_rest, end1]],
+              [[n_fine, n_fine + n_rest], [end1, n]]]
+    for K, ranges, scene in zip(Ks, expect, alone):
+        assert posed.ranges(view, K).tolist() == [ranges]
         a = posed.render(view, K, 48, 40, background=(1.0, 1.0, 1.0))
-        b = alone.render(view, K, 48, 40, background=(1.0, 1.0, 1.0))
+        b = scene.render(view, K, 48, 40, background=(1.0, 1.0, 1.0))
         assert float(b.alpha.max()) > 0.5, "the hand should be in the picture"
         assert (a.rgb - b.rgb).abs().max() < 1e-5 and (a.alpha - b.alpha).abs().max() < 1e-5
 

@@ -1,5 +1,5 @@
 """Reading a hand Gaussians folder (``gaussians.ply`` + ``links.json``, written by ``gausstac
-build-asset``, :mod:`.build`): the Gaussians and link names, the coarser level of detail, and
+build-asset``, :mod:`.build`): the Gaussians and link names, the coarser levels of detail, and
 the links whose surfaces are closed. One reader for the tasks, the agents and the demo; it
 needs no ManiSkill. Every function is cached per process and raises
 :class:`~gausstac_maniskill.errors.AssetError` naming the file and the field.
@@ -59,26 +59,38 @@ def load_hand_closed_links(folder: str) -> tuple:
 
 @lru_cache(maxsize=8)
 def load_hand_lod(folder: str):
-    """The coarser level of a hand Gaussians folder, or None: ``(fine spacing [m], coarse
-    spacing [m], coarse GaussianSet)`` from ``links.json``'s ``spacing`` and ``coarse`` entry
-    (``{"file": ..., "spacing": ...}``; the same link names and frames as ``gaussians.ply``).
-    A camera whose pixels at the hand are at least the coarse spacing draws the coarse set
-    (:class:`gausstac_maniskill.render.SceneGaussians`). Cached per process."""
+    """The coarser levels of a hand Gaussians folder, or None: ``(fine spacing [m], ((spacing
+    [m], GaussianSet), ...))``, finest first, from ``links.json``'s ``spacing`` and its
+    ``levels`` list (``[{"file": ..., "spacing": ...}, ...]``; an older folder's single
+    ``coarse`` entry is read as a one-level list). Every level is the same hand built at
+    another spacing: the same link names and frames as ``gaussians.ply``. A camera draws the
+    coarsest level whose splats are no wider than its pixels at the hand
+    (:class:`gausstac_maniskill.render.Detail`). Cached per process."""
     from .gaussians import load_ply
 
     links, meta, names = _links_json(folder)
-    coarse = meta.get("coarse")
-    if coarse is None:
+    levels = meta.get("levels", [meta["coarse"]] if "coarse" in meta else None)
+    field = "levels" if "levels" in meta else "coarse"
+    if levels is None:
         return None
+    if not isinstance(levels, list) or not levels:
+        raise AssetError(f"{links}: '{field}' must be a non-empty list of {{'file', 'spacing'}} objects")
     try:
-        fine, spacing, ply = float(meta["spacing"]), float(coarse["spacing"]), os.path.join(folder, coarse["file"])
+        fine = float(meta["spacing"])
+        entries = [(float(e["spacing"]), os.path.join(folder, e["file"])) for e in levels]
     except (KeyError, TypeError, ValueError) as e:
-        raise AssetError(f"{links}: 'coarse' needs 'file' and 'spacing' [m], and the file 'spacing' ({e!r})") from None
-    if not 0 < fine < spacing:
-        raise AssetError(f"{links}: coarse.spacing={spacing} must exceed spacing={fine} (metres)")
-    if not os.path.isfile(ply):
-        raise AssetError(f"{ply}: coarse hand Gaussians file not found ({links}: coarse.file)")
-    gs = load_ply(ply)
-    if len(gs) and int(gs.link_id.max()) >= len(names):
-        raise AssetError(f"{ply}: link ids reach {int(gs.link_id.max())}, but {links} names {len(names)} links")
-    return fine, spacing, gs
+        raise AssetError(f"{links}: each of '{field}' needs 'file' and 'spacing' [m], and the file 'spacing' "
+                         f"({e!r})") from None
+    spacings = [fine] + [s for s, _ in entries]
+    if not all(0 < a < b for a, b in zip(spacings, spacings[1:])):
+        raise AssetError(f"{links}: spacing={fine} and {field}[*].spacing={spacings[1:]} must grow from level "
+                         "to level (metres)")
+    out = []
+    for k, (spacing, ply) in enumerate(entries):
+        if not os.path.isfile(ply):
+            raise AssetError(f"{ply}: hand Gaussians file of a level of detail not found ({links}: {field}[{k}].file)")
+        gs = load_ply(ply)
+        if len(gs) and int(gs.link_id.max()) >= len(names):
+            raise AssetError(f"{ply}: link ids reach {int(gs.link_id.max())}, but {links} names {len(names)} links")
+        out.append((spacing, gs))
+    return fine, tuple(out)

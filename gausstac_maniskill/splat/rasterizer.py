@@ -98,7 +98,10 @@ With ``gaussian_ranges`` [C, 2], camera c sees only Gaussians [start, stop): B e
 concatenated into one set, each env's cameras seeing their own env's range, render in one
 call of three launches (its records and keys are per camera and local to the range, so a
 camera's picture equals that of its range rendered alone, bit for bit). ``lighting`` may
-then differ per camera (each env's scene lights).
+then differ per camera (each env's scene lights). With [C, 2, 2] a camera sees two ranges,
+the first then the second (a scene's shared Gaussians and one level of detail of its hand:
+``render.Detail``); its picture equals that of the two ranges' Gaussians, in that order,
+rendered alone.
 
 Device
 ------
@@ -265,7 +268,8 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
              use_cov: ti.template(), framed: ti.template(), rot_mode: ti.template(),
              lit: ti.template(), grey: ti.template(), cull: ti.template(), rec: _f32_3, bins: _i32_3):
     """EWA projection of camera c's Gaussians into camera c: the j-th of the Gaussians
-    [seen[c, 0], seen[c, 1]) (all of them, or camera c's env's) writes rec[c, j] and
+    [seen[c, 0], seen[c, 1]) then [seen[c, 2], seen[c, 3]) (all of them, or camera c's env's)
+    writes rec[c, j] and
     bins[c, j] (bins[c, j, B_TILES] = 0 if culled or past the range).
 
     ``use_cov``: covariances from ``cov6`` (else from ``quats``/``scales``); ``framed``:
@@ -282,9 +286,11 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
     """
     for c, j in ti.ndrange(viewmats.shape[0], bins.shape[1]):
         bins[c, j, B_TILES] = 0
-        g = seen[c, 0] + j  # the Gaussian; its entries are [c, j]
+        g = seen[c, 0] + j  # the Gaussian (of the first range, then the second); its entries are [c, j]
         if g >= seen[c, 1]:
-            continue
+            g = seen[c, 2] + g - seen[c, 1]
+            if g >= seen[c, 3]:
+                continue
         W = ti.Matrix([[viewmats[c, i, j] for j in ti.static(range(3))]
                        for i in ti.static(range(3))])  # world -> camera rotation
         t = ti.math.vec3(viewmats[c, 0, 3], viewmats[c, 1, 3], viewmats[c, 2, 3])
@@ -800,21 +806,25 @@ def _rasterize(g: _Inputs, frames: torch.Tensor | None, frame_rotations: torch.T
 
 
 def _camera_ranges(gaussian_ranges, C: int, n: int, device) -> tuple[torch.Tensor, int]:
-    """``gaussian_ranges`` [C, 2] (camera c sees Gaussians [start, stop)) checked, as int32 on
-    ``device``, and the longest range; None: every camera sees all ``n`` Gaussians."""
+    """``gaussian_ranges`` [C, 2] (camera c sees Gaussians [start, stop)) or [C, 2, 2] (two
+    such ranges) checked, as [C, 4] int32 (start, stop, start, stop) on ``device``, and the
+    most Gaussians a camera sees; None: every camera sees all ``n`` Gaussians."""
     if gaussian_ranges is None:
-        return torch.tensor([[0, n]], dtype=torch.int32, device=device).expand(C, 2).contiguous(), n
+        return torch.tensor([[0, n, n, n]], dtype=torch.int32, device=device).expand(C, 4).contiguous(), n
     r = torch.as_tensor(gaussian_ranges)
-    if r.shape != (C, 2) or r.dtype.is_floating_point:
-        raise ConfigError(f"gaussian_ranges must be an integer tensor of shape [C, 2] = [{C}, 2], got "
+    if r.shape not in ((C, 2), (C, 2, 2)) or r.dtype.is_floating_point:
+        raise ConfigError(f"gaussian_ranges must be an integer tensor of shape [C, 2] or [C, 2, 2] (C = {C}), got "
                           f"{r.dtype} {list(r.shape)}")
     r = r.to(torch.int64).cpu()
-    if C and ((r[:, 0] < 0).any() or (r[:, 1] < r[:, 0]).any() or (r[:, 1] > n).any()):
-        bad = int(((r[:, 0] < 0) | (r[:, 1] < r[:, 0]) | (r[:, 1] > n)).nonzero()[0])
-        raise ConfigError(f"gaussian_ranges[{bad}] = {r[bad].tolist()} is not a range [start, stop) "
-                          f"with 0 <= start <= stop <= N = {n}")
-    longest = int((r[:, 1] - r[:, 0]).max()) if C else 0
-    return r.to(device=device, dtype=torch.int32).contiguous(), longest
+    if r.dim() == 2:
+        r = torch.stack([r, r[:, 1:].expand(C, 2)], 1)  # and an empty second range
+    bad = ((r[..., 0] < 0) | (r[..., 1] < r[..., 0]) | (r[..., 1] > n)).any(1)
+    if C and bad.any():
+        c = int(bad.nonzero()[0])
+        raise ConfigError(f"gaussian_ranges[{c}] = {torch.as_tensor(gaussian_ranges)[c].tolist()} is not a range "
+                          f"[start, stop) (or two) with 0 <= start <= stop <= N = {n}")
+    most = int((r[..., 1] - r[..., 0]).sum(1).max()) if C else 0
+    return r.reshape(C, 4).to(device=device, dtype=torch.int32).contiguous(), most
 
 
 def _camera_lights(lighting, C: int, device) -> tuple[torch.Tensor, list]:
@@ -1024,7 +1034,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor | None, scales: torch.Ten
             background image for depth-aware compositing (Gaussians behind it
             are hidden). Use ``inf`` where the background is empty.
         gaussian_ranges: optional [C, 2] integers: camera c sees only Gaussians
-            [start, stop) (see *Batches* above); default: every camera sees all of them.
+            [start, stop); or [C, 2, 2]: two such ranges (see *Batches* above); default:
+            every camera sees all of them.
         near, far: clip distances along camera z, metres.
         timings: record per-stage wall times (ms) in ``RenderOutput.stats``.
 

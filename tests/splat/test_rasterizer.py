@@ -149,10 +149,28 @@ def test_gaussian_ranges_render_each_env_as_if_alone(scene_factory):
             assert torch.equal(getattr(one, name)[0], getattr(out, name)[c]), (c, name)
     with pytest.raises(ConfigError, match=r"gaussian_ranges\[1\] = \[150, 371\]"):
         render(both, V, K, W, H, gaussian_ranges=torch.tensor([[0, 150], [150, 371], [0, 1]]))
-    with pytest.raises(ConfigError, match="shape \\[C, 2\\] = \\[3, 2\\]"):
+    with pytest.raises(ConfigError, match="shape \\[C, 2\\] or \\[C, 2, 2\\] \\(C = 3\\)"):
         render(both, V, K, W, H, gaussian_ranges=ranges[:2])
     with pytest.raises(ConfigError, match="sequence of C = 3"):
         render(both, V, K, W, H, lighting=lights[:2], normals=normals)
+
+
+def test_two_ranges_per_camera_render_their_gaussians_alone(scene_factory):
+    """[C, 2, 2] ranges: a camera sees its first range, then its second (a scene's shared
+    Gaussians and one level of its hand, ``render.Detail``): every picture equals those
+    Gaussians, in that order, rendered alone, bit for bit (guards the kernel's indexing)."""
+    g = scene_factory(300, 1, seed=23)
+    V, K = cameras()
+    ranges = torch.tensor([[[0, 100], [200, 300]], [[50, 50], [120, 260]], [[0, 300], [300, 300]]])
+    out = render(g, V, K, W, H, background=BG, gaussian_ranges=ranges)
+    for c, ((a0, a1), (b0, b1)) in enumerate(ranges.tolist()):
+        idx = torch.cat([torch.arange(a0, a1), torch.arange(b0, b1)])
+        one = render(g[idx], V[c:c + 1], K[c:c + 1], W, H, background=BG)
+        assert one.alpha.max() > 0.3, "the Gaussians should show in camera %d" % c
+        for name in ("rgb", "depth", "alpha"):
+            assert torch.equal(getattr(one, name)[0], getattr(out, name)[c]), (c, name)
+    with pytest.raises(ConfigError, match=r"gaussian_ranges\[1\] = \[\[50, 50\], \[260, 120\]\]"):
+        render(g, V, K, W, H, gaussian_ranges=torch.tensor([[[0, 1], [1, 2]], [[50, 50], [260, 120]], [[0, 1]] * 2]))
 
 
 def test_deterministic(scene_factory):
