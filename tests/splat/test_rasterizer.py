@@ -185,18 +185,30 @@ def test_deterministic(scene_factory):
 def test_keys_padded_for_the_radix_sort_render_the_same(monkeypatch, scene_factory):
     """On the CPU a key list of RADIX_PAD_FROM..RADIX_SORT_FROM entries is padded to reach
     PyTorch's radix sort (faster); the padding sorts past the last tile and is never read.
-    Guards that rule: the picture is bit-equal to the unpadded sort's (17 798 keys here, in the
-    padded range, checked). It does not see padding sorted into a tile whose unset values
-    happen to draw nothing (a pad of 0 passed it)."""
+    Guards that rule: the picture is bit-equal to the unpadded sort's (18 242 keys here, in the
+    padded range, checked). The padding's values are left unset (``torch.empty``); here they
+    are set to draw a wide Gaussian over a whole tile, so that padding sorted into a tile shows
+    (a pad of 0 fails this test, tried)."""
+    from gausstac_maniskill.splat import GaussianSet
     from gausstac_maniskill.splat import rasterizer as R
 
-    g = scene_factory(3000, 0, seed=11)
+    wide = GaussianSet.create(torch.zeros(1, 3), torch.tensor([[1.0, 0.0, 0.0, 0.0]]), torch.full((1, 3), 1.0),
+                              torch.tensor([0.0]), torch.ones(1, 1, 3))
+    g = GaussianSet.cat([wide, scene_factory(3000, 0, seed=11)])  # Gaussian 0 covers every picture
     V, K = cameras()
+    empty = torch.empty
+    tile_box = (15 << 4 | 15 << 12) << 32  # a value's box: columns 0..15, rows 0..15
+
+    def unset_values_draw_gaussian_0(*args, **kwargs):
+        t = empty(*args, **kwargs)
+        return t.fill_(tile_box) if t.dtype == torch.int64 else t
+
+    monkeypatch.setattr(torch, "empty", unset_values_draw_gaussian_0)
     pictures = []
     for pad_from in (10**12, 1):
         monkeypatch.setattr(R, "RADIX_PAD_FROM", pad_from)
         pictures.append(render(g, V, K, 256, 192, background=BG, timings=True))
-    assert 1 <= pictures[0].stats["n_keys"] < R.RADIX_SORT_FROM
+    assert 1 <= pictures[0].stats["n_keys"] < R.RADIX_SORT_FROM, pictures[0].stats
     for name in ("rgb", "depth", "alpha"):
         assert torch.equal(getattr(pictures[0], name), getattr(pictures[1], name)), name
 
