@@ -148,6 +148,24 @@ class RigidLayer:
         return rigid_frames(self._pose_matrices())
 
 
+def _levels_of(hand_lod) -> list:
+    """The ((spacing [m], GaussianSet), ...) of ``hand_lod`` (``splat.asset.load_hand_lod``'s
+    form), checked: ConfigError unless the spacings grow from level to level."""
+    try:
+        _, levels = hand_lod
+        levels = [(float(sp), g) for sp, g in levels]
+    except (TypeError, ValueError):
+        raise ConfigError("hand_lod must be (fine spacing [m], ((spacing [m], GaussianSet), ...)) as "
+                          f"splat.asset.load_hand_lod returns it; got {type(hand_lod).__name__} of "
+                          f"{len(hand_lod) if hasattr(hand_lod, '__len__') else '?'} items") from None
+    spacings = [sp for sp, _ in levels]
+    if not levels or any(not isinstance(g, GaussianSet) for _, g in levels) \
+            or not all(0 < a < b for a, b in zip(spacings, spacings[1:])) or spacings[0] <= 0:
+        raise ConfigError(f"hand_lod: the levels must be GaussianSets with spacings that grow from level to "
+                          f"level, got spacings {spacings}")
+    return levels
+
+
 class Detail:
     """A scene's levels of detail of the hand (:class:`SceneGaussians` with ``hand_lod``).
 
@@ -254,7 +272,7 @@ class SceneGaussians:
             sets.append(self._drop_pad_regions(hand))
             self.n_hand = len(sets[0])
             if hand_lod is not None:
-                self.hand_levels = [(float(sp), self._drop_pad_regions(g)) for sp, g in hand_lod[1]]
+                self.hand_levels = [(float(sp), self._drop_pad_regions(g)) for sp, g in _levels_of(hand_lod)]
         self.object_names = list(objects or {})
         for i, name in enumerate(self.object_names):
             if name not in sim._objects:

@@ -290,3 +290,20 @@ def test_closed_links_skip_the_hand_faces_turned_away(pressed_scene):
         assert dz.mean() < 5e-4 and dz.max() < 1e-2, (dz.mean(), dz.max())
     with pytest.raises(ConfigError, match="not among the hand links"):
         SceneGaussians(sim, hand, links, closed_links=["no_such_link"])
+
+
+def test_hand_levels_of_detail_are_checked(pressed_scene):
+    """A ``hand_lod`` in the old three-item form, or with levels out of order, is a ConfigError
+    that says the expected form (not a TypeError from inside the scene)."""
+    from gausstac_maniskill.agents.base import load_hand_gaussians, load_hand_lod
+    from gausstac_maniskill.demo import ASSET_DIR
+    from gausstac_maniskill.errors import ConfigError
+    from gausstac_maniskill.render import SceneGaussians
+
+    sim, _, _ = pressed_scene
+    hand, links = load_hand_gaussians(str(ASSET_DIR))
+    fine, levels = load_hand_lod(str(ASSET_DIR))
+    with pytest.raises(ConfigError, match="as splat.asset.load_hand_lod returns it"):
+        SceneGaussians(sim, hand, links, hand_lod=(fine, levels[1][0], levels[1][1]))
+    with pytest.raises(ConfigError, match="grow from level to level"):
+        SceneGaussians(sim, hand, links, hand_lod=(fine, levels[::-1]))
