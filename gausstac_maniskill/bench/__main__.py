@@ -28,6 +28,7 @@ BENCHMARKS = {
     "hold": "gausstac_maniskill.bench.hold",
     "batch": "gausstac_maniskill.bench.batch",
     "scale": "gausstac_maniskill.bench.scale",
+    "motion": "gausstac_maniskill.bench.motion",
 }
 
 
