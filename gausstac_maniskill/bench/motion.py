@@ -32,10 +32,12 @@ LABELS = {"Fn_moving": "Fn, pressing", "Fn_first_held": "Fn, first held step", "
 
 
 def run(mass_scaling: float, dx: float = 1e-3, indenter: str = "plate", mover: str = "object",
-        depth: float = 1e-3, hold: int = 5) -> dict:
-    """One press-hold-slide-hold sequence at pad pseudo-mass factor ``mass_scaling``; returns
-    ``{"mass_scaling", "substeps", "step_ms", **FIELDS}`` (forces on the indenter in N, sensor
-    axes: Fn along -z into the pad, Ft along the slide)."""
+        depth: float = 1e-3, hold: int = 5, press_steps: int = 2) -> dict:
+    """One press-hold-slide-hold sequence at pad pseudo-mass factor ``mass_scaling``, the press
+    in ``press_steps`` control steps (depth / press_steps each after the first, which also
+    closes the 0.2 mm gap); returns ``{"mass_scaling", "substeps", "step_ms", **FIELDS}`` (forces on the
+    indenter in N, sensor axes: Fn along -z into the pad, Ft along the slide; "Fn_moving" is
+    the press's last step)."""
     from . import pad as P
 
     sim, W = P.make_sim(dx, indenter, mass_scaling=mass_scaling)
@@ -56,7 +58,7 @@ def run(mass_scaling: float, dx: float = 1e-3, indenter: str = "plate", mover: s
         F = R.T @ sim.object_wrench("indenter")[0]
         forces.append((F[2], -F[0]))
 
-    path = [(-depth * k / 2, 0.0) for k in (1, 2)] + [(-depth, 0.0)] * hold \
+    path = [(-depth * k / press_steps, 0.0) for k in range(1, press_steps + 1)] + [(-depth, 0.0)] * hold \
         + [(-depth, P.SLIDE * k / 2) for k in (1, 2)] + [(-depth, P.SLIDE)] * hold
     if mover == "object":
         step(P.GAP, 0.0)
@@ -68,8 +70,9 @@ def run(mass_scaling: float, dx: float = 1e-3, indenter: str = "plate", mover: s
     f = np.array(forces[1:])  # one row per step of ``path``
     return dict(mass_scaling=float(mass_scaling), substeps=float(np.mean(subs[1:])),
                 step_ms=1e3 * float(np.median(walls[1:])),
-                Fn_moving=float(f[1, 0]), Fn_first_held=float(f[2, 0]), Fn_held=float(f[1 + hold, 0]),
-                Ft_moving=float(f[3 + hold, 1]), Ft_held=float(f[-1, 1]))
+                Fn_moving=float(f[press_steps - 1, 0]), Fn_first_held=float(f[press_steps, 0]),
+                Fn_held=float(f[press_steps + hold - 1, 0]), Ft_moving=float(f[press_steps + hold + 1, 1]),
+                Ft_held=float(f[-1, 1]))
 
 
 def extrapolate(rows: list[dict]) -> dict:
@@ -98,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
     ap.add_argument("--indenter", default="plate", choices=["plate", "sphere"])
     ap.add_argument("--mover", default="object", choices=["object", "link"])
+    ap.add_argument("--press-steps", type=int, default=2,
+                    help="control steps of the 1 mm press (default 2: 10 mm/s; 6: 3.3 mm/s; 20: 1 mm/s)")
     ap.add_argument("--out", default="out/bench_motion")
     arch_option(ap)
     args = ap.parse_args(argv)
@@ -107,10 +112,18 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     arch = backend.init(args.arch)
-    rows = [run(s, args.dx, args.indenter, args.mover) for s in tqdm(args.mass_scaling, desc="mass scaling")]
+    if args.press_steps < 2:
+        ap.error("--press-steps must be at least 2 (the first step only reaches the pad)")
+    rows = [run(s, args.dx, args.indenter, args.mover, press_steps=args.press_steps)
+            for s in tqdm(args.mass_scaling, desc="mass scaling")]
     f0 = extrapolate(rows)
-    text = table(rows, f0, f"Index pad, {args.indenter}, the {args.mover} moving, dx = {args.dx * 1e3:g} mm, "
-                 f"Taichi {arch}: forces against the pads' pseudo-mass (errors against s → 0)")
+    from .pad import DT
+
+    speed = 1e3 * 1e-3 / (args.press_steps * DT)  # mm/s in the press's steps after the first
+    text = table(rows, f0, f"Index pad, {args.indenter}, the {args.mover} moving, dx = {args.dx * 1e3:g} mm, press "
+                 f"in {args.press_steps} steps ({speed:.1f} mm/s), Taichi {arch}: forces against the pads' "
+                 "pseudo-mass (errors against s → 0)")
     print(text)
-    print("wrote", write_report(args.out, f"motion_{args.indenter}_{args.mover}.md", text))
+    suffix = "" if args.press_steps == 2 else f"_press{args.press_steps}"
+    print("wrote", write_report(args.out, f"motion_{args.indenter}_{args.mover}{suffix}.md", text))
     return 0
