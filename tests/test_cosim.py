@@ -96,7 +96,7 @@ def test_stress_reading_matches_the_contact_force(hand_poses):
 
 def test_centred_press_map_is_symmetric(pressed):
     _, maps, _ = pressed
-    depth = maps[INDEX]["depth"].numpy()
+    depth = maps[INDEX]["depth"].cpu().numpy()
     H, W = depth.shape
     assert depth.max() > 0.5e-3
     # peak at the centre taxels

@@ -8,6 +8,7 @@ launches per step does not grow with the number of envs.
 import numpy as np
 import pytest
 
+from gausstac_maniskill import backend
 from gausstac_maniskill.config import Material, SolverSettings
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.mpm import MPMWorld, box_particles
@@ -72,6 +73,17 @@ def _readout(world, env, col):
                 wrench=np.concatenate(world.collider_wrench(col)), link=np.concatenate(world.link_wrench(f"base{env}")))
 
 
+def _assert_rounding_apart(a, b, e):
+    """Env ``e`` of a batch (b) against its scene alone (a), to float32 rounding: ~10 ulp at
+    4 mm in position (the stencil is taken from each box's own origin, or on CUDA the atomic
+    sums land in another order)."""
+    np.testing.assert_allclose(b["x"], a["x"], rtol=0, atol=3e-9, err_msg=f"env {e} positions")
+    np.testing.assert_allclose(b["F"], a["F"], rtol=0, atol=2e-5, err_msg=f"env {e} F")
+    scale = max(np.abs(a["wrench"][:3]).max(), 1e-6)
+    np.testing.assert_allclose(b["wrench"], a["wrench"], rtol=0, atol=1e-4 * scale, err_msg=f"env {e} wrench")
+    np.testing.assert_allclose(b["link"], a["link"], rtol=0, atol=1e-4 * scale, err_msg=f"env {e} link")
+
+
 def test_batched_envs_step_like_each_scene_alone():
     dt, steps = 4e-3, 4
     batch, cols, substeps = _run(SCENES, steps, dt)
@@ -79,13 +91,7 @@ def test_batched_envs_step_like_each_scene_alone():
     for e, sc in enumerate(SCENES):
         alone, acol, taken = _run([sc], steps, dt, substeps)
         assert taken == substeps
-        a, b = _readout(alone, 0, acol[0]), _readout(batch, e, cols[e])
-        # float32 rounding (the stencil is taken from each box's own origin): ~10 ulp at 4 mm
-        np.testing.assert_allclose(b["x"], a["x"], rtol=0, atol=3e-9, err_msg=f"env {e} positions")
-        np.testing.assert_allclose(b["F"], a["F"], rtol=0, atol=2e-5, err_msg=f"env {e} F")
-        scale = max(np.abs(a["wrench"][:3]).max(), 1e-6)
-        np.testing.assert_allclose(b["wrench"], a["wrench"], rtol=0, atol=1e-4 * scale, err_msg=f"env {e} wrench")
-        np.testing.assert_allclose(b["link"], a["link"], rtol=0, atol=1e-4 * scale, err_msg=f"env {e} link")
+        _assert_rounding_apart(_readout(alone, 0, acol[0]), _readout(batch, e, cols[e]), e)
     # the scenes are different and the contacts real: the check is not comparing zeros
     f = [np.abs(np.concatenate(batch.collider_wrench(c))[2]) for c in cols]
     assert f[0] > 1e-3 and f[1] > 1e-3 and f[2] == 0.0
@@ -93,7 +99,9 @@ def test_batched_envs_step_like_each_scene_alone():
 
 
 def test_identical_envs_are_bit_equal_to_the_scene_alone():
-    """Copies of one scene share the box and the slab order: the same sums in the same order."""
+    """Copies of one scene share the box and the slab order: the same sums in the same order
+    on the CPU. On CUDA the scatter's atomic adds land in no fixed order (the H100 run of
+    2026-11-26 differed in the last bit of x), so there only float32 rounding is promised."""
     dt, steps = 4e-3, 3
     sc = SCENES[1]
     batch, cols, substeps = _run([sc, sc, sc], steps, dt)
@@ -101,6 +109,9 @@ def test_identical_envs_are_bit_equal_to_the_scene_alone():
     a = _readout(alone, 0, acol[0])
     for e in range(3):
         b = _readout(batch, e, cols[e])
+        if backend.current_arch() == "cuda":
+            _assert_rounding_apart(a, b, e)
+            continue
         for k in a:
             assert np.array_equal(a[k], b[k]), f"env {e}: {k} differs"
 

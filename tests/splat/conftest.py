@@ -13,12 +13,6 @@ import math
 import pytest
 import torch
 
-from gausstac_maniskill import backend
-
-
-@pytest.fixture(scope="session", autouse=True)
-def _taichi_backend():
-    backend.init("cpu")  # $GAUSSTAC_ARCH, default auto (CUDA if present)
 
 
 @pytest.fixture(autouse=True)
