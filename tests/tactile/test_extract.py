@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from gausstac_maniskill.tactile import TaxelBinning, allegro_pad_specs, build_pad, tactile_maps
+from gausstac_maniskill.tactile import TaxelBinning, allegro_pad_specs, build_pad, force_footprint, tactile_maps
 from gausstac_maniskill.urdf import default_hand_urdf, link_mesh
 
 
@@ -45,3 +45,36 @@ def test_uniform_pressure_gives_a_smooth_force_map(index_pad):
     assert m.sum() >= f * inner.sum() - 1e-9
     assert m.sum() <= f * pad.surface.sum() + 1e-9
     assert not maps["depth"].numpy().any()  # at rest: no depth anywhere
+
+
+def _force_map(pad, magnitude, force_binning=None):
+    """The force map of ``magnitude`` [N] pushing each surface particle along -z (link = world)."""
+    forces = np.zeros((pad.num_particles, 3))
+    forces[pad.surface] = -magnitude[pad.surface, None] * pad.sensor_frame[:3, 2]
+    return tactile_maps(pad, TaxelBinning.for_pad(pad), pad.rest, np.eye(4), forces,
+                        force_binning=force_binning)["force"].numpy().astype(np.float64)
+
+
+def test_force_map_filters_a_pattern_of_the_grid_cell_and_keeps_a_smooth_load(index_pad):
+    """The force map spreads each particle's force over one grid cell (force_footprint). Guards
+    the filter, not the physics (bench pad's map L2 between resolutions is the evidence): a
+    ±50 % alternation from one particle column to the next (period dx = 1 mm, the pattern a
+    grid imprints on the particles' share of contact) reads flat, where the particle's own
+    footprint beats to 1.22 between neighbouring taxels; a smooth dome 4 mm in radius keeps
+    its total and its shape within 3 % (L2)."""
+    pad = index_pad
+    cell = TaxelBinning.for_pad(pad, force_footprint(pad, 1e-3))
+    column = np.floor(pad.rest[:, 1] / pad.spacing + 1e-6).astype(int)  # link y: the sensor's -y
+    alternating = 1e-3 * (1.0 + 0.5 * np.where(column % 2 == 0, 1.0, -1.0))
+    own, filtered = _force_map(pad, alternating), _force_map(pad, alternating, cell)
+    middle = lambda m: m[6:10, 6:10]  # noqa: E731 - the flat middle of the pad
+    assert middle(own).max() / middle(own).min() > 1.15
+    assert middle(filtered).max() / middle(filtered).min() < 1.01
+    s = pad.sensor_coords()
+    dome = 1e-3 * np.clip(1.0 - (s[:, 0] ** 2 + s[:, 1] ** 2) / 4e-3 ** 2, 0.0, None)
+    own, filtered = _force_map(pad, dome), _force_map(pad, dome, cell)
+    assert filtered.sum() == pytest.approx(own.sum(), rel=1e-6)  # (float32 maps)
+    assert np.linalg.norm(filtered - own) / np.linalg.norm(own) < 0.03
+    assert force_footprint(pad, 1e-3) == 1e-3 and force_footprint(pad, 0.2e-3) == pad.spacing
+    with pytest.raises(ValueError, match="footprint"):
+        TaxelBinning.for_pad(pad, 0.0)
