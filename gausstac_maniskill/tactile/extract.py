@@ -13,26 +13,28 @@ position x:
   over the soft particles of a taxel through the pad's thickness [Pa]. Unlike
   ``force`` it sees every contact, soft objects included.
 
-Each particle stands for a square of the sensor plane, one particle spacing wide, centred
-on the projection of its rest position; it is shared among the taxels that square overlaps,
-in proportion to the overlap (a conservative box-filter remap). Depth and shear are the
-overlap-weighted means over the surface particles of a taxel (empty taxels read 0), and the
-force map sums the overlap-weighted component along -z of the contact force the colliders
-exert on the particles [N]. So the force map adds up to the total normal contact force on
-the pad within the layout. (Assigning each particle whole to the taxel of its centre
-aliases: a 1.25 mm taxel holds 2 or 3 columns of a 0.5 mm lattice, and the force map
-beat by ±50 % between neighbouring taxels, differently at each resolution.)
+Each particle stands for a square of the sensor plane one *grid cell* wide (``Pad.footprint``:
+the MPM grid spacing dx, at least one particle spacing), centred on the projection of its
+rest position; it is shared among the taxels that square overlaps, in proportion to the
+overlap (a conservative box-filter remap). Depth and shear are the overlap-weighted means over
+the surface particles of a taxel (empty taxels read 0), pressure the same over its soft
+particles, and the force map sums the overlap-weighted component along -z of the contact force
+the colliders exert on the particles [N]. So the force map adds up to the total normal contact
+force on the pad within the layout (a particle within dx/2 of the layout's edge leaves part of
+its share outside it).
 
-For the force map each particle's square is one *grid cell* wide instead (``footprint`` of
-:meth:`TaxelBinning.for_pad`, the MPM grid spacing dx; :func:`force_footprint`). Contact
-reaches the particles through the grid, so the traction the simulation resolves varies on
-the scale of dx, not of the particle spacing: the particles of one cell share its nodes'
-impulse unevenly, by where they sit in the cell, a pattern of period dx that is a
-discretisation artefact, different at every resolution. Spreading each particle's force over
-its cell filters that pattern out and still adds up to the same total. Measured on the
-Allegro index pad (``bench pad``'s scenes, dx = 1 mm against 0.5 mm, relative L2 of the
-force map): plate pressed 1 mm 0.141 → 0.087, plate slid 0.153 → 0.092, 5 mm sphere
-pressed 0.5 mm 0.148 → 0.112 and 1 mm 0.077 → 0.060 (BENCHMARKS.md, 2026-11-26).
+Why a grid cell and not the particle's own spacing: the particles move with, and take their
+contact through, the grid, so the fields the simulation resolves vary on the scale of dx. The
+particles of one cell share its nodes' motion and impulse unevenly, by where they sit in the
+cell: a pattern of period dx that is a discretisation artefact, different at every resolution.
+A square one cell wide filters it out. Measured on the Allegro index pad (``bench pad``'s held
+scenes, relative L2 of the dx = 1 mm map against the 0.5 mm one, particle square → cell
+square; BENCHMARKS.md, 2026-11-26): force, plate pressed 1 mm 0.141 → 0.087, plate slid
+0.153 → 0.092, 5 mm sphere pressed 0.5 mm 0.148 → 0.112; shear, sphere pressed 1 mm
+0.114 → 0.082; depth, sphere slid 0.104 → 0.076. The price is a blur of one cell: the
+sphere's peak depth reads 1 % less. (Assigning each particle whole to the taxel of its
+centre aliases worse still: a 1.25 mm taxel holds 2 or 3 columns of a 0.5 mm lattice, and
+the force map beat by ±50 % between neighbouring taxels.)
 """
 from __future__ import annotations
 
@@ -43,24 +45,19 @@ import torch
 
 from .pad import Pad
 
-__all__ = ["TaxelBinning", "tactile_maps", "force_footprint", "MAP_KEYS"]
+__all__ = ["TaxelBinning", "tactile_maps", "MAP_KEYS"]
 
 #: The maps a pad gives, in this order (:func:`tactile_maps`, the device read, the sensor).
 MAP_KEYS = ("depth", "shear", "force", "pressure")
-
-
-def force_footprint(pad: Pad, dx: float) -> float:
-    """Width [m] of a particle's square in the force map: one MPM grid cell (``dx`` [m]), at
-    least one particle spacing (module docstring)."""
-    return max(float(pad.spacing), float(dx))
 
 
 @dataclass
 class TaxelBinning:
     """Precomputed share of every pad particle in each taxel: ``taxel`` [N, K] taxel indices
     (-1: outside the layout) and ``weight`` [N, K] the fraction of the particle's square
-    footprint (``footprint`` wide, one particle spacing by default) that falls in that taxel
-    (K = up to 2 × 2 taxels per particle when the taxel pitch is at least the footprint)."""
+    footprint (``footprint`` wide, by default the pad's :attr:`Pad.footprint`, one grid cell) that
+    falls in that taxel (K = up to 2 × 2 taxels per particle when the taxel pitch is at least the
+    footprint)."""
 
     taxel: np.ndarray  # [N, K] int
     weight: np.ndarray  # [N, K] float, rows sum to the share of the footprint inside the layout
@@ -70,10 +67,10 @@ class TaxelBinning:
     @classmethod
     def for_pad(cls, pad: Pad, footprint: float | None = None) -> "TaxelBinning":
         """The binning of ``pad``'s particles, each a square ``footprint`` [m] wide (default:
-        the particle spacing) centred on its rest place in the sensor plane."""
+        ``pad.footprint``) centred on its rest place in the sensor plane."""
         lay = pad.spec.layout
         s = pad.sensor_coords()
-        width = float(pad.spacing if footprint is None else footprint)
+        width = float(pad.footprint if footprint is None else footprint)
         if not (np.isfinite(width) and width > 0.0):
             raise ValueError(f"TaxelBinning.for_pad: footprint={footprint!r} m must be positive")
         axes = []
@@ -105,19 +102,16 @@ class TaxelBinning:
 
 
 def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_pose: np.ndarray,
-                 contact_forces: np.ndarray, stresses: np.ndarray | None = None,
-                 force_binning: TaxelBinning | None = None) -> dict[str, torch.Tensor]:
+                 contact_forces: np.ndarray, stresses: np.ndarray | None = None) -> dict[str, torch.Tensor]:
     """Tactile maps of one pad.
 
     Args:
         pad: the pad (rest geometry in the link frame).
-        binning: its :class:`TaxelBinning` (particle footprints).
+        binning: its :class:`TaxelBinning`.
         positions: [N, 3] current world positions of the pad's particles [m].
         link_pose: 4x4 current world pose of the pad's link.
         contact_forces: [N, 3] world contact force on each particle [N].
         stresses: optional [N, 3, 3] world Cauchy stress of each particle [Pa].
-        force_binning: the force map's binning (the product's: one grid cell per particle,
-            :func:`force_footprint`); default ``binning``.
 
     Returns:
         ``{"depth": [H, W] m, "shear": [H, W, 2] m, "force": [H, W] N, "pressure": [H, W] Pa}``
@@ -137,8 +131,7 @@ def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_po
     depth = binning.accumulate(surf, -un) / safe
     sx = binning.accumulate(surf, shear[:, 0]) / safe
     sy = binning.accumulate(surf, shear[:, 1]) / safe
-    fb = binning if force_binning is None else force_binning
-    force = fb.accumulate((fb.taxel >= 0).any(axis=1), fn)
+    force = binning.accumulate(inside, fn)
     pressure = np.zeros(H * W)
     if stresses is not None:
         zw = R @ S[:, 2]

@@ -38,6 +38,7 @@ class Pad:
         surface: [N] bool, the outermost particle layer (depth < spacing).
         sensor_frame: 4x4 sensor frame in the link frame (z out of the pad, x along the finger).
         spacing: particle spacing [m].
+        cell: the MPM grid spacing [m] the pad was built for (0: not known).
     """
 
     spec: PadSpec
@@ -48,6 +49,7 @@ class Pad:
     surface: np.ndarray
     sensor_frame: np.ndarray
     spacing: float
+    cell: float = 0.0
 
     @property
     def name(self) -> str:
@@ -56,6 +58,12 @@ class Pad:
     @property
     def num_particles(self) -> int:
         return len(self.rest)
+
+    @property
+    def footprint(self) -> float:
+        """Width [m] of the square of the sensor plane each particle stands for in the tactile
+        maps: one grid cell, at least one particle spacing (:mod:`.extract`)."""
+        return max(float(self.spacing), float(self.cell))
 
     def sensor_coords(self) -> np.ndarray:
         """[N, 3] rest positions in the sensor frame."""
@@ -202,7 +210,8 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
            spec.thickness, float(spacing), float(dx))
     if key in _CACHE:
         rest, kin, dist, nrm, surface, S = _CACHE[key]
-        return Pad(spec, rest.copy(), kin.copy(), dist.copy(), nrm.copy(), surface.copy(), S.copy(), spacing)
+        return Pad(spec, rest.copy(), kin.copy(), dist.copy(), nrm.copy(), surface.copy(), S.copy(), spacing,
+                   float(dx))
     if not mesh.is_watertight or not mesh.volume > 0:
         raise AssetError(f"{label}: the pad mesh must be watertight with positive volume "
                          f"(watertight={mesh.is_watertight}, volume={mesh.volume:.3g} m^3)")
@@ -232,7 +241,7 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
     x /= np.linalg.norm(x)
     S = np.eye(4)
     S[:3, 0], S[:3, 1], S[:3, 2], S[:3, 3] = x, np.cross(axis, x), axis, origin
-    pad = Pad(spec, rest, kin[keep], dist, nrm, dist < spacing, S, spacing)
+    pad = Pad(spec, rest, kin[keep], dist, nrm, dist < spacing, S, spacing, float(dx))
     _CACHE[key] = (pad.rest, pad.kinematic, pad.depth, pad.normal, pad.surface, pad.sensor_frame)
     return pad
 

@@ -6,18 +6,17 @@ NumPy reference, which the tests compare against), computed where the particles 
 * nothing of the particle state comes back to the host, only the maps ([B, H, W] per pad
   and map), written straight into a torch tensor on the device of the Taichi arch;
 * every (env, pad) taxel is one thread that gathers its particles from a precomputed list
-  (the taxel's share of each particle's footprint, :class:`TaxelBinning`), in a fixed
-  order: no atomics, the same sums on any thread count.
+  (the taxel's share of each particle's footprint, one grid cell wide: :class:`TaxelBinning`),
+  in a fixed order: no atomics, the same sums on any thread count.
 
 Per taxel t of a pad on link pose (R, o), sensor axes S (columns x, y, z in the link
-frame), for each particle i of the taxel with overlap weight w_i (its footprint one
-particle spacing wide) and force weight f_i (one grid cell wide, :func:`.extract.force_footprint`),
-rest place X_i (link frame), world position x_i, contact impulse J_i of the control step Δt,
-Kirchhoff stress τ_i and deformation gradient F_i:
+frame), for each particle i of the taxel with overlap weight w_i and rest place X_i (link
+frame), world position x_i, contact impulse J_i of the control step Δt, Kirchhoff stress
+τ_i and deformation gradient F_i:
 
 * u_i = Sᵀ (Rᵀ (x_i − o) − X_i), the displacement on the sensor axes;
 * depth = Σ w (−u_z) / Σ w, shear = Σ w (u_x, u_y) / Σ w over the surface particles;
-* force = Σ f (−J_i · R S z) / Δt over all of the taxel's particles [N];
+* force = Σ w (−J_i · R S z) / Δt over all of the taxel's particles [N];
 * pressure = Σ w (−z_wᵀ σ_i z_w) / Σ w over the soft ones, σ = τ / det F, z_w = R S z [Pa].
 """
 
@@ -29,7 +28,7 @@ import torch
 
 from .. import backend
 from ..mpm.kernels import NDF, NDF2, NDI, NDI2, NDM, NDV
-from .extract import TaxelBinning, force_footprint
+from .extract import TaxelBinning
 from .pad import Pad
 
 __all__ = ["TactileReadout"]
@@ -41,8 +40,7 @@ Particles = ti.types.argpack(  # the MPM world's state arrays (all groups, all e
     x=NDV, impulse=NDV, tau=NDM, F=NDM)  # position [m], contact impulse of the step [N s], τ [Pa], F
 Taxels = ti.types.argpack(  # per pad, the same in every env
     taxel_pad=NDI, taxel_start=NDI,  # per taxel (all pads' taxels in a row): its pad, its first entry
-    entry_particle=NDI, entry_weight=NDF, entry_force=NDF,  # per entry: particle (in its pad), overlaps
-    entry_flags=NDI,  # (of its particle footprint, of its grid cell for the force), flags
+    entry_particle=NDI, entry_weight=NDF, entry_flags=NDI,  # per entry: particle (in its pad), overlap, flags
     entry_rest=NDV,  # the particle's rest place in the link frame [m]
     pad_axes=NDM)  # per pad: sensor axes in the link frame (columns x, y, z)
 Slots = ti.types.argpack(  # per (env, pad), row env · n_pad + pad; uploaded at each read
@@ -71,14 +69,14 @@ def taxel_maps(state: Particles, tab: Taxels, slots: Slots, n_pad: ti.i32, inv_d
                 i = first + tab.entry_particle[k]
                 w = tab.entry_weight[k]
                 flags = tab.entry_flags[k]
-                if flags & SURFACE and w > 0.0:
+                if flags & SURFACE:
                     u = S.transpose() @ (R.transpose() @ (state.x[i] - o) - tab.entry_rest[k])
                     acc[0] += -w * u[2]
                     acc[1] += w * u[0]
                     acc[2] += w * u[1]
                     w_surf += w
-                acc[3] += -tab.entry_force[k] * state.impulse[i].dot(z_w) * inv_dt  # pressing force along -z
-                if flags & SOFT and w > 0.0:
+                acc[3] += -w * state.impulse[i].dot(z_w) * inv_dt  # pressing force along -z
+                if flags & SOFT:
                     sigma = state.tau[i] / ti.max(state.F[i].determinant(), 1e-6)  # Cauchy
                     acc[4] += -w * z_w.dot(sigma @ z_w)
                     w_soft += w
@@ -105,8 +103,7 @@ class TactileReadout:
     envs at once (see the module docstring).
 
     Args:
-        world: the MPM world the pads' particles live in (its grid spacing sets the force
-            map's footprint, :func:`.extract.force_footprint`).
+        world: the MPM world the pads' particles live in.
         pads: the pads, the same in every env (their rest geometry and sensor layout).
         slots: per env, per pad (in ``pads`` order), ``(group name, link name)`` in the world.
     """
@@ -124,34 +121,24 @@ class TactileReadout:
         taxel_pad, starts = [], [0]
         for p, pad in enumerate(self.pads):
             b = TaxelBinning.for_pad(pad)
-            bf = TaxelBinning.for_pad(pad, force_footprint(pad, world.settings.dx))
             n_taxel = b.rows * b.cols
-            # entries: the (taxel, particle) pairs of either binning, with both overlaps
-            taxel, n, w, wf = [], [], [], []
-            for bin_, is_force in ((b, False), (bf, True)):
-                i, k = np.nonzero((bin_.taxel >= 0) & (bin_.weight > 0.0))
-                taxel.append(bin_.taxel[i, k])
-                n.append(i)
-                w.append(np.where(is_force, 0.0, bin_.weight[i, k]))
-                wf.append(np.where(is_force, bin_.weight[i, k], 0.0))
-            taxel, n, w, wf = (np.concatenate(c) for c in (taxel, n, w, wf))
-            pair, first = np.unique(taxel.astype(np.int64) * pad.num_particles + n, return_inverse=True)
-            w = np.bincount(first, weights=w, minlength=len(pair))  # by taxel, then particle: the reference's order
-            wf = np.bincount(first, weights=wf, minlength=len(pair))
-            taxel, n = (pair // pad.num_particles).astype(np.int64), (pair % pad.num_particles).astype(np.int64)
+            n, k = np.nonzero(b.taxel >= 0)
+            keep = b.weight[n, k] > 0.0
+            n, k = n[keep], k[keep]
+            order = np.lexsort((k, n, b.taxel[n, k]))  # by taxel, then particle: the reference's order
+            n, k = n[order], k[order]
             flags = np.where(pad.surface[n], SURFACE, 0) | np.where(pad.kinematic[n], 0, SOFT)
-            rows.append((n, w, wf, flags, pad.rest[n]))
-            counts = np.bincount(taxel, minlength=n_taxel)
+            rows.append((n, b.weight[n, k], flags, pad.rest[n]))
+            counts = np.bincount(b.taxel[n, k], minlength=n_taxel)
             starts.extend(starts[-1] + np.cumsum(counts))
             taxel_pad.extend([p] * n_taxel)
             self.offsets.append(self.offsets[-1] + n_taxel)
-        n, w, wf, f, rest = (np.concatenate(c) for c in zip(*rows))
+        n, w, f, rest = (np.concatenate(c) for c in zip(*rows))
         self._tab = dict(  # the Taxels pack's arrays (packs are built per launch: one held to exit errs)
             taxel_pad=_ndarray(np.array(taxel_pad, np.int32), ti.i32),
             taxel_start=_ndarray(np.array(starts, np.int32), ti.i32),
             entry_particle=_ndarray(n.astype(np.int32), ti.i32),
             entry_weight=_ndarray(w.astype(np.float32), ti.f32),
-            entry_force=_ndarray(wf.astype(np.float32), ti.f32),
             entry_flags=_ndarray(f.astype(np.int32), ti.i32),
             entry_rest=_ndarray(rest.astype(np.float32), ti.f32, vec=3),
             pad_axes=_ndarray(np.array([pad.sensor_frame[:3, :3] for pad in self.pads], np.float32), ti.f32, mat=3))

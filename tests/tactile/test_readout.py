@@ -11,7 +11,7 @@ import pytest
 from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
 from gausstac_maniskill.mpm import Sphere
 from gausstac_maniskill.pose import MujocoPoseSource
-from gausstac_maniskill.tactile import TaxelBinning, allegro_pad_specs, force_footprint, tactile_maps
+from gausstac_maniskill.tactile import TaxelBinning, allegro_pad_specs, tactile_maps
 from gausstac_maniskill.transforms import make_pose
 
 INDEX = "link_3.0_tip"
@@ -38,7 +38,7 @@ def _reference(sim, name):
     pad, w = sim.pads[name], sim.world
     g, link = dict(zip(sim.pads, sim.pad_slots()))[name]
     return tactile_maps(pad, TaxelBinning.for_pad(pad), w.positions(g), w.link_pose(link), w.contact_forces(g),
-                        w.stresses(g), TaxelBinning.for_pad(pad, force_footprint(pad, w.settings.dx)))
+                        w.stresses(g))
 
 
 def test_device_maps_equal_the_numpy_reference(pressed):
