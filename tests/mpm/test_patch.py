@@ -3,6 +3,7 @@ contact is simulated; the rest rides with its link."""
 import numpy as np
 import pytest
 
+from gausstac_maniskill import backend
 from gausstac_maniskill.config import Material, SolverSettings
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.mpm import MPMWorld, Sphere, box_particles
@@ -62,7 +63,7 @@ def test_a_pad_nothing_touches_costs_nothing_and_rides_with_its_link():
     # float32 rounding of the carried rotation: within 1e-6 on the CPU, 2.2e-6 on CUDA (H100,
     # 2026-11-26: its fused multiply-adds round otherwise); a pad left unturned is off by up to 0.32
     np.testing.assert_allclose(world.deformation_gradients("pad"), np.broadcast_to(T[:3, :3], (len(rest), 3, 3)),
-                               atol=4e-6)
+                               atol=4e-6 if backend.current_arch() == "cuda" else 1e-6)
 
 
 def test_the_frozen_part_rides_rigidly_and_a_released_pad_relaxes_whole():

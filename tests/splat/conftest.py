@@ -14,7 +14,6 @@ import pytest
 import torch
 
 
-
 @pytest.fixture(autouse=True)
 def _torch_single_thread():
     """Small torch ops with 2 OpenMP threads are 10-50x slower when another process
