@@ -35,7 +35,8 @@ def test_lame_parameters_and_wave_speed():
 
 @pytest.mark.parametrize("field,value", [("dx", 0), ("cfl", 1.5), ("max_substeps", 0),
                                          ("mass_scaling", 0.5), ("damping", -1.0),
-                                         ("gravity", (0, 1)), ("particles_per_axis", 7)])
+                                         ("gravity", (0, 1)), ("particles_per_axis", 7),
+                                         ("hold_scaling", 0.5), ("hold_speed", 0.0)])
 def test_solver_settings_fields(field, value):
     with pytest.raises(ConfigError, match=rf"SolverSettings\.{field}"):
         SolverSettings(**{field: value})

@@ -1279,6 +1279,28 @@ Reduction = ti.types.argpack(  # what reduce_contact reads and sums into
 
 
 @ti.kernel
+def group_drift(P: Particles, active: NDI, n: ti.i32, link_poses: NDF2, dt: ti.f32, out: NDF):
+    """out[g] = the largest speed [m/s] of a dynamic particle of group g relative to its
+    link's rigid motion over the step just taken (pose rows of kinematics.py)."""
+    for ii in range(n):
+        p = active[ii]
+        l = P.link[p]
+        if P.kind[p] == DYNAMIC and l >= 0:
+            R0, t0 = pose_at(link_poses, l, 0.0)
+            R1, t1 = pose_at(link_poses, l, 1.0)
+            x0 = R0 @ (R1.transpose() @ (P.x[p] - t1)) + t0  # where the link's motion took x from
+            v_link = (P.x[p] - x0) / dt  # (zero when the link stands)
+            ti.atomic_max(out[P.group[p]], (P.v[p] - v_link).norm())
+
+
+@ti.kernel
+def scale_mass(P: Particles, start: ti.i32, stop: ti.i32, factor: ti.f32):
+    """Rows [start, stop): mass ← factor · mass (a pad's pseudo-mass changed)."""
+    for p in range(start, stop):
+        P.mass[p] *= factor
+
+
+@ti.kernel
 def torn_particles(P: Particles, X0: NDV, active: NDI, n: ti.i32, link_poses: NDF2, group_tear: NDF, torn: NDI):
     """torn[g] += the number of group g's dynamic particles farther than ``group_tear[g]`` [m]
     (0: no check) from their rest place R X0 + t on their link's end pose: no elastic state of

@@ -17,6 +17,10 @@ Time integration differs by kind of group (explicit MLS-MPM substeps for all):
   near critical for the layer's slowest mode, so they settle to elastic equilibrium
   within a control step. Their kinematic core holds them, so the pseudo-mass never
   shows as a wrong fall or swing of the pad; weight always uses the physical mass.
+  Dynamic relaxation's equilibrium does not depend on the pseudo-mass, only its path to
+  it does, so a pad that has settled while nothing moves its boundary (its link and its
+  env's colliders stand still, no soft body is awake) takes ``SolverSettings.hold_scaling``
+  times more (4× fewer substeps at the default 16) until its boundary moves again.
 
 With ``SolverSettings.pressure = "implicit"`` the λ ln J term of Neo-Hookean groups is one
 value per grid cell, solved backward Euler in every substep (``kernels.pressure_solve``); the
@@ -113,6 +117,8 @@ class Group:
     patch_state: int = 0  # active patch (mpm.patch): 0 at rest, 1 patched in contact, 2 released (whole)
     env: int = 0  # the env (scene) of a batched world it belongs to: it touches only that env's groups and colliders
     tear: float = 0.0  # quasi-static: a particle this far [m] from its rest place has lost its core (0: no check)
+    hold: bool = False  # quasi-static: held and settled, at settings.hold_mass_scaling
+    drift: float = math.inf  # quasi-static: largest particle speed relative to its link at the last step's end [m/s]
 
     @property
     def stop(self) -> int:
@@ -778,6 +784,8 @@ class MPMWorld:
         t0 = time.perf_counter()
         self._push()
         driver = self._driver_speed(float(dt))
+        if self.settings.hold_scaling > 1.0:
+            self._choose_hold(float(dt))
         n_sub, dt_sub = self.plan_substeps(float(dt), driver)
         if int(min_substeps) > n_sub and self._n_active:
             n_sub, dt_sub = int(min_substeps), float(dt) / int(min_substeps)
@@ -835,6 +843,12 @@ class MPMWorld:
         pairs = d["pair_impulse"].to_numpy().astype(np.float64)
         self._pair_impulse = pairs[: len(self.link_names) * n_slot].reshape(len(self.link_names), n_slot, 7)
         torn = self._torn_groups() if self._n_active else []
+        if self.settings.hold_scaling > 1.0 and self._n_active and any(g.quasi_static for g in self.groups):
+            d["group_drift"].fill(0.0)
+            K.group_drift(self._pack["P"], d["active"], self._n_active, d["link_pose"], float(dt), d["group_drift"])
+            drift = d["group_drift"].to_numpy()
+            for i, g in enumerate(self.groups):
+                g.drift = float(drift[i]) if g.awake else math.inf
         self._link_prev = self._link_next.copy()
         self._link_twist = twists
         self._col_prev = self._collider_poses()
@@ -844,6 +858,38 @@ class MPMWorld:
         self._rest_torn(torn, driver)
         self.last_step = StepInfo(n_sub, dt_sub, time.perf_counter() - t0, self._n_active, cells)
         return self.last_step
+
+    def _choose_hold(self, dt: float) -> None:
+        """Which awake quasi-static groups hold (see the module docstring): those whose link and
+        env colliders move their surfaces slower than ``hold_speed / 5`` over the step, with no
+        soft body awake in their env, and that either hold already or drifted slower than
+        ``hold_speed`` relative to their link at the end of the last step."""
+        s = self.settings
+        limit = 0.2 * s.hold_speed * dt  # boundary travel [m] that counts as standing still
+        links = _surface_travel(self._link_prev, self._link_next, self._link_radius)
+        cols = np.zeros(0)
+        if self.colliders:
+            r = np.array([_collider_radius(c) for c in self.colliders])
+            cols = _surface_travel(self._col_prev, self._collider_poses(), np.where(np.isfinite(r), r, 1.0))
+        for g in self.groups:
+            if not (g.awake and g.quasi_static and g.link >= 0):
+                continue
+            still = links[g.link] <= limit and all(cols[k] <= limit for k in range(len(cols))
+                                                   if self._col_env[k] == g.env)
+            still = still and not any(h.awake and not h.quasi_static and h.env == g.env for h in self.groups)
+            self._set_hold(g, still and (g.hold or g.drift < s.hold_speed))
+
+    def _set_hold(self, g: Group, hold: bool) -> None:
+        """Put group g on its hold pseudo-mass or back (masses and relaxation rate)."""
+        if hold == g.hold:
+            return
+        f = self.settings.hold_scaling if hold else 1.0 / self.settings.hold_scaling
+        if self._on_device():
+            K.scale_mass(self._pack["P"], g.start, g.stop, f)
+        self._host["mass"][g.start:g.stop] *= np.float32(f)
+        g.mass_scale *= f
+        g.relaxation /= math.sqrt(f)
+        g.hold = hold
 
     def _torn_groups(self) -> list[tuple[Group, int]]:
         """Awake quasi-static groups with particles beyond their ``tear`` distance from their
@@ -1155,6 +1201,7 @@ class MPMWorld:
         upload("group_tear", np.array([g.tear for g in self.groups] or [0.0], np.float32), ti.f32)
         d["torn"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
         d["group_touched"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
+        d["group_drift"] = ti.ndarray(ti.f32, shape=max(len(self.groups), 1))
         upload("group_field", np.array([g.field for g in self.groups] or [0], np.int32), ti.i32)
         upload("group_env", np.array([g.env for g in self.groups] or [0], np.int32), ti.i32)
         # the grid holds one box per env and awake field: each group's copy (_refresh_active)
@@ -1307,6 +1354,7 @@ class MPMWorld:
             "collider_pose": np.array([self.colliders[i].pose for i in cols]).copy(),
             "awake": np.array([g.awake for g in G]),
             "patch_state": np.array([g.patch_state for g in G], np.int32),
+            "hold": np.array([g.hold for g in G]), "drift": np.array([g.drift for g in G]),
             "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in G],
             "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
             "collider_impulse": self._col_impulse[cols].copy(), "last_dt_ctrl": self._last_dt_ctrl,
@@ -1346,10 +1394,14 @@ class MPMWorld:
         for n, i in enumerate(cols):
             self.colliders[i].pose = state["collider_pose"][n].copy()
         patch = state.get("patch_state", np.zeros(len(groups), np.int32))
+        hold = state.get("hold", np.zeros(len(groups), bool))
+        drift = state.get("drift", np.full(len(groups), np.inf))
         for n, i in enumerate(groups):
             g, sp = self.groups[i], state["sleep_pose"][n]
             g.awake, g.sleep_pose, g.patch_state = bool(state["awake"][n]), (None if sp is None else sp.copy()), \
                 int(patch[n])
+            g.drift = float(drift[n])
+            self._set_hold(g, bool(hold[n]))
         # one clock for all envs: every env's state carries the world's scalars, so restoring
         # all of them is exact; the largest speed (the next substep count) is kept at least
         # where it was while other envs share the world

@@ -120,3 +120,54 @@ def test_pseudo_mass_ignores_the_hand_acceleration():
         worst = max(worst, float(np.abs(local - rest).max()))
     assert worst < 1e-5, f"pad deformed {worst * 1e3:.4f} mm by the link's acceleration"
     assert math.isfinite(worst)
+
+
+def press_hold_move(hold_scaling, held=8, state_at=None):
+    """A 4 mm sphere pressed 1 mm into the block pad over three control steps of 50 ms, held
+    ``held`` steps, then moved 0.2 mm sideways; per step (Fn [N], substeps). With ``state_at``
+    also the world and its state after that many steps."""
+    world = pad_world(mass_scaling=1000.0, hold_scaling=hold_scaling)
+    ball = world.add_collider(Sphere(radius=4e-3, pose=make_pose([0, 0, 4e-3]), friction=0.5))
+    out, saved = [], None
+    for k in range(3 + held + 1):
+        x = 2e-4 if k == 3 + held else 0.0
+        world.set_collider_pose(ball, make_pose([x, 0, 4e-3 - 1e-3 * min(1, (k + 1) / 3)]))
+        world.step(0.05)
+        out.append((float(world.collider_wrench(ball)[0][2]), world.last_step.substeps))
+        if state_at == k + 1:
+            saved = world.state_dict()
+    return out, (world, ball, saved)
+
+
+def test_a_settled_held_pad_takes_fewer_substeps_and_keeps_its_force():
+    """Dynamic relaxation's equilibrium does not depend on the pseudo-mass: once the pressed pad
+    has settled and nothing moves, it takes 16x the pseudo-mass (4x fewer substeps) and reads
+    the force the default pseudo-mass reads, within 0.5 % (measured: 0.06-0.2 %); the sphere's
+    first move brings the default back for that step. Guards the switch both ways and that it
+    leaves the held force alone; the held force itself is checked against theory elsewhere."""
+    held, _ = press_hold_move(16.0)
+    ref, _ = press_hold_move(1.0)
+    assert all(h[1] == r[1] for h, r in zip(held[:4], ref[:4]))  # pressing: the default pseudo-mass
+    holding = [k for k in range(4, 11) if held[k][1] * 3 <= ref[k][1]]
+    assert holding and holding[0] <= 6 and holding == list(range(holding[0], 11)), (held, ref)
+    for k in holding:
+        assert held[k][0] == pytest.approx(ref[k][0], rel=5e-3), (k, held[k], ref[k])
+    assert held[11][1] == ref[11][1]  # moved: the default again
+    assert held[11][0] == pytest.approx(ref[11][0], rel=0.01)
+
+
+def test_a_held_pad_state_reloads_bit_exact():
+    """A state saved while a pad holds (its larger pseudo-mass) loads into a fresh world, which
+    then steps exactly like the original: one more held step, then the move."""
+    _, (world, _, saved) = press_hold_move(16.0, held=7, state_at=9)  # steps 4-10 held, 11 moves
+    assert saved["hold"][0]
+    twin = pad_world(mass_scaling=1000.0, hold_scaling=16.0)
+    ball = twin.add_collider(Sphere(radius=4e-3, pose=make_pose([0, 0, 4e-3]), friction=0.5))
+    twin.load_state_dict(saved)
+    assert twin.group("pad").hold
+    for x in (0.0, 2e-4):
+        twin.set_collider_pose(ball, make_pose([x, 0, 3e-3]))
+        twin.step(0.05)
+    assert not twin.group("pad").hold
+    assert np.array_equal(twin.positions("pad"), world.positions("pad"))
+    assert np.array_equal(twin.velocities("pad"), world.velocities("pad"))
