@@ -209,6 +209,7 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
 
     def hold(phase: str, d: float, z: float, x: float) -> dict:
         Fs, ms, areas, Fstress = [], [], [], []
+        first = len(walls)
         for _ in range(protocol.hold):
             F, m = step(z, x)
             Fs.append(F)
@@ -220,10 +221,12 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
         Fn = float(Fs[:, 2].mean())
         end = len(Fs) // 2
         stress, pressure = np.array(Fstress).T
+        held_walls, held_subs = walls[first + end:], subs[first + end:]
         return dict(phase=phase, d=d, Fn=Fn, Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
                     F_map=float(maps["force"].sum()), F_stress=float(stress.mean()), F_pressure=float(pressure.mean()),
                     Fn_end=float(Fs[end:, 2].mean()), F_stress_end=float(stress[end:].mean()),
                     F_pressure_end=float(pressure[end:].mean()),
+                    wall_end=1e3 * float(np.mean(held_walls)), substeps_end=float(np.mean(held_subs)),
                     F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
                     area_taxel=float((maps["force"] > AREA_FORCE).sum() * taxel_area),
                     area_particle=float(np.mean(areas)), peak_depth=float(maps["depth"].max()), maps=maps)
@@ -414,7 +417,9 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
             runs.append(dict(dx=dx, mass_scaling=ms, patch_radius=pr, cfl=c.get("cfl", cfl), active=c["active"],
                              particles=c["particles"],
                              substeps=c["substeps"],
-                             step_ms=c["step_ms"], Fn=c["phases"][0]["Fn_end"], F_spread=c["phases"][0]["F_spread"],
+                             step_ms=c["step_ms"], held_ms=c["phases"][0]["wall_end"],
+                             held_substeps=c["phases"][0]["substeps_end"],
+                             Fn=c["phases"][0]["Fn_end"], F_spread=c["phases"][0]["F_spread"],
                              F_stress=c["phases"][0]["F_stress_end"], F_pressure=c["phases"][0]["F_pressure_end"]))
     from ..cosim import default_hand_settings
 
@@ -440,15 +445,16 @@ def format_curve(curve: dict, indenter: str, depth: float) -> str:
            f"reference {curve['reference']:.4f} N ({curve['reference_from']})", "",
            "| dx [mm] | cells in the 4 mm layer | pad mass scaling | Courant number | patch radius [mm] | particles | "
            "simulated (held) | substeps / step | "
-           "MPM wall / 50 ms step [ms] | Fn [N] | Fn spread over hold | error | "
-           "Fn from pad stress [N] | stress / contact | pressure map × area / contact |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "MPM wall / 50 ms step [ms] | second half of the hold: substeps, ms / step | Fn [N] | "
+           "Fn spread over hold | error | Fn from pad stress [N] | stress / contact | pressure map × area / contact |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(curve["runs"], key=lambda r: r["step_ms"]):
         patch = "off" if r["patch_radius"] is None else f"{r['patch_radius'] * 1e3:g}"
         out.append(f"| {r['dx'] * 1e3:g} | {4e-3 / r['dx']:.1f} | {r['mass_scaling']:g} | {r['cfl']:g} | {patch} | "
                    f"{r['particles']} | "
                    f"{r['active']:.0f} | "
-                   f"{r['substeps']:.0f} | {r['step_ms']:.0f} | {r['Fn']:.4f} | {100 * r['F_spread']:.1f}% | "
+                   f"{r['substeps']:.0f} | {r['step_ms']:.0f} | {r['held_substeps']:.0f}, {r['held_ms']:.0f} | "
+                   f"{r['Fn']:.4f} | {100 * r['F_spread']:.1f}% | "
                    f"{_pct(r['err'])} | {r['F_stress']:.4f} | {_pct(r['F_stress'] / r['Fn'] - 1)} | "
                    f"{_pct(r['F_pressure'] / r['Fn'] - 1)} |")
     return "\n".join(out)

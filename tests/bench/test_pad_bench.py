@@ -71,7 +71,8 @@ def _fake_case(fn):
         return dict(particles=int(1e-6 / dx ** 3), active=0.5e-6 / dx ** 3, cfl=0.4, substeps=10.0, step_ms=1e-3 / dx,
                     phases=[dict(Fn=0.5 * fn(dx, mass_scaling), Fn_end=fn(dx, mass_scaling), F_spread=0.0,
                                  F_stress=0.5 * fn(dx, mass_scaling), F_stress_end=0.95 * fn(dx, mass_scaling),
-                                 F_pressure=0.5 * fn(dx, mass_scaling), F_pressure_end=0.9 * fn(dx, mass_scaling))])
+                                 F_pressure=0.5 * fn(dx, mass_scaling), F_pressure_end=0.9 * fn(dx, mass_scaling),
+                                 wall_end=0.5e-3 / dx, substeps_end=5.0)])
     return run_case
 
 
