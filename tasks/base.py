@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import dataclasses
 import os
 import time
 import warnings
@@ -481,8 +482,13 @@ class GaussTacEnv(BaseEnv):
             hand_lod = load_hand_lod(agent.gausstac_gaussians) if self.splat_lod else None
             closed = load_hand_closed_links(agent.gausstac_gaussians) if self.splat_cull else ()
         objects = self._object_poses()
+        settings = self.mpm_settings
+        if self.mpm_every_sim_step:
+            # the pads' reaction moves SAPIEN bodies: their pseudo-mass stays what the coupling
+            # was built and measured with (a held pad's larger one jolted a pinched cube)
+            settings = dataclasses.replace(settings, hold_scaling=1.0)
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
-                                   urdf=agent.pad_urdf(), settings=self.mpm_settings,
+                                   urdf=agent.pad_urdf(), settings=settings,
                                    sleep_margin=self.mpm_sleep_margin)
         self.cosims = self._batch.scenes
         for name, obj in self._rigid.items():
