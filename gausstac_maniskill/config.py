@@ -133,7 +133,8 @@ class SolverSettings:
             relaxation does not depend on the pseudo-mass, so a held contact keeps its force
             (within 0.2 % over ten held steps on the Allegro pad, ``bench pad --curve``) at
             √hold_scaling fewer substeps (4× at the default 16); the first motion of its
-            boundary brings the default pseudo-mass back for that step.
+            boundary brings the default pseudo-mass back for that step. ``GaussTacEnv`` sets it
+            to 1 where the pads' reaction moves SAPIEN bodies (``pad_reaction``, two-way objects).
         hold_speed: the speed [m/s] below which a pad counts as settled (see ``hold_scaling``).
         damping: viscous velocity damping rate [1/s] applied on the grid
             (v ← v·exp(-damping·Δt)); 0 = none. Helps reach quasi-static states.
