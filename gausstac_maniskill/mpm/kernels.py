@@ -1294,10 +1294,10 @@ def group_drift(P: Particles, active: NDI, n: ti.i32, link_poses: NDF2, dt: ti.f
 
 
 @ti.kernel
-def scale_mass(P: Particles, start: ti.i32, stop: ti.i32, factor: ti.f32):
-    """Rows [start, stop): mass ← factor · mass (a pad's pseudo-mass changed)."""
+def fill_mass(P: Particles, start: ti.i32, stop: ti.i32, mass: ti.f32):
+    """Rows [start, stop): mass ← ``mass`` [kg] (a pad's pseudo-mass changed)."""
     for p in range(start, stop):
-        P.mass[p] *= factor
+        P.mass[p] = mass
 
 
 @ti.kernel

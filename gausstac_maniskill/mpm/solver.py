@@ -117,7 +117,7 @@ class Group:
     patch_state: int = 0  # active patch (mpm.patch): 0 at rest, 1 patched in contact, 2 released (whole)
     env: int = 0  # the env (scene) of a batched world it belongs to: it touches only that env's groups and colliders
     tear: float = 0.0  # quasi-static: a particle this far [m] from its rest place has lost its core (0: no check)
-    hold: bool = False  # quasi-static: held and settled, at settings.hold_mass_scaling
+    hold: bool = False  # quasi-static: held and settled, its pseudo-mass times settings.hold_scaling
     drift: float = math.inf  # quasi-static: largest particle speed relative to its link at the last step's end [m/s]
 
     @property
@@ -880,16 +880,19 @@ class MPMWorld:
             self._set_hold(g, still and (g.hold or g.drift < s.hold_speed))
 
     def _set_hold(self, g: Group, hold: bool) -> None:
-        """Put group g on its hold pseudo-mass or back (masses and relaxation rate)."""
+        """Put group g on its hold pseudo-mass or back (masses and relaxation rate). The mass is
+        set anew from density, pseudo-mass and rest volume, as add_group set it, so switching
+        back and forth never drifts."""
         if hold == g.hold:
             return
         f = self.settings.hold_scaling if hold else 1.0 / self.settings.hold_scaling
-        if self._on_device():
-            K.scale_mass(self._pack["P"], g.start, g.stop, f)
-        self._host["mass"][g.start:g.stop] *= np.float32(f)
-        g.mass_scale *= f
+        g.mass_scale = self.settings.mass_scaling * (self.settings.hold_scaling if hold else 1.0)
         g.relaxation /= math.sqrt(f)
         g.hold = hold
+        mass = np.float32(g.material.density * g.mass_scale * float(self._host["vol"][g.start]))
+        if self._on_device():
+            K.fill_mass(self._pack["P"], g.start, g.stop, float(mass))
+        self._host["mass"][g.start:g.stop] = mass
 
     def _torn_groups(self) -> list[tuple[Group, int]]:
         """Awake quasi-static groups with particles beyond their ``tear`` distance from their
