@@ -751,10 +751,17 @@ class MPMWorld:
                 f"a softer material, quasi-static SolverSettings.mass_scaling > 1, or raise max_substeps.")
         return n, dt / n
 
-    def _driver_speed(self, dt: float) -> float:
-        """Upper bound of link/collider surface speeds [m/s] over the next step: the origin's
-        travel plus the turn's angle times the body's radius, over dt."""
-        speed = _surface_travel(self._link_prev, self._link_next, self._link_radius).max(initial=0.0)
+    def _driver_speed(self, dt: float, travel=None) -> float:
+        """Upper bound of link/collider surface speeds [m/s] over the next step of dt seconds
+        (from :meth:`_boundary_travel`, or ``travel`` it returned)."""
+        links, cols = self._boundary_travel() if travel is None else travel
+        return float(max(links.max(initial=0.0), cols.max(initial=0.0))) / dt
+
+    def _boundary_travel(self) -> tuple[np.ndarray, np.ndarray]:
+        """Upper bounds [m] of how far each link's [L] and each collider's [C] surface moves over
+        the next step: the origin's travel plus the turn's angle times the body's radius."""
+        links = _surface_travel(self._link_prev, self._link_next, self._link_radius)
+        cols = np.zeros(0)
         if self.colliders:
             nxt = self._collider_poses()
             r = np.array([_collider_radius(c) for c in self.colliders])
@@ -763,8 +770,8 @@ class MPMWorld:
                 self._pull(("x",))
                 x = self._host["x"] if self._n else np.zeros((1, 3))
                 r[far] = [float(np.linalg.norm(x - T[:3, 3], axis=1).max()) for T in nxt[far]]
-            speed = max(speed, _surface_travel(self._col_prev, nxt, r).max())
-        return float(speed) / dt
+            cols = _surface_travel(self._col_prev, nxt, r)
+        return links, cols
 
     def step(self, dt: float, min_substeps: int = 1) -> StepInfo:
         """Advance one control step of ``dt`` seconds; links and colliders move from
@@ -783,9 +790,10 @@ class MPMWorld:
             raise ConfigError(f"step(dt={dt!r}): dt must be a positive finite number of seconds")
         t0 = time.perf_counter()
         self._push()
-        driver = self._driver_speed(float(dt))
+        travel = self._boundary_travel()
+        driver = self._driver_speed(float(dt), travel)
         if self.settings.hold_scaling > 1.0:
-            self._choose_hold(float(dt))
+            self._choose_hold(float(dt), travel)
         n_sub, dt_sub = self.plan_substeps(float(dt), driver)
         if int(min_substeps) > n_sub and self._n_active:
             n_sub, dt_sub = int(min_substeps), float(dt) / int(min_substeps)
@@ -859,18 +867,15 @@ class MPMWorld:
         self.last_step = StepInfo(n_sub, dt_sub, time.perf_counter() - t0, self._n_active, cells)
         return self.last_step
 
-    def _choose_hold(self, dt: float) -> None:
+    def _choose_hold(self, dt: float, travel: tuple[np.ndarray, np.ndarray]) -> None:
         """Which awake quasi-static groups hold (see the module docstring): those whose link and
-        env colliders move their surfaces slower than ``hold_speed / 5`` over the step, with no
-        soft body awake in their env, and that either hold already or drifted slower than
-        ``hold_speed`` relative to their link at the end of the last step."""
+        env colliders move their surfaces slower than ``hold_speed / 5`` over the step (``travel``:
+        :meth:`_boundary_travel`), with no soft body awake in their env, and that either hold
+        already or drifted slower than ``hold_speed`` relative to their link at the end of the
+        last step."""
         s = self.settings
         limit = 0.2 * s.hold_speed * dt  # boundary travel [m] that counts as standing still
-        links = _surface_travel(self._link_prev, self._link_next, self._link_radius)
-        cols = np.zeros(0)
-        if self.colliders:
-            r = np.array([_collider_radius(c) for c in self.colliders])
-            cols = _surface_travel(self._col_prev, self._collider_poses(), np.where(np.isfinite(r), r, 1.0))
+        links, cols = travel
         for g in self.groups:
             if not (g.awake and g.quasi_static and g.link >= 0):
                 continue
