@@ -446,8 +446,10 @@ def _rasterize_tiles(starts: _i64_1, vals: _i64_1, rec: _f32_3,
     (pixel index li = row·16 + column); a finished pixel stores -T (T > 0
     otherwise) and has its bit cleared in its row's mask ``live``. A Gaussian whose
     box (in its key's value) covers no unfinished pixel is skipped without reading its
-    record, and rows with nothing left to draw are skipped whole. Each tile owns its
-    pixels: no atomics, deterministic.
+    record; otherwise it visits only the unfinished pixels of its box, row by row, as the
+    set bits of ``live & box`` (lowest column first: each pixel still takes its Gaussians
+    in depth order, so the picture is the same as visiting every pixel of the box). Each
+    tile owns its pixels: no atomics, deterministic.
     """
     C, H, Wd = out_rgb.shape[0], out_rgb.shape[1], out_rgb.shape[2]
     tiles_y = (H + TILE - 1) // TILE
@@ -504,39 +506,40 @@ def _rasterize_tiles(starts: _i64_1, vals: _i64_1, rec: _f32_3,
                 cr, cg, cb = rec[c, g, R_R], rec[c, g, R_G], rec[c, g, R_BL]
                 half_a = -0.5 * A
                 for r in range(cy0, cy1):
-                    if live[r] & box_bits != 0:
+                    todo_row = live[r] & box_bits  # the box's unfinished pixels of this row
+                    if todo_row != 0:
                         # power = -½(A dx² + C dy²) - B dx dy along the row
                         y = py0 + r
                         dy = y + 0.5 - v
                         lin = -B * dy
                         const = -0.5 * Cc * dy * dy
-                        dx = px0 + cx0 + 0.5 - u
-                        li = r * TILE + cx0
-                        for col in range(cx0, cx1):
+                        while todo_row != 0:  # each unfinished pixel once, lowest column first
+                            low = todo_row & (~todo_row + ti.u32(1))
+                            todo_row ^= low
+                            col = 31 - ti.cast(ti.math.clz(low), ti.i32)
+                            dx = px0 + col + 0.5 - u
                             power = (half_a * dx + lin) * dx + const
                             if power >= thr:  # inside the support: o·exp(power) may reach 1/255
-                                T = trans[li]
-                                if T > 0.0:
-                                    alpha = ti.min(ALPHA_MAX, o * ti.exp(power))
-                                    if alpha >= ALPHA_MIN:
-                                        T_next = T * (1.0 - alpha)
-                                        hidden = False
-                                        if ti.static(use_bg_depth):
-                                            hidden = z > z_bg[li]  # behind the background surface
-                                        if hidden or T_next < T_MIN:
-                                            # finished *before* this Gaussian
-                                            trans[li] = -T
-                                            alive -= 1
-                                            live[r] &= ~ti.u32(1 << col)
-                                        else:
-                                            w = alpha * T  # blending weight
-                                            acc_r[li] += w * cr
-                                            acc_g[li] += w * cg
-                                            acc_b[li] += w * cb
-                                            acc_z[li] += w * z
-                                            trans[li] = T_next
-                            dx += 1.0
-                            li += 1
+                                li = r * TILE + col
+                                T = trans[li]  # > 0: its bit in live is set
+                                alpha = ti.min(ALPHA_MAX, o * ti.exp(power))
+                                if alpha >= ALPHA_MIN:
+                                    T_next = T * (1.0 - alpha)
+                                    hidden = False
+                                    if ti.static(use_bg_depth):
+                                        hidden = z > z_bg[li]  # behind the background surface
+                                    if hidden or T_next < T_MIN:
+                                        # finished *before* this Gaussian
+                                        trans[li] = -T
+                                        alive -= 1
+                                        live[r] &= ~low
+                                    else:
+                                        w = alpha * T  # blending weight
+                                        acc_r[li] += w * cr
+                                        acc_g[li] += w * cg
+                                        acc_b[li] += w * cb
+                                        acc_z[li] += w * z
+                                        trans[li] = T_next
         # write out, compositing the background with the remaining transmittance
         for y, x in ti.ndrange((py0, py1), (px0, px1)):
             li = (y - py0) * TILE + (x - px0)
