@@ -259,6 +259,16 @@ def _box_1d(centre: ti.f32, radius: ti.f32, size: ti.i32):
     return lo, hi
 
 
+@ti.func
+def _split(i: ti.i32, n: ti.i32, one_camera: ti.template()):
+    """(camera, item) of the flat index i over cameras × n items; with ``one_camera`` it is
+    (0, i) without the integer division, which costs as much as a small loop body."""
+    c, k = 0, i
+    if ti.static(not one_camera):
+        c, k = ti.raw_div(i, n), ti.raw_mod(i, n)  # (i >= 0: no floor correction)
+    return c, k
+
+
 @ti.kernel
 def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _f32_2,
              sh: _f32_3, degree: ti.i32, sh_rot: _f32_3, frame_id: _i32_1, frames: _f32_3,
@@ -266,7 +276,8 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
              viewmats: _f32_3, cams: _f32_2, seen: _i32_2, width: ti.i32, height: ti.i32,
              near: ti.f32, far: ti.f32,
              use_cov: ti.template(), framed: ti.template(), rot_mode: ti.template(),
-             lit: ti.template(), grey: ti.template(), cull: ti.template(), rec: _f32_3, bins: _i32_3):
+             lit: ti.template(), grey: ti.template(), cull: ti.template(), one_camera: ti.template(),
+             rec: _f32_3, bins: _i32_3):
     """EWA projection of camera c's Gaussians into camera c: the j-th of the Gaussians
     [seen[c, 0], seen[c, 1]) then [seen[c, 2], seen[c, 3]) (all of them, or camera c's env's)
     writes rec[c, j] and
@@ -284,7 +295,8 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
     ``cams`` [C, 12]: the per-camera constants of :func:`_camera_constants`. Only entries
     of Gaussians that touch a tile are written.
     """
-    for c, j in ti.ndrange(viewmats.shape[0], bins.shape[1]):
+    for i in range(viewmats.shape[0] * bins.shape[1]):
+        c, j = _split(i, bins.shape[1], one_camera)
         bins[c, j, B_TILES] = 0
         g = seen[c, 0] + j  # the Gaussian (of the first range, then the second); its entries are [c, j]
         if g >= seen[c, 1]:
@@ -394,7 +406,7 @@ def _project(means: _f32_2, quats: _f32_2, scales: _f32_2, cov6: _f32_2, opac: _
 
 @ti.kernel
 def _emit_keys(ends: _i64_1, bins: _i32_3, tiles_x: ti.i32, tiles_per_cam: ti.i32, keys: _i64_1,
-               vals: _i64_1):
+               vals: _i64_1, one_camera: ti.template()):
     """One key per (Gaussian, touched tile): (camera·tiles + tile) << 32 | depth bits, and
     its value: the part of the Gaussian's box inside the tile (4 bits each: first column,
     last column, first row, last row, tile-local) << 32 | Gaussian index. ``ends`` [C·N]:
@@ -404,7 +416,8 @@ def _emit_keys(ends: _i64_1, bins: _i32_3, tiles_x: ti.i32, tiles_per_cam: ti.i3
     Positive float32 depths compare like their bit patterns read as integers,
     so sorting the keys sorts by tile, then front to back.
     """
-    for c, g in ti.ndrange(bins.shape[0], bins.shape[1]):
+    for i in range(bins.shape[0] * bins.shape[1]):
+        c, g = _split(i, bins.shape[1], one_camera)
         count = bins[c, g, B_TILES]
         off = ends[c * bins.shape[1] + g] - count
         if count > 0:
@@ -439,7 +452,7 @@ def _emit_entry(keys: ti.template(), vals: ti.template(), off: ti.i64, first_til
 def _rasterize_tiles(starts: _i64_1, vals: _i64_1, rec: _f32_3,
                      background: _f32_4, bg_is_image: ti.i32, bg_depth: _f32_3,
                      use_bg_depth: ti.template(), tiles_x: ti.i32, spread: ti.template(),
-                     out_rgb: _f32_4, out_depth: _f32_3, out_alpha: _f32_3):
+                     one_camera: ti.template(), out_rgb: _f32_4, out_depth: _f32_3, out_alpha: _f32_3):
     """Front-to-back α compositing, one thread per (camera, 16×16 tile).
 
     The tile's transmittance T and colour/depth sums live in thread-local arrays
@@ -455,10 +468,12 @@ def _rasterize_tiles(starts: _i64_1, vals: _i64_1, rec: _f32_3,
     tiles_y = (H + TILE - 1) // TILE
     # Taichi's CPU backend hands a parallel loop out in blocks of at least 512 iterations
     # (adaptive block size): a loop over the 64 tiles of a 128×128 picture would run on one
-    # thread. Each tile is therefore ``spread`` iterations of which the first does the work.
-    for c, tile, lane in ti.ndrange(C, tiles_y * tiles_x, spread):
-        if lane != 0:
+    # thread. Each tile is therefore ``spread`` iterations (a power of two) of which the first
+    # does the work.
+    for i in range(C * tiles_y * tiles_x * spread):
+        if i & (spread - 1) != 0:
             continue
+        c, tile = _split(i >> ti.static(spread.bit_length() - 1), tiles_y * tiles_x, one_camera)
         px0 = (tile % tiles_x) * TILE
         py0 = (tile // tiles_x) * TILE
         px1 = ti.min(px0 + TILE, Wd)
@@ -947,7 +962,7 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     if n_seen:
         _project(g.means, g.quats, g.scales, g.cov6, g.opacity, g.sh, g.degree, sh_rot, frame_id, frames,
                  normals, lights, albedo_pow, viewmats, cams, seen, width, height, float(near), float(far),
-                 g.use_cov, framed, rot_mode, lit, grey, cull, rec, bins)
+                 g.use_cov, framed, rot_mode, lit, grey, cull, C == 1, rec, bins)
     sync()
     t_proj = time.perf_counter()
 
@@ -959,7 +974,7 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
         keys = torch.empty(n_sort, dtype=torch.int64, device=dev)
         vals = torch.empty(n_sort, dtype=torch.int64, device=dev)
         keys[n_keys:] = n_tile_total << 32  # padding: past the last tile
-        _emit_keys(ends, bins, tiles_x, tiles_x * tiles_y, keys, vals)
+        _emit_keys(ends, bins, tiles_x, tiles_x * tiles_y, keys, vals, C == 1)
         keys, order = torch.sort(keys, stable=True)
         vals = vals.index_select(0, order)  # (a quarter of the time of vals[order])
         # tile t's entries are [starts[t], starts[t + 1]) of the sorted list
@@ -976,7 +991,7 @@ def _rasterize_stages(g: _Inputs, frames, frame_rotations, viewmats, Ks, width, 
     out_alpha = torch.empty(C, height, width, **f32)
     spread = 256 if backend.current_arch() == "cpu" else 1
     _rasterize_tiles(starts, vals, rec, bg, bg_is_image, bg_depth, background_depth is not None,
-                     tiles_x, spread, out_rgb, out_depth, out_alpha)
+                     tiles_x, spread, C == 1, out_rgb, out_depth, out_alpha)
     sync()
     t_end = time.perf_counter()
     stats = {"n_keys": n_keys}
