@@ -29,6 +29,8 @@ from typing import Callable
 
 import taichi as ti
 
+from .cpu_pinning import pin_taichi_workers, thread_ids
+
 __all__ = ["BackendError", "init", "ensure_init", "current_arch", "torch_device", "is_initialized", "before_shutdown"]
 
 _VALID = ("cpu", "cuda", "auto")
@@ -149,8 +151,10 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
                       log_level=ti.WARN, **opts)
         if cpu_threads:
             kwargs["cpu_max_num_threads"] = cpu_threads
+        before = thread_ids()
         ti.init(**kwargs)
         _arch = "cpu"
+        pin_taichi_workers(before, ti.lang.impl.current_cfg().cpu_max_num_threads)
         return _arch
 
 

@@ -1,4 +1,5 @@
 """The single ti.init: arch names, CUDA asked for on a machine without it, compile switches."""
+import ast
 import os
 import subprocess
 import sys
@@ -50,3 +51,24 @@ def test_compile_builds_reach_taichi(build, cfg, opt):
         assert "ERR GAUSSTAC_COMPILE='bogus' is not one of" in out.stdout, out.stdout + out.stderr
     else:
         assert out.stdout.split()[-3:] == [cfg, opt, str(1 << 30)], out.stdout + out.stderr
+
+
+_CORES = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+
+
+@pytest.mark.skipif(_CORES < 2, reason="pinning needs a process that may use 2 or more cores")
+@pytest.mark.parametrize("threads, pin, pinned", [(_CORES, "", True), (_CORES, "0", False), (1, "", False)])
+def test_cpu_pool_workers_pinned_one_per_core(threads, pin, pinned):
+    """Guards the wiring of cpu_pinning (not physics; the speed it buys is in BENCHMARKS.md): a
+    pool with one worker per core has its workers pinned to distinct cores, all of them;
+    ``GAUSSTAC_CPU_PIN=0`` or a smaller pool (process collection) leaves every thread free."""
+    code = ("import os\nfrom gausstac_maniskill import backend\nbackend.init('cpu')\n"
+            "print(sorted(tuple(sorted(os.sched_getaffinity(int(t)))) for t in os.listdir('/proc/self/task')))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "GAUSSTAC_CPU_THREADS": str(threads), "GAUSSTAC_CPU_PIN": pin})
+    masks = ast.literal_eval(out.stdout.strip().splitlines()[-1])
+    single = sorted(m for m in masks if len(m) == 1)
+    if pinned:
+        assert single == sorted((c,) for c in os.sched_getaffinity(0)), out.stdout + out.stderr
+    else:
+        assert single == [], out.stdout + out.stderr

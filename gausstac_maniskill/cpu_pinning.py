@@ -1,0 +1,89 @@
+"""One core per Taichi CPU worker: pinning Taichi's thread pool (Linux).
+
+Taichi 1.7's CPU backend runs every parallel loop on its own pool of worker threads
+(``cpu_max_num_threads`` of them, one per core by default); the Python thread only waits.
+Its workers sleep between loops, and the kernel's scheduler places a woken worker where it
+sees fit. On the project's 2-core benchmark machine (a Firecracker VM whose guest kernel packs
+runnable threads onto few vCPUs) both workers were often woken on one vCPU: a loop of a few
+milliseconds then ran on one core with two threads taking turns. Pinning worker i to core i
+(what ``OMP_PROC_BIND`` does for OpenMP) keeps them apart. ``BENCHMARKS.md`` ("the workers
+pinned") has the measurements.
+
+The pool's threads are not named, so :func:`pin_taichi_workers` finds them by what they
+do: the threads that ``ti.init`` created and that run a short parallel probe loop. It pins
+only a pool that has one worker per core the process may use (Ray or process collection
+gives each process fewer threads than cores, ``GAUSSTAC_CPU_THREADS``: those are left to the
+scheduler) and never when ``GAUSSTAC_CPU_PIN=0``.
+"""
+
+import os
+
+import taichi as ti
+
+__all__ = ["thread_ids", "pin_taichi_workers"]
+
+#: probe loop: items (a few per pool task), and sine terms per item (about 10 µs each)
+_PROBE_ITEMS, _PROBE_WORK = 4096, 1000
+
+
+def thread_ids() -> set[int]:
+    """Kernel thread ids of this process (empty where ``/proc`` is not there)."""
+    try:
+        return {int(t) for t in os.listdir("/proc/self/task")}
+    except OSError:
+        return set()
+
+
+def _run_ns(tid: int) -> int:
+    """Nanoseconds thread ``tid`` has run on a CPU (``/proc/self/task/<tid>/schedstat``;
+    -1 when the thread is gone or the file is missing)."""
+    try:
+        with open(f"/proc/self/task/{tid}/schedstat") as f:
+            return int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return -1
+
+
+@ti.kernel
+def _probe(out: ti.types.ndarray(dtype=ti.f32, ndim=1), work: ti.i32):
+    """A parallel loop long enough (tens of ms) for every pool worker to take part."""
+    for i in range(out.shape[0]):
+        s = ti.f32(i)
+        for k in range(work):
+            s += ti.sin(s * 1e-3 + k)
+        out[i] = s
+
+
+def pin_taichi_workers(before: set[int], n_threads: int) -> list[int]:
+    """Pin Taichi's CPU pool workers one per core, if the pool has one worker per core.
+
+    Args:
+        before: the thread ids that existed before ``ti.init`` (:func:`thread_ids`).
+        n_threads: the pool's size (``cpu_max_num_threads``).
+
+    Returns:
+        The pinned workers' thread ids, worker k on the k-th core of the process's
+        affinity set (empty: nothing pinned — disabled, not Linux, a pool smaller than
+        the cores, or its workers not all found).
+    """
+    if os.environ.get("GAUSSTAC_CPU_PIN", "1") == "0" or not hasattr(os, "sched_setaffinity"):
+        return []
+    cores = sorted(os.sched_getaffinity(0))
+    if n_threads != len(cores) or n_threads < 2:
+        return []
+    out = ti.ndarray(ti.f32, _PROBE_ITEMS)
+    _probe(out, 0)  # compiled first: a compiler thread must not count as a worker
+    ti.sync()
+    new = sorted(thread_ids() - before)
+    start = {t: _run_ns(t) for t in new}
+    _probe(out, _PROBE_WORK)
+    ti.sync()
+    workers = [t for t in new if start[t] >= 0 and _run_ns(t) > start[t]]
+    if len(workers) != n_threads:
+        return []
+    try:
+        for core, tid in zip(cores, workers):
+            os.sched_setaffinity(tid, {core})
+    except OSError:
+        return []
+    return workers
