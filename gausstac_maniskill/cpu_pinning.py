@@ -3,11 +3,11 @@
 Taichi 1.7's CPU backend runs every parallel loop on its own pool of worker threads
 (``cpu_max_num_threads`` of them, one per core by default); the Python thread only waits.
 Its workers sleep between loops, and the kernel's scheduler places a woken worker where it
-sees fit. On the project's 2-core benchmark machine (a Firecracker VM whose guest kernel packs
-runnable threads onto few vCPUs) both workers were often woken on one vCPU: a loop of a few
-milliseconds then ran on one core with two threads taking turns. Pinning worker i to core i
-(what ``OMP_PROC_BIND`` does for OpenMP) keeps them apart. ``BENCHMARKS.md`` ("the workers
-pinned") has the measurements.
+sees fit. On the project's 2-core benchmark machine (a Firecracker VM; ``sched_vcpu_pack`` on
+its kernel command line) both workers often ran on one vCPU after an env step: the splat
+camera's loops of a few milliseconds then took as long as on one thread. Pinning worker i to
+core i (what ``OMP_PROC_BIND`` does for OpenMP) keeps them apart. ``BENCHMARKS.md`` ("Taichi's
+workers pinned one per core") has the measurements.
 
 The pool's threads are not named, so :func:`pin_taichi_workers` finds them by what they
 do: the threads that ``ti.init`` created and that run a short parallel probe loop. It pins
