@@ -22,8 +22,8 @@ import taichi as ti
 
 __all__ = ["thread_ids", "pin_taichi_workers"]
 
-#: probe loop: items (a few per pool task), and sine terms per item (about 10 µs each)
-_PROBE_ITEMS, _PROBE_WORK = 4096, 1000
+#: probe loop: items per worker (about 20 ms of work each), and sine terms per item (about 10 µs)
+_PROBE_ITEMS_PER_WORKER, _PROBE_WORK = 2048, 1000
 
 
 def thread_ids() -> set[int]:
@@ -46,7 +46,7 @@ def _run_ns(tid: int) -> int:
 
 @ti.kernel
 def _probe(out: ti.types.ndarray(dtype=ti.f32, ndim=1), work: ti.i32):
-    """A parallel loop long enough (tens of ms) for every pool worker to take part."""
+    """A parallel loop long enough (about 20 ms) for every pool worker to take part."""
     for i in range(out.shape[0]):
         s = ti.f32(i)
         for k in range(work):
@@ -71,7 +71,7 @@ def pin_taichi_workers(before: set[int], n_threads: int) -> list[int]:
     cores = sorted(os.sched_getaffinity(0))
     if n_threads != len(cores) or n_threads < 2:
         return []
-    out = ti.ndarray(ti.f32, _PROBE_ITEMS)
+    out = ti.ndarray(ti.f32, _PROBE_ITEMS_PER_WORKER * n_threads)
     _probe(out, 0)  # compiled first: a compiler thread must not count as a worker
     ti.sync()
     new = sorted(thread_ids() - before)
