@@ -591,7 +591,8 @@ class MPMWorld:
         solved implicitly on cells (``SolverSettings.pressure``)."""
         speeds = [(math.sqrt(2.0 * g.material.mu / g.material.density)
                    if cell_pressure(g.material, self.settings.pressure) else g.material.wave_speed)
-                  / math.sqrt(g.mass_scale) for g in self.groups if g.awake and g.count > g.n_kinematic]
+                  / math.sqrt(g.mass_scale * self._hold_factor(g))
+                  for g in self.groups if g.awake and g.count > g.n_kinematic]
         return max(speeds, default=0.0)
 
     # ------------------------------------------------------------------ driving
@@ -884,17 +885,20 @@ class MPMWorld:
             still = still and not any(h.awake and not h.quasi_static and h.env == g.env for h in self.groups)
             self._set_hold(g, still and (g.hold or g.drift < s.hold_speed))
 
+    def _hold_factor(self, g: Group) -> float:
+        """What group g's pseudo-mass is multiplied by now: ``hold_scaling`` while it holds, else 1.
+        Its relaxation rate is divided by the square root (the same damping ratio)."""
+        return self.settings.hold_scaling if g.hold else 1.0
+
     def _set_hold(self, g: Group, hold: bool) -> None:
-        """Put group g on its hold pseudo-mass or back (masses and relaxation rate). The mass is
-        set anew from density, pseudo-mass and rest volume, as add_group set it, so switching
-        back and forth never drifts."""
+        """Put group g on its hold pseudo-mass or back. Its particles' mass is set anew from
+        density, pseudo-mass and rest volume, as add_group set it, so switching back and forth
+        never drifts; its ``mass_scale`` and ``relaxation`` stay as add_group set them."""
         if hold == g.hold:
             return
-        f = self.settings.hold_scaling if hold else 1.0 / self.settings.hold_scaling
-        g.mass_scale = self.settings.mass_scaling * (self.settings.hold_scaling if hold else 1.0)
-        g.relaxation /= math.sqrt(f)
         g.hold = hold
-        mass = np.float32(g.material.density * g.mass_scale * float(self._host["vol"][g.start]))
+        mass = np.float32(g.material.density * g.mass_scale * self._hold_factor(g)
+                          * float(self._host["vol"][g.start]))
         if self._on_device():
             K.fill_mass(self._pack["P"], g.start, g.stop, float(mass))
         self._host["mass"][g.start:g.stop] = mass
@@ -1056,7 +1060,7 @@ class MPMWorld:
         rate = np.zeros(self.num_envs, np.float32)
         for g in self.groups:
             if g.awake and g.quasi_static:
-                rate[g.env] = max(rate[g.env], g.relaxation)
+                rate[g.env] = max(rate[g.env], g.relaxation / math.sqrt(self._hold_factor(g)))
         self._dev["env_relax"].from_numpy(rate)
         self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, self._reach, s.grid_margin,
                                                  s.soft_friction, float(s.bond == "surface")], np.float32))
