@@ -29,6 +29,7 @@ BENCHMARKS = {
     "batch": "gausstac_maniskill.bench.batch",
     "scale": "gausstac_maniskill.bench.scale",
     "motion": "gausstac_maniskill.bench.motion",
+    "quasistatic": "gausstac_maniskill.bench.quasistatic",
 }
 
 

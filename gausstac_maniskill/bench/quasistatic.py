@@ -1,0 +1,220 @@
+"""Quasi-static linear pads (:mod:`gausstac_maniskill.fem`): thin-layer theory and the product pad.
+
+``python -m gausstac_maniskill.bench quasistatic [--sizes 1e-3 5e-4] [--nu 0.45 0.48 0.499]
+[--pad-sizes 1e-3 5e-4] [--depths 2.5e-4 5e-4 1e-3] [--mpm-dx 1e-3 | --no-mpm] [--out DIR]``
+
+The pad solved at equilibrium instead of relaxed by the explicit MPM: linear elasticity on one
+cube element per particle (selective reduced integration, no volumetric locking), its stiffness
+factored once in the link frame, frictionless contact solved exactly on the surface points
+near the collider (:mod:`gausstac_maniskill.fem.contact`). No time step, no pseudo-mass.
+
+1. **Thin layer** (the set-up of ``bench thinlayer``: h = 4 mm bonded to a rigid base,
+   E = 0.3 MPa, δ = 0.1·h, a/h = 0.3 … 3, a quarter with symmetry planes), pressed by the
+   theory's own indenter: a frictionless paraboloid in small-displacement contact, the gap
+   δ − r²/(2R) − u_z read at the rest surface. So the comparison is with the layer solution
+   under its own assumptions (linear elasticity, small strain and slope); the explicit MPM's
+   rows in ``bench thinlayer`` carry the Neo-Hookean layer's finite strain besides.
+2. **The product pad** (the Allegro index pad, Dragon Skin 10: E = 0.26 MPa, ν = 0.48), the
+   5 mm sphere and the plate of ``bench pad`` pressed 0.25, 0.5 and 1 mm, frictionless, at
+   the given element sizes (a pad built at particle spacing = element size). Each depth is
+   solved twice: the first solve computes the compliance of the surface points the contact
+   reaches for the first time (three linear solves per point), the second is a held step.
+   With ``--mpm-dx`` the explicit MPM presses the same pad in the same run, frictionless, and
+   its held force is shown beside (it takes ~1 min to compile and ~0.6 s per step).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+import warnings
+
+import numpy as np
+
+from .thinlayer import A_OVER_H, E_LAYER, H_LAYER, STRAIN, layer_force
+
+__all__ = ["paraboloid", "layer_point", "layer_table", "pad_rows", "main"]
+
+PAD_DEPTHS = (0.25e-3, 0.5e-3, 1e-3)
+
+
+def paraboloid(R: float, apex) -> callable:
+    """The layer solution's indenter as an ``sdf`` for :meth:`QuasiStaticBody.solve`: a
+    paraboloid of radius R [m] with its apex at ``apex`` [3] m, opening along +z, in
+    small-displacement form: φ(x) = apex_z + r²/(2R) − x_z with r measured at the points
+    given and the normal −z (only u_z closes the gap)."""
+    apex = np.asarray(apex, float)
+
+    def sdf(x):
+        r2 = ((x[:, :2] - apex[:2]) ** 2).sum(1)
+        return apex[2] + r2 / (2.0 * R) - x[:, 2], np.tile([0.0, 0.0, -1.0], (len(x), 1))
+
+    return sdf
+
+
+def layer_point(a_over_h: float, size: float, nu: float, h: float = H_LAYER, E: float = E_LAYER) -> dict:
+    """The bonded layer pressed to δ = STRAIN·h by the paraboloid with √(Rδ) = a_over_h·h,
+    elements of edge ``size`` [m]; returns the force [N] beside the layer solution's."""
+    from ..fem import layer_body
+
+    d = STRAIN * h
+    R = (a_over_h * h) ** 2 / d
+    a = math.sqrt(R * d)
+    t0 = time.perf_counter()
+    body = layer_body(h, max(3 * a, a + 4 * h), size, E, nu)
+    t1 = time.perf_counter()
+    res = body.solve(paraboloid(R, [0.0, 0.0, h - d]))
+    t2 = time.perf_counter()
+    F = -4.0 * float(res.total_force[2])
+    F_layer = layer_force(E, nu, R, d, h)[0]
+    return dict(a_over_h=a_over_h, size=size, nu=nu, R=R, d=d, dofs=body.num_free, points=res.candidates,
+                F=F, F_layer=F_layer, err=100.0 * (F / F_layer - 1.0), build_s=t1 - t0, solve_s=t2 - t1)
+
+
+def layer_table(sizes, nus, a_over_h=A_OVER_H, progress: bool = True) -> tuple[str, list[dict]]:
+    """Markdown table of :func:`layer_point` over element sizes × ν × a/h, and its rows."""
+    from tqdm import tqdm
+
+    rows = []
+    with tqdm(total=len(sizes) * len(nus) * len(a_over_h), desc="thin layer", disable=not progress) as bar:
+        for nu in nus:
+            for size in sizes:
+                for r in a_over_h:
+                    rows.append(layer_point(r, size, nu))
+                    bar.update(1)
+    head = "| ν | element [mm] | elements through h | " + " | ".join(f"a/h = {r:g}" for r in a_over_h) + \
+           " | max \\|err\\|, a/h ≤ 2 | unknowns | factor [s] | solve [s] |"
+    lines = [f"Force error [%] against the layer solution (h = {H_LAYER * 1e3:g} mm, δ = {STRAIN:g} h, frictionless "
+             "paraboloid in small-displacement contact)", "", head, "|" + "---|" * (len(a_over_h) + 7)]
+    for nu in nus:
+        for size in sizes:
+            rs = [x for x in rows if x["nu"] == nu and x["size"] == size]
+            worst = max(abs(x["err"]) for x in rs if x["a_over_h"] <= 2.0 + 1e-9)
+            lines.append(f"| {nu} | {size * 1e3:g} | {H_LAYER / size:.0f} | " +
+                         " | ".join(f"{x['err']:+.1f}" for x in rs) +
+                         f" | {worst:.1f} | {min(x['dofs'] for x in rs)}–{max(x['dofs'] for x in rs)} | "
+                         f"{max(x['build_s'] for x in rs):.1f} | {max(x['solve_s'] for x in rs):.1f} |")
+    return "\n".join(lines), rows
+
+
+def _pad(size: float):
+    from ..cosim import default_hand_urdf
+    from ..tactile.pad import build_pad, pad_mesh
+    from .pad import index_spec
+
+    spec = index_spec()
+    with warnings.catch_warnings():  # a 1 mm lattice is a 2 mm MPM grid's: the warning is about the MPM
+        warnings.simplefilter("ignore")
+        return build_pad(spec, pad_mesh(spec, default_hand_urdf()), size, 2.0 * size)
+
+
+def pad_rows(sizes, indenters=("sphere", "plate"), depths=PAD_DEPTHS, progress: bool = True) -> list[dict]:
+    """The index pad pressed by each indenter to each depth (frictionless), per element size."""
+    from tqdm import tqdm
+
+    from ..fem import pad_body
+    from ..mpm.colliders import signed_distance
+    from .pad import _collider, indenter_pose
+
+    rows = []
+    with tqdm(total=len(sizes) * len(indenters) * len(depths), desc="product pad", disable=not progress) as bar:
+        for size in sizes:
+            for kind in indenters:
+                pad = _pad(size)
+                t0 = time.perf_counter()
+                body = pad_body(pad)
+                build = time.perf_counter() - t0
+                S = pad.sensor_frame  # the link frame is the world frame here
+                for d in depths:
+                    collider = _collider(kind, indenter_pose(kind, S, -d), 0.0)
+
+                    def sdf(x, c=collider):
+                        phi, n = signed_distance(c, x)
+                        return phi.astype(np.float64), n.astype(np.float64)
+
+                    times = []
+                    for _ in range(2):
+                        t0 = time.perf_counter()
+                        res = body.solve(sdf)
+                        times.append(time.perf_counter() - t0)
+                    Fn = -float((S[:3, :3].T @ res.total_force)[2])
+                    rows.append(dict(size=size, indenter=kind, d=d, dofs=body.num_free, surface=body.num_points,
+                                     points=res.candidates, columns=body.columns_solved, Fn=Fn, build_s=build,
+                                     first_ms=1e3 * times[0], held_ms=1e3 * times[1]))
+                    bar.update(1)
+    return rows
+
+
+def mpm_forces(dx: float, indenters, depths, progress: bool = True) -> dict:
+    """The explicit MPM's frictionless held force [N] and ms per step on the same pad, by (indenter, depth)."""
+    from tqdm import tqdm
+
+    from .pad import Protocol, run_case
+
+    out = {}
+    with tqdm(total=len(indenters) * len(depths), desc=f"MPM dx={dx * 1e3:g} mm", disable=not progress) as bar:
+        for kind in indenters:
+            for d in depths:
+                case = run_case(dx, kind, [d], protocol=Protocol(press=2, slide=0, hold=4), friction=0.0)
+                out[(kind, d)] = (case["phases"][0]["Fn_end"], case["step_ms"])
+                bar.update(1)
+    return out
+
+
+def pad_table(rows: list[dict], mpm: dict | None, mpm_dx: float | None) -> str:
+    ref = {}
+    for r in rows:  # the finest element size is the reference of each (indenter, depth)
+        k = (r["indenter"], r["d"])
+        if k not in ref or r["size"] < ref[k]["size"]:
+            ref[k] = r
+    mcols = f" | MPM dx = {mpm_dx * 1e3:g} mm: Fn [N] | ms / step | FEM / MPM" if mpm else ""
+    lines = ["| indenter | depth [mm] | element [mm] | unknowns | surface points | in contact problem | Fn [N] | "
+             "vs finest | first solve [ms] | held solve [ms]" + mcols + " |",
+             "|" + "---|" * (10 + (3 if mpm else 0))]
+    for r in sorted(rows, key=lambda r: (r["indenter"], r["d"], -r["size"])):
+        f0 = ref[(r["indenter"], r["d"])]["Fn"]
+        line = (f"| {r['indenter']} | {r['d'] * 1e3:g} | {r['size'] * 1e3:g} | {r['dofs']} | {r['surface']} | "
+                f"{r['points']} | {r['Fn']:.4f} | {100 * (r['Fn'] / f0 - 1):+.1f} % | {r['first_ms']:.0f} | "
+                f"{r['held_ms']:.1f}")
+        if mpm:
+            Fm, ms = mpm[(r["indenter"], r["d"])]
+            line += f" | {Fm:.4f} | {ms:.0f} | {r['Fn'] / Fm:.3f}"
+        lines.append(line + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench quasistatic", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=float, nargs="+", default=[1e-3, 5e-4], help="thin layer: element edges [m]")
+    ap.add_argument("--nu", type=float, nargs="+", default=[0.45, 0.48, 0.499], help="thin layer: Poisson's ratios")
+    ap.add_argument("--pad-sizes", type=float, nargs="+", default=[1e-3, 5e-4],
+                    help="product pad: element edges [m] (5e-4 is the particle spacing of the MPM's dx = 1 mm)")
+    ap.add_argument("--depths", type=float, nargs="+", default=list(PAD_DEPTHS), help="product pad: press depths [m]")
+    ap.add_argument("--indenters", nargs="+", default=["sphere", "plate"], choices=["sphere", "plate"])
+    ap.add_argument("--mpm-dx", type=float, default=1e-3, help="the explicit MPM's grid spacing beside [m]")
+    ap.add_argument("--no-mpm", action="store_true", help="skip the explicit MPM")
+    ap.add_argument("--no-layer", action="store_true", help="skip the thin layer")
+    ap.add_argument("--out", default="out/bench_quasistatic", help="directory for results.json")
+    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    args = ap.parse_args(argv)
+    from .. import backend
+
+    backend.init(arch=args.arch)  # the colliders' signed distance (and the MPM) run in Taichi
+    os.makedirs(args.out, exist_ok=True)
+    t0 = time.perf_counter()
+    out = {}
+    if not args.no_layer:
+        table, out["layer"] = layer_table(args.sizes, args.nu)
+        print(table, "\n")
+    out["pad"] = rows = pad_rows(args.pad_sizes, args.indenters, args.depths)
+    mpm = None if args.no_mpm else mpm_forces(args.mpm_dx, args.indenters, args.depths)
+    print(pad_table(rows, mpm, None if args.no_mpm else args.mpm_dx))
+    if mpm:
+        out["mpm"] = [dict(indenter=k[0], d=k[1], Fn=v[0], step_ms=v[1]) for k, v in mpm.items()]
+    with open(os.path.join(args.out, "results.json"), "w") as f:
+        json.dump(out, f, indent=1)
+    print(f"\n{time.perf_counter() - t0:.0f} s; results in {args.out}/results.json")
+    return 0

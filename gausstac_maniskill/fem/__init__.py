@@ -1,0 +1,19 @@
+"""Quasi-static linear elasticity on a voxel lattice: a pad at equilibrium per control step.
+
+The explicit MPM (:mod:`gausstac_maniskill.mpm`) relaxes a pad towards equilibrium with a
+pseudo-mass; this package solves the equilibrium itself. A pad is quasi-static at control
+rates (its elastic wave crosses it in under a millisecond), and in its link frame its rest
+shape never changes, so its stiffness matrix is assembled and factored once:
+
+* :mod:`.hex` — trilinear hexahedra on the pad's particle lattice (one voxel per particle),
+  selective reduced integration against volumetric locking, assembly and interpolation.
+* :mod:`.contact` — frictionless contact of the body's surface points with a rigid collider,
+  solved as a linear complementarity problem on the points near it, with the body's
+  compliance at those points computed once per point and kept.
+"""
+from .contact import ContactResult, QuasiStaticBody, solve_lcp
+from .hex import VoxelBody, element_stiffness, stiffness, voxel_body
+from .pad import layer_body, pad_body
+
+__all__ = ["VoxelBody", "element_stiffness", "stiffness", "voxel_body", "QuasiStaticBody", "ContactResult",
+           "solve_lcp", "pad_body", "layer_body"]

@@ -1,0 +1,74 @@
+"""Quasi-static bodies for the product's pads and for the thin-layer benchmark.
+
+* :func:`pad_body`: a :class:`~gausstac_maniskill.tactile.pad.Pad` (link frame) as one cube
+  element per soft particle (edge: the particle spacing), bonded where it meets the pad's
+  kinematic particles, touched on the link mesh (the point ``depth`` along ``normal`` from
+  each outermost particle, as ``GaussTacSim(pad_surface="mesh")``).
+* :func:`layer_body`: a flat layer of thickness h bonded to a rigid base (a quarter, with
+  symmetry planes x = 0 and y = 0), touched at its top face.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ConfigError
+from .contact import QuasiStaticBody
+from .hex import voxel_body
+
+__all__ = ["pad_body", "layer_body"]
+
+
+def pad_body(pad, E: float | None = None, nu: float | None = None) -> QuasiStaticBody:
+    """The soft layer of ``pad`` as a quasi-static body in its link frame (metres).
+
+    Args:
+        pad: a :class:`~gausstac_maniskill.tactile.pad.Pad` (particles on a lattice of
+            spacing ``pad.spacing``, as :func:`~gausstac_maniskill.tactile.pad.build_pad` makes).
+        E, nu: Young's modulus [Pa] and Poisson's ratio (default: the pad's material).
+    """
+    mat = pad.spec.material
+    E = mat.E if E is None else E
+    nu = mat.nu if nu is None else nu
+    s = pad.spacing
+    origin = pad.rest.min(0) - 0.5 * s
+    ijk = np.round((pad.rest - origin) / s - 0.5).astype(np.int64)
+    if np.abs((pad.rest - origin) / s - 0.5 - ijk).max() > 1e-6:
+        raise ConfigError(f"pad {pad.name!r}: particles are not on a lattice of spacing {s:g} m")
+    soft = ~pad.kinematic
+    body = voxel_body(ijk[soft], origin, s)
+    # the bond: every node the soft elements share with a kinematic particle's cube
+    bound = {tuple(v) for v in (ijk[pad.kinematic][:, None, :] + _corners()).reshape(-1, 3)}
+    fixed = np.array([tuple(v) in bound for v in body.nodes])
+    surface = np.flatnonzero(pad.surface[soft])
+    rest = pad.rest[soft][surface]
+    points = rest + pad.depth[soft][surface, None] * pad.normal[soft][surface]
+    return QuasiStaticBody(body, E, nu, fixed, points, surface, name=f"pad {pad.name!r}")
+
+
+def _corners() -> np.ndarray:
+    from .hex import CORNERS
+
+    return CORNERS[None]
+
+
+def layer_body(h: float, half_width: float, size: float, E: float, nu: float) -> QuasiStaticBody:
+    """A quarter of a flat layer [0, W]² × [0, h] (W = ``half_width``) of cube elements of edge
+    ``size`` [m], bonded to a rigid base at z = 0, with frictionless symmetry planes x = 0 and
+    y = 0 and free outer faces; touched at the centres of its top faces (z = h). Forces on it
+    are a quarter of the whole layer's."""
+    nz = int(round(h / size))
+    if nz < 1 or abs(nz * size - h) > 1e-6 * h:
+        raise ConfigError(f"layer_body: h={h!r} m is not a whole number of elements of {size!r} m")
+    nxy = math.ceil(half_width / size - 1e-9)
+    i, j, k = np.meshgrid(np.arange(nxy), np.arange(nxy), np.arange(nz), indexing="ij")
+    body = voxel_body(np.stack([i, j, k], -1).reshape(-1, 3), np.zeros(3), size)
+    nodes = body.nodes
+    fixed = np.zeros((len(nodes), 3), bool)
+    fixed[nodes[:, 2] == 0] = True
+    fixed[nodes[:, 0] == 0, 0] = True
+    fixed[nodes[:, 1] == 0, 1] = True
+    top = np.flatnonzero(body.voxels[:, 2] == nz - 1)
+    points = (body.voxels[top] + [0.5, 0.5, 1.0]) * size
+    return QuasiStaticBody(body, E, nu, fixed, points, top, name="layer")

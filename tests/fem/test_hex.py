@@ -1,0 +1,67 @@
+"""Cube elements: rigid modes, no spurious modes, the patch test, the elimination order."""
+import numpy as np
+import pytest
+import scipy.sparse.linalg as sla
+
+from gausstac_maniskill.errors import ConfigError
+from gausstac_maniskill.fem import element_stiffness, layer_body, stiffness, voxel_body
+from gausstac_maniskill.fem.hex import dissection_order
+
+
+@pytest.mark.parametrize("nu", [0.3, 0.48, 0.499])
+def test_element_has_six_rigid_modes_and_no_spurious_one(nu):
+    K = element_stiffness(1e-3, 0.26e6, nu)
+    assert np.allclose(K, K.T)
+    w = np.linalg.eigvalsh(K)
+    # 3 translations + 3 rotations carry no energy; any further zero mode would be an
+    # hourglass mode of the reduced integration (the deviatoric part is fully integrated)
+    assert np.all(np.abs(w[:6]) < 1e-9 * w[-1])
+    assert w[6] > 1e-5 * w[-1]  # the softest shear mode against the bulk mode: μ/K ≈ 2e-3 at ν = 0.499
+
+
+def test_uniaxial_strain_is_exact():
+    """A layer compressed by a flat frictionless plate between rollers (uniaxial strain) carries
+    σ = M ε with the oedometer modulus M = E(1 − ν)/((1 + ν)(1 − 2ν)), at any element count."""
+    from gausstac_maniskill.fem import QuasiStaticBody
+
+    E, nu, h, s = 0.3e6, 0.48, 4e-3, 1e-3
+    layer = layer_body(h, 5e-3, s, E, nu)
+    nodes = layer.body.nodes
+    fixed = layer.fixed.copy()
+    fixed[nodes[:, 0] == nodes[:, 0].max(), 0] = True
+    fixed[nodes[:, 1] == nodes[:, 1].max(), 1] = True
+    body = QuasiStaticBody(layer.body, E, nu, fixed, layer.points, layer.point_elements)
+    d = 1e-3 * h
+    res = body.solve(lambda x: ((h - d) - x[:, 2], np.tile([0.0, 0.0, -1.0], (len(x), 1))))
+    M = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
+    width = nodes[:, 0].max() * s
+    assert -res.total_force[2] == pytest.approx(M * d / h * width ** 2, rel=1e-9)
+    assert np.allclose(res.displacement[:, 2], -d, rtol=1e-9)
+
+
+def test_dissection_order_factor_solves_the_system():
+    layer = layer_body(2e-3, 3e-3, 5e-4, 0.3e6, 0.45)
+    order = dissection_order(layer.body.nodes, leaf=8)
+    assert np.array_equal(np.sort(order), np.arange(len(layer.body.nodes)))
+    K = stiffness(layer.body, 0.3e6, 0.45)
+    free = np.flatnonzero(~layer.fixed.ravel())
+    rng = np.random.default_rng(0)
+    f = rng.normal(size=len(free))
+    u = layer.nodal_displacement(np.arange(3), rng.normal(size=(3, 3)))  # exercises the factor
+    assert np.isfinite(u).all()
+    ref = sla.spsolve(K[free][:, free].tocsc(), f)
+    # the body's factor, in its own elimination order, solves the same system
+    rows = layer._row[free]
+    b = np.empty(len(free))
+    b[rows] = f
+    got = layer._lu.solve(b)[rows]
+    assert np.allclose(got, ref, rtol=1e-8, atol=1e-12 * np.abs(ref).max())
+
+
+def test_bad_input_names_the_field():
+    with pytest.raises(ConfigError, match="nu"):
+        element_stiffness(1e-3, 0.3e6, 0.5)
+    with pytest.raises(ConfigError, match="twice"):
+        voxel_body([[0, 0, 0], [0, 0, 0]], np.zeros(3), 1e-3)
+    with pytest.raises(ConfigError, match="whole number"):
+        layer_body(4e-3, 5e-3, 1.5e-3, 0.3e6, 0.45)
