@@ -15,12 +15,15 @@ near the collider (:mod:`gausstac_maniskill.fem.contact`). No time step, no pseu
    under its own assumptions (linear elasticity, small strain and slope); the explicit MPM's
    rows in ``bench thinlayer`` carry the Neo-Hookean layer's finite strain besides.
 2. **The product pad** (the Allegro index pad, Dragon Skin 10: E = 0.26 MPa, ν = 0.48), the
-   5 mm sphere and the plate of ``bench pad`` pressed 0.25, 0.5 and 1 mm, frictionless, at
-   the given element sizes (a pad built at particle spacing = element size). Each depth is
-   solved twice: the first solve computes the compliance of the surface points the contact
-   reaches for the first time (three linear solves per point), the second is a held step.
-   With ``--mpm-dx`` the explicit MPM presses the same pad in the same run, frictionless, and
-   its held force is shown beside (it takes ~1 min to compile and ~0.6 s per step).
+   5 mm sphere and the plate of ``bench pad`` pressed to 0.25, 0.5 and 1 mm in turn,
+   frictionless, at the given element sizes (a pad built at particle spacing = element size),
+   as a linear body (``--models linear``, small strain, contact read at the rest surface) and
+   as a finite-strain Neo-Hookean one (``neo_hookean``, contact read at the displaced surface,
+   each depth started from the last). Each depth is solved twice: the press (it also computes
+   the compliance of the surface points the contact reaches for the first time, three linear
+   solves per point), then a held step. With ``--mpm-dx`` the explicit MPM presses the same pad
+   in the same run, frictionless, and its held force is shown beside (about 1 min to compile,
+   then 0.6 s per step).
 """
 from __future__ import annotations
 
@@ -110,8 +113,11 @@ def _pad(size: float):
         return build_pad(spec, pad_mesh(spec, default_hand_urdf()), size, 2.0 * size)
 
 
-def pad_rows(sizes, indenters=("sphere", "plate"), depths=PAD_DEPTHS, progress: bool = True) -> list[dict]:
-    """The index pad pressed by each indenter to each depth (frictionless), per element size."""
+def pad_rows(sizes, indenters=("sphere", "plate"), depths=PAD_DEPTHS, models=("linear",),
+             progress: bool = True) -> list[dict]:
+    """The index pad pressed by each indenter through ``depths`` in turn (frictionless), per
+    element size and material model. A linear body reads the contact at its rest surface, a
+    ``neo_hookean`` one at its displaced surface, starting from the last depth's state."""
     from tqdm import tqdm
 
     from ..fem import pad_body
@@ -119,31 +125,38 @@ def pad_rows(sizes, indenters=("sphere", "plate"), depths=PAD_DEPTHS, progress: 
     from .pad import _collider, indenter_pose
 
     rows = []
-    with tqdm(total=len(sizes) * len(indenters) * len(depths), desc="product pad", disable=not progress) as bar:
+    total = len(sizes) * len(indenters) * len(depths) * len(models)
+    with tqdm(total=total, desc="product pad", disable=not progress) as bar:
         for size in sizes:
-            for kind in indenters:
-                pad = _pad(size)
-                t0 = time.perf_counter()
-                body = pad_body(pad)
-                build = time.perf_counter() - t0
-                S = pad.sensor_frame  # the link frame is the world frame here
-                for d in depths:
-                    collider = _collider(kind, indenter_pose(kind, S, -d), 0.0)
+            pad = _pad(size)
+            S = pad.sensor_frame  # the link frame is the world frame here
+            for model in models:
+                for kind in indenters:
+                    t0 = time.perf_counter()
+                    body = pad_body(pad, model=model)
+                    build = time.perf_counter() - t0
+                    geometry = "rest" if model == "linear" else "deformed"
+                    warm = None
+                    for d in depths:
+                        collider = _collider(kind, indenter_pose(kind, S, -d), 0.0)
 
-                    def sdf(x, c=collider):
-                        phi, n = signed_distance(c, x)
-                        return phi.astype(np.float64), n.astype(np.float64)
+                        def sdf(x, c=collider):
+                            phi, n = signed_distance(c, x)
+                            return phi.astype(np.float64), n.astype(np.float64)
 
-                    times = []
-                    for _ in range(2):
-                        t0 = time.perf_counter()
-                        res = body.solve(sdf)
-                        times.append(time.perf_counter() - t0)
-                    Fn = -float((S[:3, :3].T @ res.total_force)[2])
-                    rows.append(dict(size=size, indenter=kind, d=d, dofs=body.num_free, surface=body.num_points,
-                                     points=res.candidates, columns=body.columns_solved, Fn=Fn, build_s=build,
-                                     first_ms=1e3 * times[0], held_ms=1e3 * times[1]))
-                    bar.update(1)
+                        times, its = [], []
+                        for _ in range(2):  # the press to this depth, then a held step
+                            t0 = time.perf_counter()
+                            res = body.solve(sdf, geometry=geometry, warm=warm, max_iterations=200)
+                            times.append(time.perf_counter() - t0)
+                            its.append(res.iterations)
+                            warm = res
+                        Fn = -float((S[:3, :3].T @ res.total_force)[2])
+                        rows.append(dict(size=size, model=model, indenter=kind, d=d, dofs=body.num_free,
+                                         surface=body.num_points, points=res.candidates,
+                                         columns=body.columns_solved, Fn=Fn, build_s=build,
+                                         iterations=its, first_ms=1e3 * times[0], held_ms=1e3 * times[1]))
+                        bar.update(1)
     return rows
 
 
@@ -165,19 +178,19 @@ def mpm_forces(dx: float, indenters, depths, progress: bool = True) -> dict:
 
 def pad_table(rows: list[dict], mpm: dict | None, mpm_dx: float | None) -> str:
     ref = {}
-    for r in rows:  # the finest element size is the reference of each (indenter, depth)
-        k = (r["indenter"], r["d"])
+    for r in rows:  # the finest element size of each model is the reference of each (indenter, depth)
+        k = (r["model"], r["indenter"], r["d"])
         if k not in ref or r["size"] < ref[k]["size"]:
             ref[k] = r
     mcols = f" | MPM dx = {mpm_dx * 1e3:g} mm: Fn [N] | ms / step | FEM / MPM" if mpm else ""
-    lines = ["| indenter | depth [mm] | element [mm] | unknowns | surface points | in contact problem | Fn [N] | "
-             "vs finest | first solve [ms] | held solve [ms]" + mcols + " |",
-             "|" + "---|" * (10 + (3 if mpm else 0))]
-    for r in sorted(rows, key=lambda r: (r["indenter"], r["d"], -r["size"])):
-        f0 = ref[(r["indenter"], r["d"])]["Fn"]
-        line = (f"| {r['indenter']} | {r['d'] * 1e3:g} | {r['size'] * 1e3:g} | {r['dofs']} | {r['surface']} | "
-                f"{r['points']} | {r['Fn']:.4f} | {100 * (r['Fn'] / f0 - 1):+.1f} % | {r['first_ms']:.0f} | "
-                f"{r['held_ms']:.1f}")
+    lines = ["| indenter | depth [mm] | model | element [mm] | unknowns | in contact problem | Fn [N] | "
+             "vs finest | iterations | press [ms] | held [ms]" + mcols + " |",
+             "|" + "---|" * (11 + (3 if mpm else 0))]
+    for r in sorted(rows, key=lambda r: (r["indenter"], r["d"], r["model"], -r["size"])):
+        f0 = ref[(r["model"], r["indenter"], r["d"])]["Fn"]
+        line = (f"| {r['indenter']} | {r['d'] * 1e3:g} | {r['model']} | {r['size'] * 1e3:g} | {r['dofs']} | "
+                f"{r['points']} | {r['Fn']:.4f} | {100 * (r['Fn'] / f0 - 1):+.1f} % | "
+                f"{r['iterations'][0]} / {r['iterations'][1]} | {r['first_ms']:.0f} | {r['held_ms']:.0f}")
         if mpm:
             Fm, ms = mpm[(r["indenter"], r["d"])]
             line += f" | {Fm:.4f} | {ms:.0f} | {r['Fn'] / Fm:.3f}"
@@ -194,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="product pad: element edges [m] (5e-4 is the particle spacing of the MPM's dx = 1 mm)")
     ap.add_argument("--depths", type=float, nargs="+", default=list(PAD_DEPTHS), help="product pad: press depths [m]")
     ap.add_argument("--indenters", nargs="+", default=["sphere", "plate"], choices=["sphere", "plate"])
+    ap.add_argument("--models", nargs="+", default=["linear", "neo_hookean"], choices=["linear", "neo_hookean"],
+                    help="product pad: material models")
     ap.add_argument("--mpm-dx", type=float, default=1e-3, help="the explicit MPM's grid spacing beside [m]")
     ap.add_argument("--no-mpm", action="store_true", help="skip the explicit MPM")
     ap.add_argument("--no-layer", action="store_true", help="skip the thin layer")
@@ -209,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_layer:
         table, out["layer"] = layer_table(args.sizes, args.nu)
         print(table, "\n")
-    out["pad"] = rows = pad_rows(args.pad_sizes, args.indenters, args.depths)
+    out["pad"] = rows = pad_rows(args.pad_sizes, args.indenters, args.depths, args.models)
     mpm = None if args.no_mpm else mpm_forces(args.mpm_dx, args.indenters, args.depths)
     print(pad_table(rows, mpm, None if args.no_mpm else args.mpm_dx))
     if mpm:

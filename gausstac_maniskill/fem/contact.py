@@ -22,12 +22,52 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ConfigError, SimulationError
-from .hex import VoxelBody, dissection_order, stiffness, trilinear
+from .hex import VoxelBody, dissection_order, neo_hookean_forces, stiffness, trilinear
 
 __all__ = ["QuasiStaticBody", "ContactResult", "solve_lcp"]
 
+_BLAS = None
+
+
+def _one_blas_thread():
+    """Context: BLAS on one thread. The dense algebra here is small (a few hundred unknowns);
+    OpenBLAS's threads only contend with Taichi's workers for the cores (measured 2× slower)."""
+    global _BLAS
+    from threadpoolctl import ThreadpoolController
+
+    if _BLAS is None:
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
 #: Points whose compliance columns are solved together (one multi-right-hand-side solve).
 COLUMN_BATCH = 32
+#: Iterates the finite-strain fixed point mixes (Anderson acceleration).
+ANDERSON_DEPTH = 15
+
+
+class _Anderson:
+    """Anderson acceleration of a fixed point u = T(u) (Walker & Ni 2011, "type II"): the next
+    iterate is the combination of the last ``depth`` values of T whose residual combination
+    T(u) − u is least in the least-squares sense. A plain iteration overshoots where the
+    material has stiffened beyond the factored stiffness (compressed, near-incompressible
+    silicone); the mixing damps that."""
+
+    def __init__(self, depth: int):
+        self.depth, self.dr, self.dt, self.last = depth, [], [], None
+
+    def next(self, u: np.ndarray, t: np.ndarray) -> np.ndarray:
+        r, t = (t - u).ravel(), t.ravel()
+        if self.last is not None:
+            self.dr.append(r - self.last[0])
+            self.dt.append(t - self.last[1])
+            del self.dr[:-self.depth], self.dt[:-self.depth]
+        self.last = (r, t)
+        if not self.dr:
+            return t.reshape(u.shape)
+        R = np.stack(self.dr, axis=1)
+        gamma = np.linalg.lstsq(R, r, rcond=None)[0]
+        return (t - np.stack(self.dt, axis=1) @ gamma).reshape(u.shape)
 
 
 def solve_lcp(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -42,8 +82,9 @@ def solve_lcp(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     if not len(b):
         return np.zeros(0)
     A = 0.5 * (A + A.T)
-    L = cholesky(A + 1e-12 * np.trace(A) / len(b) * np.eye(len(b)), lower=True)
-    lam, _ = nnls(L.T, -solve_triangular(L, b, lower=True), maxiter=50 * len(b))
+    A[np.diag_indices(len(b))] += 1e-12 * np.trace(A) / len(b)
+    L = cholesky(A, lower=True, check_finite=False)
+    lam, _ = nnls(L.T, -solve_triangular(L, b, lower=True, check_finite=False), maxiter=50 * len(b))
     return lam
 
 
@@ -57,6 +98,9 @@ class ContactResult:
         gap: [S] signed distance [m] from each displaced point to the collider.
         iterations: outer iterations (surface moved, φ and n read again).
         candidates: points taken into the complementarity problem.
+        nodes: [V, 3] displacement [m] of every node (``"neo_hookean"`` bodies; None for
+            linear ones, whose :meth:`QuasiStaticBody.nodal_displacement` gives it on demand).
+        residual: |f_int − f_contact| / |f_contact| at the end (0 for linear bodies).
     """
 
     force: np.ndarray
@@ -64,6 +108,8 @@ class ContactResult:
     gap: np.ndarray
     iterations: int
     candidates: int
+    nodes: np.ndarray | None = None
+    residual: float = 0.0
 
     @property
     def total_force(self) -> np.ndarray:
@@ -83,12 +129,18 @@ class QuasiStaticBody:
         points: [S, 3] rest positions [m] of the surface points contact may act on.
         point_elements: [S] element each point is interpolated from.
         name: label for error messages.
+        model: ``"linear"`` (small strain, the default) or ``"neo_hookean"`` (finite strain:
+            :func:`~.hex.neo_hookean_forces`, solved by fixed-point iterations on the linear
+            stiffness's factor, each with the contact solved exactly; see :meth:`solve`).
     """
 
-    def __init__(self, body: VoxelBody, E: float, nu: float, fixed, points, point_elements, name: str = "body"):
+    def __init__(self, body: VoxelBody, E: float, nu: float, fixed, points, point_elements, name: str = "body",
+                 model: str = "linear"):
         import scipy.sparse.linalg as sla
 
-        self.body, self.E, self.nu, self.name = body, float(E), float(nu), name
+        if model not in ("linear", "neo_hookean"):
+            raise ConfigError(f"{name}: model={model!r} must be 'linear' or 'neo_hookean'")
+        self.body, self.E, self.nu, self.name, self.model = body, float(E), float(nu), name, model
         fixed = np.asarray(fixed, bool)
         if fixed.ndim == 1:
             fixed = np.repeat(fixed[:, None], 3, axis=1)
@@ -100,6 +152,8 @@ class QuasiStaticBody:
         if not fixed.any():
             raise ConfigError(f"{name}: no fixed degree of freedom; the body would float (singular stiffness)")
         K = stiffness(body, E, nu)
+        self._K = K
+        self._free = free
         self.num_free = len(free)
         # row of each degree of freedom in a solution vector padded with a zero row for the fixed ones
         self._row = np.full(body.num_dofs, len(free), np.int64)
@@ -150,6 +204,13 @@ class QuasiStaticBody:
             for c, p in enumerate(chunk):
                 self._columns[int(p)] = np.ascontiguousarray(disp[:, :, 3 * c:3 * c + 3])  # [S, 3 (u), 3 (f)]
 
+    def _normal_compliance(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """[m, m] normal compliance A_sd = n_s · W_sd n_d [m/N] among surface ``points`` [m] with unit
+        ``normals`` [m, 3]."""
+        self._ensure_columns(points)
+        cols = np.stack([self._columns[int(p)][points] @ n for p, n in zip(points, normals)], axis=1)  # [s, d, 3]
+        return np.einsum("sdi,si->sd", cols, normals)
+
     def displacement_of(self, points, forces) -> np.ndarray:
         """[S, 3] displacement [m] of every surface point under ``forces`` [m, 3] [N] at ``points`` [m]
         (from the kept compliance columns)."""
@@ -168,7 +229,8 @@ class QuasiStaticBody:
 
     # ------------------------------------------------------------------ contact
     def solve(self, sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], geometry: str = "rest",
-              margin: float | None = None, tol: float | None = None, max_iterations: int = 20) -> ContactResult:
+              margin: float | None = None, tol: float | None = None, max_iterations: int = 60,
+              warm: ContactResult | None = None) -> ContactResult:
         """Equilibrium of the body pressed by one rigid collider.
 
         Args:
@@ -185,11 +247,24 @@ class QuasiStaticBody:
             tol: convergence of the surface's motion and of the largest penetration [m]
                 (default 1e-4 of an element).
             max_iterations: outer iterations before :class:`SimulationError`.
+            warm: the last step's result, to start from (``"neo_hookean"`` bodies).
+
+        A ``"neo_hookean"`` body is always read at its displaced surface (finite strain), and
+        solved by fixed-point iterations on the linear stiffness K: with the nonlinear
+        remainder r(u) = f_int(u) − K u of the last iterate as a load, each iteration solves
+        the linear contact problem exactly, u ← K⁻¹(Nᵀf − r(u)). It converges where K⁻¹ f_int
+        is a contraction: the pad's strains of tens of per cent are.
         """
         if geometry not in ("rest", "deformed"):
             raise ConfigError(f"{self.name}: geometry={geometry!r} must be 'rest' or 'deformed'")
         margin = self.body.size if margin is None else float(margin)
         tol = 1e-4 * self.body.size if tol is None else float(tol)
+        with _one_blas_thread():
+            if self.model == "neo_hookean":
+                return self._solve_finite_strain(sdf, margin, tol, max_iterations, warm)
+            return self._solve_linear(sdf, geometry, margin, tol, max_iterations)
+
+    def _solve_linear(self, sdf, geometry, margin, tol, max_iterations) -> ContactResult:
         u = np.zeros((self.num_points, 3))
         taken = np.zeros(self.num_points, bool)
         phi, n = sdf(self.points)
@@ -202,10 +277,8 @@ class QuasiStaticBody:
             idx = np.flatnonzero(taken)
             if not len(idx):
                 return ContactResult(np.zeros_like(u), u, gap_now, it, 0)
-            self._ensure_columns(idx)
-            Wc = np.stack([self._columns[int(p)][idx] for p in idx], axis=2)  # [m (s), 3, m (d), 3]
             nc = n[idx]
-            lam = solve_lcp(np.einsum("si,sidj,dj->sd", nc, Wc, nc), phi[idx])
+            lam = solve_lcp(self._normal_compliance(idx, nc), phi[idx])
             f = lam[:, None] * nc
             u_new = self.displacement_of(idx, f)
             moved = float(np.abs(u_new - u).max())
@@ -219,3 +292,63 @@ class QuasiStaticBody:
                 return ContactResult(force, u, gap, it, len(idx))
         raise SimulationError(f"{self.name}: contact did not converge in {max_iterations} iterations "
                               f"(last surface motion {moved:.3g} m, deepest penetration {-gap.min():.3g} m)")
+
+    # ------------------------------------------------------------------ finite strain
+    def _interp(self, u_nodes: np.ndarray) -> np.ndarray:
+        """[S, 3] displacement of the surface points from node displacements [V, 3]."""
+        return np.einsum("sa,sai->si", self._weights, u_nodes[self.body.element_nodes[self.point_elements]])
+
+    def _solve_nodes(self, load: np.ndarray) -> np.ndarray:
+        """[V, 3] node displacements K⁻¹ load for a nodal load [V, 3] (fixed ones read 0)."""
+        x = self._lu.solve(load.ravel()[self._free])
+        u = np.zeros(self.body.num_dofs)
+        u[self._free] = x
+        return u.reshape(-1, 3)
+
+    def _solve_finite_strain(self, sdf, margin, tol, max_iterations, warm) -> ContactResult:
+        body = self.body
+        u = np.zeros((len(body.nodes), 3)) if warm is None or warm.nodes is None else warm.nodes.copy()
+        taken = np.zeros(self.num_points, bool)
+        if warm is not None:
+            taken |= np.abs(warm.force).sum(1) > 0
+        f = np.zeros((0, 3))
+        idx = np.zeros(0, np.int64)
+        mix = _Anderson(ANDERSON_DEPTH)
+        for it in range(1, max_iterations + 1):
+            us = self._interp(u)
+            phi, n = sdf(self.points + us)
+            try:
+                remainder = neo_hookean_forces(body, u, self.E, self.nu) - (self._K @ u.ravel()).reshape(-1, 3)
+            except FloatingPointError as err:
+                raise SimulationError(f"{self.name}: {err} at iteration {it}; the press is too deep for "
+                                      "the pad, or the step too large") from None
+            u_load = self._solve_nodes(-remainder)
+            b = phi + np.einsum("si,si->s", n, self._interp(u_load) - us)  # gap with no contact force
+            taken |= b < margin
+            idx = np.flatnonzero(taken)
+            f = np.zeros((0, 3))
+            u_new = u_load
+            if len(idx):
+                nc = n[idx]
+                lam = solve_lcp(self._normal_compliance(idx, nc), b[idx])
+                f = lam[:, None] * nc
+                u_new = u_load + self.nodal_displacement(idx, f)
+            moved = float(np.abs(u_new - u).max())
+            if moved < tol:
+                u = u_new
+                break
+            u = mix.next(u, u_new)
+        else:
+            raise SimulationError(f"{self.name}: finite-strain contact did not converge in {max_iterations} "
+                                  f"iterations (last motion {moved:.3g} m)")
+        force = np.zeros((self.num_points, 3))
+        force[idx] = f
+        us = self._interp(u)
+        load = np.zeros((len(body.nodes), 3))
+        if len(idx):
+            rows = body.element_nodes[self.point_elements[idx]]
+            np.add.at(load, rows.ravel(), (self._weights[idx][:, :, None] * f[:, None, :]).reshape(-1, 3))
+        fint = neo_hookean_forces(body, u, self.E, self.nu)
+        free = ~self.fixed
+        residual = float(np.linalg.norm((fint - load)[free]) / max(np.linalg.norm(load[free]), 1e-30))
+        return ContactResult(force, us, sdf(self.points + us)[0], it, len(idx), u, residual)

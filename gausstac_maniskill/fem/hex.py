@@ -164,3 +164,42 @@ def dissection_order(nodes: np.ndarray, leaf: int = 64) -> np.ndarray:
             continue
         stack += [(plane, True), (right, False), (left, False)]
     return np.concatenate(order)
+
+
+def _gauss_gradients(size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Shape gradients [8 points, 8 nodes, 3] at the 2×2×2 Gauss points and [8, 3] at the centre."""
+    gauss = (2.0 * CORNERS - 1.0) / np.sqrt(3.0)
+    return np.stack([_shape_gradients(xi, size) for xi in gauss]), _shape_gradients(np.zeros(3), size)
+
+
+def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> np.ndarray:
+    """Internal nodal forces [V, 3] [N] of ``body`` displaced by ``u`` [V, 3] [m], for the
+    decoupled compressible Neo-Hookean solid ψ = μ/2 (J^(−2/3) tr C − 3) + K/2 (ln J)² with the
+    same split as :func:`element_stiffness`: the isochoric part on the 2×2×2 Gauss points, the
+    volumetric part with J of the element's centre (F-bar: one volume change per element).
+    Its linearisation at u = 0 is :func:`stiffness` exactly (μ = E/(2(1+ν)), K = E/(3(1−2ν))).
+
+    Raises:
+        FloatingPointError: an element is inverted (J ≤ 0 at a point).
+    """
+    mu = E / (2.0 * (1.0 + nu))
+    bulk = E / (3.0 * (1.0 - 2.0 * nu))
+    G, G0 = _gauss_gradients(body.size)
+    ue = u[body.element_nodes]  # [E, 8, 3]
+    eye = np.eye(3)
+    F = eye + np.einsum("eai,gaj->egij", ue, G)  # [E, 8, 3, 3]
+    J = np.linalg.det(F)
+    F0 = eye + np.einsum("eai,aj->eij", ue, G0)
+    J0 = np.linalg.det(F0)
+    if (J <= 0).any() or (J0 <= 0).any():
+        raise FloatingPointError("an element is inverted (J <= 0)")
+    Finv_T = np.linalg.inv(F).transpose(0, 1, 3, 2)
+    I1 = np.einsum("egij,egij->eg", F, F)
+    P = mu * J[..., None, None] ** (-2.0 / 3.0) * (F - I1[..., None, None] / 3.0 * Finv_T)
+    P0 = bulk * np.log(J0)[:, None, None] * np.linalg.inv(F0).transpose(0, 2, 1)
+    v = body.size ** 3
+    fe = np.einsum("egij,gaj->eai", P, G) * (v / 8.0) + np.einsum("eij,aj->eai", P0, G0) * v
+    f = np.zeros((len(body.nodes), 3))
+    for i in range(3):
+        f[:, i] = np.bincount(body.element_nodes.ravel(), fe[:, :, i].ravel(), minlength=len(body.nodes))
+    return f

@@ -20,13 +20,14 @@ from .hex import voxel_body
 __all__ = ["pad_body", "layer_body"]
 
 
-def pad_body(pad, E: float | None = None, nu: float | None = None) -> QuasiStaticBody:
+def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = "linear") -> QuasiStaticBody:
     """The soft layer of ``pad`` as a quasi-static body in its link frame (metres).
 
     Args:
         pad: a :class:`~gausstac_maniskill.tactile.pad.Pad` (particles on a lattice of
             spacing ``pad.spacing``, as :func:`~gausstac_maniskill.tactile.pad.build_pad` makes).
         E, nu: Young's modulus [Pa] and Poisson's ratio (default: the pad's material).
+        model: ``"linear"`` or ``"neo_hookean"`` (:class:`QuasiStaticBody`).
     """
     mat = pad.spec.material
     E = mat.E if E is None else E
@@ -44,7 +45,7 @@ def pad_body(pad, E: float | None = None, nu: float | None = None) -> QuasiStati
     surface = np.flatnonzero(pad.surface[soft])
     rest = pad.rest[soft][surface]
     points = rest + pad.depth[soft][surface, None] * pad.normal[soft][surface]
-    return QuasiStaticBody(body, E, nu, fixed, points, surface, name=f"pad {pad.name!r}")
+    return QuasiStaticBody(body, E, nu, fixed, points, surface, name=f"pad {pad.name!r}", model=model)
 
 
 def _corners() -> np.ndarray:
@@ -53,11 +54,11 @@ def _corners() -> np.ndarray:
     return CORNERS[None]
 
 
-def layer_body(h: float, half_width: float, size: float, E: float, nu: float) -> QuasiStaticBody:
+def layer_body(h: float, half_width: float, size: float, E: float, nu: float, model: str = "linear") -> QuasiStaticBody:
     """A quarter of a flat layer [0, W]² × [0, h] (W = ``half_width``) of cube elements of edge
     ``size`` [m], bonded to a rigid base at z = 0, with frictionless symmetry planes x = 0 and
     y = 0 and free outer faces; touched at the centres of its top faces (z = h). Forces on it
-    are a quarter of the whole layer's."""
+    are a quarter of the whole layer's. ``model`` as in :class:`QuasiStaticBody`."""
     nz = int(round(h / size))
     if nz < 1 or abs(nz * size - h) > 1e-6 * h:
         raise ConfigError(f"layer_body: h={h!r} m is not a whole number of elements of {size!r} m")
@@ -71,4 +72,4 @@ def layer_body(h: float, half_width: float, size: float, E: float, nu: float) ->
     fixed[nodes[:, 1] == 0, 1] = True
     top = np.flatnonzero(body.voxels[:, 2] == nz - 1)
     points = (body.voxels[top] + [0.5, 0.5, 1.0]) * size
-    return QuasiStaticBody(body, E, nu, fixed, points, top, name="layer")
+    return QuasiStaticBody(body, E, nu, fixed, points, top, name="layer", model=model)

@@ -95,3 +95,65 @@ def test_product_pad_press_is_positive_monotone_and_repeatable():
         assert np.array_equal(first.force, again.force)
         forces.append(-(S[:3, :3].T @ first.total_force)[2])
     assert 0 < forces[0] < forces[1] < forces[2]
+
+
+def _plate(top):
+    return lambda x: (top - x[:, 2], np.tile([0.0, 0.0, -1.0], (len(x), 1)))
+
+
+def _rollers(layer):
+    """The layer's outer faces on rollers too: a homogeneous uniaxial strain under a plate."""
+    from gausstac_maniskill.fem import QuasiStaticBody
+
+    nodes = layer.body.nodes
+    fixed = layer.fixed.copy()
+    fixed[nodes[:, 0] == nodes[:, 0].max(), 0] = True
+    fixed[nodes[:, 1] == nodes[:, 1].max(), 1] = True
+    return QuasiStaticBody(layer.body, layer.E, layer.nu, fixed, layer.points, layer.point_elements,
+                           model=layer.model)
+
+
+def test_finite_strain_uniaxial_compression_is_exact():
+    """20 % uniaxial compression: P_zz = μ λ^(−2/3) (λ − (2 + λ²)/(3λ)) + K ln λ / λ of the
+    decoupled Neo-Hookean law (F = diag(1, 1, λ)), which the elements reproduce exactly."""
+    E, nu, h, s = 0.26e6, 0.48, 4e-3, 1e-3
+    body = _rollers(layer_body(h, 3e-3, s, E, nu, model="neo_hookean"))
+    lam = 0.8
+    res = body.solve(_plate(lam * h), tol=1e-12, max_iterations=200)
+    mu, K = E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu))
+    P = mu * lam ** (-2 / 3) * (lam - (2 + lam ** 2) / (3 * lam)) + K * np.log(lam) / lam
+    area = (3 * s) ** 2
+    assert -res.total_force[2] == pytest.approx(-P * area, rel=1e-6)
+    assert res.residual < 1e-6
+
+
+def test_finite_strain_agrees_with_linear_at_small_strain_and_stiffens_at_large():
+    h, E, nu = 4e-3, 0.3e6, 0.48
+    forces = {}
+    for strain in (0.01, 0.1):
+        d = strain * h
+        R = (0.5 * h) ** 2 / d
+        c = np.array([0.0, 0.0, h + R - d])
+
+        def sphere(x):
+            v = x - c
+            r = np.linalg.norm(v, axis=1)
+            return r - R, v / r[:, None]
+
+        for model in ("linear", "neo_hookean"):
+            body = layer_body(h, max(3 * math.sqrt(R * d), math.sqrt(R * d) + 4 * h), 1e-3, E, nu, model=model)
+            forces[strain, model] = -body.solve(sphere, geometry="deformed").total_force[2]
+    assert forces[0.01, "neo_hookean"] == pytest.approx(forces[0.01, "linear"], rel=0.015)
+    assert forces[0.1, "neo_hookean"] > 1.03 * forces[0.1, "linear"]
+
+
+def test_finite_strain_warm_start_and_a_crushed_layer():
+    from gausstac_maniskill.errors import SimulationError
+
+    body = layer_body(2e-3, 3e-3, 1e-3, 0.3e6, 0.45, model="neo_hookean")
+    first = body.solve(_plate(1.8e-3))
+    again = body.solve(_plate(1.8e-3), warm=first)
+    assert again.iterations <= 2
+    assert again.total_force[2] == pytest.approx(first.total_force[2], rel=1e-4)
+    with pytest.raises(SimulationError, match="layer"):
+        body.solve(_plate(-0.5e-3), warm=first)  # the plate below the base: nothing can hold that
