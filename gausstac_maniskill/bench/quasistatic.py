@@ -38,7 +38,7 @@ import numpy as np
 
 from .thinlayer import A_OVER_H, E_LAYER, H_LAYER, STRAIN, layer_force
 
-__all__ = ["paraboloid", "layer_point", "layer_table", "pad_rows", "main"]
+__all__ = ["paraboloid", "sphere", "layer_point", "layer_table", "pad_rows", "main"]
 
 PAD_DEPTHS = (0.25e-3, 0.5e-3, 1e-3)
 
@@ -53,6 +53,19 @@ def paraboloid(R: float, apex) -> callable:
     def sdf(x):
         r2 = ((x[:, :2] - apex[:2]) ** 2).sum(1)
         return apex[2] + r2 / (2.0 * R) - x[:, 2], np.tile([0.0, 0.0, -1.0], (len(x), 1))
+
+    return sdf
+
+
+def sphere(R: float, centre) -> callable:
+    """A rigid sphere of radius R [m] centred at ``centre`` [3] m as an ``sdf`` for
+    :meth:`QuasiStaticBody.solve` (exact distance and outward normal)."""
+    centre = np.asarray(centre, float)
+
+    def sdf(x):
+        v = x - centre
+        r = np.linalg.norm(v, axis=1)
+        return r - R, v / r[:, None]
 
     return sdf
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from gausstac_maniskill.bench.quasistatic import layer_point, paraboloid
+from gausstac_maniskill.bench.quasistatic import layer_point, sphere
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.fem import layer_body, solve_lcp
 
@@ -50,15 +50,9 @@ def test_thin_layer_converges_under_refinement():
 def test_contact_conditions_hold_and_compliance_is_reciprocal():
     h, d, R = 3e-3, 3e-4, 6e-3
     body = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.45)
-    c = np.array([0.0, 0.0, h + R - d])
-
-    def sphere(x):
-        v = x - c
-        r = np.linalg.norm(v, axis=1)
-        return r - R, v / r[:, None]
-
+    ball = sphere(R, [0.0, 0.0, h + R - d])
     for geometry in ("rest", "deformed"):
-        res = body.solve(sphere, geometry=geometry)
+        res = body.solve(ball, geometry=geometry)
         lam = -res.force[:, 2]
         assert (lam >= 0).all() and lam.sum() > 0
         assert res.gap.min() > -1e-7                          # no point inside the sphere
@@ -69,7 +63,7 @@ def test_contact_conditions_hold_and_compliance_is_reciprocal():
     for s, q in itertools.product(p, p):
         assert np.allclose(W[int(q)][s], W[int(s)][q].T, rtol=1e-8, atol=1e-16)
     with pytest.raises(ConfigError, match="geometry"):
-        body.solve(sphere, geometry="bent")
+        body.solve(ball, geometry="bent")
 
 
 def test_product_pad_press_is_positive_monotone_and_repeatable():
@@ -133,16 +127,10 @@ def test_finite_strain_agrees_with_linear_at_small_strain_and_stiffens_at_large(
     for strain in (0.01, 0.1):
         d = strain * h
         R = (0.5 * h) ** 2 / d
-        c = np.array([0.0, 0.0, h + R - d])
-
-        def sphere(x):
-            v = x - c
-            r = np.linalg.norm(v, axis=1)
-            return r - R, v / r[:, None]
-
+        ball = sphere(R, [0.0, 0.0, h + R - d])
         for model in ("linear", "neo_hookean"):
             body = layer_body(h, max(3 * math.sqrt(R * d), math.sqrt(R * d) + 4 * h), 1e-3, E, nu, model=model)
-            forces[strain, model] = -body.solve(sphere, geometry="deformed").total_force[2]
+            forces[strain, model] = -body.solve(ball, geometry="deformed").total_force[2]
     assert forces[0.01, "neo_hookean"] == pytest.approx(forces[0.01, "linear"], rel=0.015)
     assert forces[0.1, "neo_hookean"] > 1.03 * forces[0.1, "linear"]
 
