@@ -28,6 +28,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench pad --curve --indenters plate --out out/bench_pad_plate
 	$(PY) -m gausstac_maniskill.bench motion
 	$(PY) -m gausstac_maniskill.bench motion --mover link
+	$(PY) -m gausstac_maniskill.bench quasistatic
 	$(PY) -m gausstac_maniskill.bench kernels
 	$(PY) -m gausstac_maniskill.bench compile
 	$(PY) -m gausstac_maniskill.bench soft
