@@ -7,13 +7,14 @@ shape never changes, so its stiffness matrix is assembled and factored once:
 
 * :mod:`.hex` — trilinear hexahedra on the pad's particle lattice (one voxel per particle),
   selective reduced integration against volumetric locking, assembly and interpolation.
-* :mod:`.contact` — frictionless contact of the body's surface points with a rigid collider,
-  solved as a linear complementarity problem on the points near it, with the body's
-  compliance at those points computed once per point and kept.
+* :mod:`.contact` — contact of the body's surface points with a rigid collider (frictionless:
+  a linear complementarity problem; with Coulomb friction: Tresca iterations of a convex
+  problem) on the points near it, with the body's compliance at those points computed once
+  per point and kept.
 """
-from .contact import ContactResult, QuasiStaticBody, solve_lcp
+from .contact import ContactResult, Indenter, QuasiStaticBody, solve_frictional, solve_lcp
 from .hex import VoxelBody, element_stiffness, stiffness, voxel_body
-from .pad import layer_body, pad_body
+from .pad import collider_indenter, layer_body, pad_body
 
 __all__ = ["VoxelBody", "element_stiffness", "stiffness", "voxel_body", "QuasiStaticBody", "ContactResult",
-           "solve_lcp", "pad_body", "layer_body"]
+           "solve_lcp", "solve_frictional", "Indenter", "pad_body", "layer_body", "collider_indenter"]

@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import ConfigError, SimulationError
 from .hex import VoxelBody, dissection_order, neo_hookean_forces, stiffness, trilinear
 
-__all__ = ["QuasiStaticBody", "ContactResult", "solve_lcp"]
+__all__ = ["QuasiStaticBody", "ContactResult", "solve_lcp", "solve_frictional", "tangent_bases"]
 
 _BLAS = None
 
@@ -88,6 +88,136 @@ def solve_lcp(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return lam
 
 
+def tangent_bases(n: np.ndarray) -> np.ndarray:
+    """[m, 2, 3] two unit tangents orthogonal to each unit normal ``n`` [m, 3] (and to each other)."""
+    a = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(n, a)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return np.stack([t1, np.cross(n, t1)], axis=1)
+
+
+#: The Coulomb bound μ f_n has settled when no point's moves by more than this fraction of the largest.
+BOUND_TOL = 1e-4
+
+
+def _project(f: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """Each point's force [m, 3] (n, t1, t2) onto {f_n ≥ 0, |f_t| ≤ bound}."""
+    out = f.copy()
+    out[:, 0] = np.maximum(f[:, 0], 0.0)
+    ft = np.linalg.norm(f[:, 1:], axis=1)
+    scale = np.where(ft > bound, bound / np.maximum(ft, 1e-300), 1.0)
+    out[:, 1:] *= scale[:, None]
+    return out
+
+
+def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.ndarray, mu: float,
+                     tol: float, max_iterations: int = 50, inner: int = 4000) -> tuple[np.ndarray, np.ndarray]:
+    """Signorini contact with Coulomb friction on m points of an elastic body, quasi-static.
+
+    Unknowns: the force f_p [3] on each point. Its displacement is W f (``W`` [m, 3, m, 3], the
+    compliance among the points); its gap g = gap0 + n·(W f) and its slip s = slip0 + Tᵀ(W f)
+    (T: :func:`tangent_bases` of ``n``; ``slip0`` [m, 2] its tangential offset from where it
+    holds on the collider). Conditions: f_n = n·f ≥ 0, g ≥ 0, f_n g = 0; |f_t| ≤ μ f_n; a point
+    that holds (|f_t| < μ f_n) does not slip; one that slips is pulled back along its slip.
+
+    Solved as a sequence of Tresca problems (the friction bound μ f_n of the last iterate held
+    fixed, Panagiotopoulos's iteration): each is the convex problem min ½fᵀWf + bᵀf over
+    {f_n ≥ 0, |f_t| ≤ bound}, whose optimality conditions are the ones above, solved by
+    accelerated projected gradients (Nesterov/FISTA with adaptive restart) to ``tol`` [m] in
+    the points' displacements, until no bound moves by more than :data:`BOUND_TOL` of the
+    largest. Raises :class:`SimulationError` if the bound does not settle.
+
+    Returns (f [m, 3], state [m] int: 0 open, 1 stuck, 2 slipping).
+    """
+    m = len(gap0)
+    T = tangent_bases(n)
+    frame = np.concatenate([n[:, None, :], T], axis=1)  # [m, 3, 3]: rows n, t1, t2
+    M = np.einsum("pai,piqj,qbj->paqb", frame, W, frame).reshape(3 * m, 3 * m)
+    M = 0.5 * (M + M.T)
+    b = np.concatenate([gap0[:, None], slip0], axis=1).ravel()
+    L = float(np.linalg.eigvalsh(M)[-1]) if m <= 400 else _largest_eigenvalue(M)
+    f = np.zeros((m, 3))
+    f[:, 0] = solve_lcp(M[0::3, 0::3], gap0)  # frictionless start
+    bound = mu * f[:, 0]
+    for _ in range(max_iterations):
+        f = _fista(M, b, f, bound, L, tol, inner)
+        new = mu * f[:, 0]
+        if np.abs(new - bound).max() <= BOUND_TOL * max(new.max(), 1e-300):
+            break
+        bound = new
+    else:
+        raise SimulationError(f"friction: the Coulomb bound did not settle in {max_iterations} Tresca iterations")
+    ft = np.linalg.norm(f[:, 1:], axis=1)  # on the bound its last Tresca problem held: slipping
+    state = np.where(f[:, 0] <= 0, 0, np.where(ft >= bound * (1 - 1e-6), 2, 1))
+    return np.einsum("pai,pa->pi", frame, f), state
+
+
+def _largest_eigenvalue(M: np.ndarray, iterations: int = 60) -> float:
+    """λ_max of a symmetric positive semidefinite M by power iteration (+5 % margin)."""
+    x = np.ones(len(M)) / np.sqrt(len(M))
+    lam = 0.0
+    for _ in range(iterations):
+        y = M @ x
+        lam = float(np.linalg.norm(y))
+        x = y / max(lam, 1e-300)
+    return 1.05 * lam
+
+
+def _fista(M, b, f0, bound, L, tol, iterations) -> np.ndarray:
+    """min ½fᵀMf + bᵀf over {f_n ≥ 0, |f_t| ≤ bound} from ``f0`` [m, 3]: FISTA with restart,
+    stopped when a step moves the points' displacements by less than ``tol`` [m]."""
+    x = _project(f0, bound)
+    y, t = x.copy(), 1.0
+    for _ in range(iterations):
+        grad = (M @ y.ravel() + b).reshape(-1, 3)
+        x_new = _project(y - grad / L, bound)
+        step = x_new - x
+        if np.abs(step).max() * L < tol:
+            return x_new
+        t_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
+        if np.sum((y - x_new) * step) > 0:  # the momentum points uphill: restart
+            y, t = x_new.copy(), 1.0
+        else:
+            y = x_new + (t - 1.0) / t_new * step
+            t = t_new
+        x = x_new
+    raise SimulationError(f"friction: the Tresca problem did not converge in {iterations} iterations")
+
+
+@dataclass
+class Indenter:
+    """A rigid collider as a body sees it, for contact with friction (which needs the
+    collider's frame to hold a stuck point's place on it).
+
+    Attributes:
+        local_sdf: ``local_sdf(q)`` for points q [k, 3] in the collider's own frame returns
+            (φ [k] m, negative inside; outward unit normal [k, 3] in that frame).
+        pose: [4, 4] the collider's frame in the body's frame [m].
+        friction: Coulomb coefficient μ ≥ 0.
+    """
+
+    local_sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    pose: np.ndarray
+    friction: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.pose = np.asarray(self.pose, float)
+        if self.pose.shape != (4, 4):
+            raise ConfigError(f"Indenter.pose has shape {self.pose.shape}, expected (4, 4)")
+        if not np.isfinite(self.friction) or self.friction < 0:
+            raise ConfigError(f"Indenter.friction={self.friction!r} must be a finite number >= 0")
+
+    def to_local(self, x: np.ndarray) -> np.ndarray:
+        return (x - self.pose[:3, 3]) @ self.pose[:3, :3]
+
+    def to_body(self, q: np.ndarray) -> np.ndarray:
+        return q @ self.pose[:3, :3].T + self.pose[:3, 3]
+
+    def __call__(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        phi, n = self.local_sdf(self.to_local(x))
+        return phi, n @ self.pose[:3, :3].T
+
+
 @dataclass
 class ContactResult:
     """Equilibrium under one collider (body frame, SI units).
@@ -101,6 +231,11 @@ class ContactResult:
         nodes: [V, 3] displacement [m] of every node (``"neo_hookean"`` bodies; None for
             linear ones, whose :meth:`QuasiStaticBody.nodal_displacement` gives it on demand).
         residual: |f_int − f_contact| / |f_contact| at the end (0 for linear bodies).
+        state: [S] int, 0 open, 1 stuck, 2 slipping (friction; 1 wherever a frictionless
+            point carries force).
+        anchors: [S, 3] where each stuck or slipping point holds on the collider, in the
+            collider's frame [m] (NaN where open; frictional contact only).
+        pose: the collider's pose [4, 4] in the body frame (frictional contact only).
     """
 
     force: np.ndarray
@@ -110,6 +245,9 @@ class ContactResult:
     candidates: int
     nodes: np.ndarray | None = None
     residual: float = 0.0
+    state: np.ndarray | None = None
+    anchors: np.ndarray | None = None
+    pose: np.ndarray | None = None
 
     @property
     def total_force(self) -> np.ndarray:
@@ -228,14 +366,20 @@ class QuasiStaticBody:
         return np.append(u, 0.0)[self._row].reshape(-1, 3)
 
     # ------------------------------------------------------------------ contact
-    def solve(self, sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], geometry: str = "rest",
+    def solve(self, sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | Indenter, geometry: str = "rest",
               margin: float | None = None, tol: float | None = None, max_iterations: int = 60,
               warm: ContactResult | None = None) -> ContactResult:
         """Equilibrium of the body pressed by one rigid collider.
 
         Args:
             sdf: ``sdf(x)`` for body-frame points x [S, 3] (every surface point, in order)
-                returns (φ [S] m, negative inside the collider; outward unit normal [S, 3]).
+                returns (φ [S] m, negative inside the collider; outward unit normal [S, 3]);
+                frictionless. An :class:`Indenter` with ``friction`` > 0 adds Coulomb
+                friction (:func:`solve_frictional`): a point holds its place on the collider
+                from one solve to the next (pass the last result as ``warm``); a point that
+                comes into contact holds where it lands: the foot on the collider's surface of
+                where it was at the last solve, carried by the collider's motion since
+                (``warm.pose``), or of where it rests if there is none.
             geometry: where the contact conditions are read. ``"rest"`` (default): φ and n
                 at the rest surface, the gap linear in the displacement, g = φ(X) + n(X)·u:
                 small-displacement contact, consistent with the linear body and with the
@@ -247,7 +391,8 @@ class QuasiStaticBody:
             tol: convergence of the surface's motion and of the largest penetration [m]
                 (default 1e-4 of an element).
             max_iterations: outer iterations before :class:`SimulationError`.
-            warm: the last step's result, to start from (``"neo_hookean"`` bodies).
+            warm: the last step's result: the state to start from (``"neo_hookean"`` bodies) and
+                the points' holds on the collider (friction).
 
         A ``"neo_hookean"`` body is always read at its displaced surface (finite strain), and
         solved by fixed-point iterations on the linear stiffness K: with the nonlinear
@@ -259,12 +404,31 @@ class QuasiStaticBody:
             raise ConfigError(f"{self.name}: geometry={geometry!r} must be 'rest' or 'deformed'")
         margin = self.body.size if margin is None else float(margin)
         tol = 1e-4 * self.body.size if tol is None else float(tol)
+        friction = _Friction(self, sdf, warm, tol) if getattr(sdf, "friction", 0.0) > 0 else None
         with _one_blas_thread():
             if self.model == "neo_hookean":
-                return self._solve_finite_strain(sdf, margin, tol, max_iterations, warm)
-            return self._solve_linear(sdf, geometry, margin, tol, max_iterations)
+                res = self._solve_finite_strain(sdf, margin, tol, max_iterations, warm, friction)
+            else:
+                res = self._solve_linear(sdf, geometry, margin, tol, max_iterations, friction)
+        if friction is not None:
+            friction.finish(res)
+        else:
+            res.state = (np.abs(res.force).sum(1) > 0).astype(np.int64)
+        return res
 
-    def _solve_linear(self, sdf, geometry, margin, tol, max_iterations) -> ContactResult:
+    def _contact_forces(self, idx, n, gap0, offset, friction) -> np.ndarray:
+        """[m, 3] forces on points ``idx`` with normals ``n`` [m, 3], gap ``gap0`` + n·(W f) and,
+        with ``friction``, position offset from their holds ``offset`` [m, 3] + W f."""
+        if friction is None:
+            return solve_lcp(self._normal_compliance(idx, n), gap0)[:, None] * n
+        self._ensure_columns(idx)
+        W = np.stack([self._columns[int(p)][idx] for p in idx], axis=2)  # [m (s), 3, m (d), 3]
+        f, friction.state = solve_frictional(W, n, gap0, np.einsum("pai,pi->pa", tangent_bases(n), offset),
+                                             friction.mu, friction.tol)
+        friction.idx = idx
+        return f
+
+    def _solve_linear(self, sdf, geometry, margin, tol, max_iterations, friction=None) -> ContactResult:
         u = np.zeros((self.num_points, 3))
         taken = np.zeros(self.num_points, bool)
         phi, n = sdf(self.points)
@@ -278,8 +442,8 @@ class QuasiStaticBody:
             if not len(idx):
                 return ContactResult(np.zeros_like(u), u, gap_now, it, 0)
             nc = n[idx]
-            lam = solve_lcp(self._normal_compliance(idx, nc), phi[idx])
-            f = lam[:, None] * nc
+            offset = None if friction is None else self.points[idx] - friction.hold[idx]
+            f = self._contact_forces(idx, nc, phi[idx], offset, friction)
             u_new = self.displacement_of(idx, f)
             moved = float(np.abs(u_new - u).max())
             u = u_new
@@ -305,7 +469,7 @@ class QuasiStaticBody:
         u[self._free] = x
         return u.reshape(-1, 3)
 
-    def _solve_finite_strain(self, sdf, margin, tol, max_iterations, warm) -> ContactResult:
+    def _solve_finite_strain(self, sdf, margin, tol, max_iterations, warm, friction=None) -> ContactResult:
         body = self.body
         u = np.zeros((len(body.nodes), 3)) if warm is None or warm.nodes is None else warm.nodes.copy()
         taken = np.zeros(self.num_points, bool)
@@ -330,8 +494,10 @@ class QuasiStaticBody:
             u_new = u_load
             if len(idx):
                 nc = n[idx]
-                lam = solve_lcp(self._normal_compliance(idx, nc), b[idx])
-                f = lam[:, None] * nc
+                offset = None
+                if friction is not None:
+                    offset = (self.points + self._interp(u_load) - friction.hold)[idx]
+                f = self._contact_forces(idx, nc, b[idx], offset, friction)
                 u_new = u_load + self.nodal_displacement(idx, f)
             moved = float(np.abs(u_new - u).max())
             if moved < tol:
@@ -352,3 +518,40 @@ class QuasiStaticBody:
         free = ~self.fixed
         residual = float(np.linalg.norm((fint - load)[free]) / max(np.linalg.norm(load[free]), 1e-30))
         return ContactResult(force, us, sdf(self.points + us)[0], it, len(idx), u, residual)
+
+
+class _Friction:
+    """The holds of one frictional solve: where each surface point holds on the collider
+    (body frame), and, once solved, the points' states and their new holds."""
+
+    def __init__(self, body: QuasiStaticBody, indenter: Indenter, warm: ContactResult | None, tol: float):
+        if not isinstance(indenter, Indenter):
+            raise ConfigError(f"{body.name}: friction needs an Indenter (its frame holds the stuck points)")
+        self.indenter, self.mu, self.tol = indenter, float(indenter.friction), tol
+        if warm is not None and warm.pose is not None:
+            # where each point was, carried by the collider's motion since
+            local = Indenter(indenter.local_sdf, warm.pose).to_local(body.points + warm.displacement)
+        else:
+            local = indenter.to_local(body.points)
+        phi, n = indenter.local_sdf(local)
+        local = local - phi[:, None] * n  # a point that comes into contact holds where it lands: its foot on the surface
+        if warm is not None and warm.pose is not None:
+            stuck = warm.state == 1
+            local[stuck] = warm.anchors[stuck]
+        self.rest = body.points
+        self.local = local
+        self.hold = indenter.to_body(local)
+        self.idx = np.zeros(0, np.int64)
+        self.state = np.zeros(0, np.int64)
+
+    def finish(self, res: ContactResult) -> None:
+        """Store the states and the new holds in ``res``: a stuck point keeps its hold, a
+        slipping one holds where it ended, an open one none."""
+        S = len(res.gap)
+        state = np.zeros(S, np.int64)
+        state[self.idx] = self.state
+        anchors = np.full((S, 3), np.nan)
+        stuck, sliding = state == 1, state == 2
+        anchors[stuck] = self.local[stuck]
+        anchors[sliding] = self.indenter.to_local(self.rest[sliding] + res.displacement[sliding])
+        res.state, res.anchors, res.pose = state, anchors, self.indenter.pose.copy()

@@ -17,7 +17,7 @@ from ..errors import ConfigError
 from .contact import QuasiStaticBody
 from .hex import voxel_body
 
-__all__ = ["pad_body", "layer_body"]
+__all__ = ["pad_body", "layer_body", "collider_indenter"]
 
 
 def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = "linear") -> QuasiStaticBody:
@@ -73,3 +73,23 @@ def layer_body(h: float, half_width: float, size: float, E: float, nu: float, mo
     top = np.flatnonzero(body.voxels[:, 2] == nz - 1)
     points = (body.voxels[top] + [0.5, 0.5, 1.0]) * size
     return QuasiStaticBody(body, E, nu, fixed, points, top, name="layer", model=model)
+
+
+def collider_indenter(collider, link_pose=None) -> "Indenter":
+    """An MPM :class:`~gausstac_maniskill.mpm.colliders.Collider` (any shape, its ``pose`` in
+    the world) as the :class:`~.contact.Indenter` a pad on a link at ``link_pose`` (4x4, world;
+    default identity) sees: its signed distance in its own frame (the same Taichi code the MPM
+    uses), its pose in the link frame, its friction."""
+    import dataclasses
+
+    from ..mpm.colliders import signed_distance
+    from .contact import Indenter
+
+    local = dataclasses.replace(collider, pose=np.eye(4))
+
+    def local_sdf(q):
+        phi, n = signed_distance(local, q)
+        return phi.astype(np.float64), n.astype(np.float64)
+
+    L = np.eye(4) if link_pose is None else np.asarray(link_pose, float)
+    return Indenter(local_sdf, np.linalg.inv(L) @ collider.pose, collider.friction)

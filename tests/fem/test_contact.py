@@ -145,3 +145,71 @@ def test_finite_strain_warm_start_and_a_crushed_layer():
     assert again.total_force[2] == pytest.approx(first.total_force[2], rel=1e-4)
     with pytest.raises(SimulationError, match="layer"):
         body.solve(_plate(-0.5e-3), warm=first)  # the plate below the base: nothing can hold that
+
+
+def _coulomb_violations(W, n, gap0, slip0, mu, f, state):
+    """Largest violations of the contact conditions: gap, pull, cone [N], stuck slip [m], and the
+    largest cosine between a slipping point's slip and its friction force (should be −1)."""
+    from gausstac_maniskill.fem.contact import tangent_bases
+
+    frame = np.concatenate([n[:, None, :], tangent_bases(n)], axis=1)
+    fl = np.einsum("pai,pi->pa", frame, f)
+    disp = np.einsum("pai,piqj,qj->pa", frame, W, f)
+    gap, slip = gap0 + disp[:, 0], slip0 + disp[:, 1:]
+    ft = np.linalg.norm(fl[:, 1:], axis=1)
+    sliding = state == 2
+    cos = np.einsum("pa,pa->p", slip[sliding], fl[sliding, 1:]) / np.maximum(
+        np.linalg.norm(slip[sliding], axis=1) * ft[sliding], 1e-300)
+    return dict(penetration=max(0.0, -gap.min()), open_gap=np.abs(gap[fl[:, 0] > 0]).max(initial=0.0),
+                pull=max(0.0, -fl[:, 0].min()), cone=max(0.0, (ft - mu * fl[:, 0]).max()),
+                stuck_slip=np.linalg.norm(slip[state == 1], axis=1).max(initial=0.0), cos=cos.max(initial=-1.0))
+
+
+def test_frictional_solver_meets_every_coulomb_condition():
+    from gausstac_maniskill.fem import solve_frictional
+
+    rng = np.random.default_rng(1)
+    m = 12
+    G = rng.normal(size=(3 * m, 3 * m))
+    W = (G @ G.T / (3 * m) + 0.5 * np.eye(3 * m)).reshape(m, 3, m, 3) * 1e-4
+    n = rng.normal(size=(m, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    gap0 = rng.normal(size=m) * 1e-5 - 5e-6
+    slip0 = rng.normal(size=(m, 2)) * 5e-6
+    for mu in (0.2, 1.0):
+        f, state = solve_frictional(W, n, gap0, slip0, mu, tol=1e-10)
+        v = _coulomb_violations(W, n, gap0, slip0, mu, f, state)
+        assert v["penetration"] < 1e-9 and v["open_gap"] < 1e-9 and v["pull"] == 0.0
+        assert v["cone"] < 1e-6 * np.abs(f).max() and v["stuck_slip"] < 1e-8
+        assert v["cos"] < -0.999  # a slipping point is pulled back along its slip
+        assert (state == 2).any() and (state == 1).any()
+
+
+def _plate_indenter(z, mu, x=0.0):
+    from gausstac_maniskill.fem import Indenter
+
+    pose = np.eye(4)
+    pose[:3, 3] = [x, 0.0, z]
+    return Indenter(lambda q: (-q[:, 2], np.tile([0.0, 0.0, -1.0], (len(q), 1))), pose, mu)
+
+
+def test_friction_stiffens_a_confined_layer_and_a_slide_drags_at_mu():
+    """A plate pressed into a bonded, nearly incompressible layer: friction holds the layer
+    from flowing out, so the force grows with μ up to full stick; slid far, every point
+    slips and the drag is μ times the normal force (Amontons–Coulomb)."""
+    h = 4e-3
+    forces = []
+    for mu in (0.0, 0.3, 5.0):
+        body = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.48)
+        warm = None
+        for z in (h - 0.1e-3, h - 0.2e-3, h - 0.3e-3):
+            warm = body.solve(_plate_indenter(z, mu), warm=warm)
+        forces.append(-warm.total_force[2])
+    assert forces[0] < 0.98 * forces[1] < 0.98 * forces[2]
+    body = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.48)
+    warm = body.solve(_plate_indenter(h - 0.3e-3, 0.3))
+    slid = body.solve(_plate_indenter(h - 0.3e-3, 0.3, x=1e-3), warm=warm)
+    fn, ft = -slid.total_force[2], np.hypot(*slid.total_force[:2])
+    assert (slid.state[np.abs(slid.force).sum(1) > 0] == 2).all()
+    assert ft == pytest.approx(0.3 * fn, rel=1e-3)
+    assert slid.total_force[0] > 0  # the plate drags the layer along +x
