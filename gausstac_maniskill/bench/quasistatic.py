@@ -1,13 +1,13 @@
-"""Quasi-static linear pads (:mod:`gausstac_maniskill.fem`): thin-layer theory and the product pad.
+"""Pads solved at equilibrium (:mod:`gausstac_maniskill.fem`): thin-layer theory and the product pad.
 
 ``python -m gausstac_maniskill.bench quasistatic [--sizes 1e-3 5e-4] [--nu 0.45 0.48 0.499]
 [--pad-sizes 1e-3 5e-4] [--depths 2.5e-4 5e-4 1e-3] [--friction 0.5] [--mpm-dx 1e-3 | --no-mpm]
 [--out DIR]``
 
-The pad solved at equilibrium instead of relaxed by the explicit MPM: linear elasticity on one
-cube element per particle (selective reduced integration, no volumetric locking), its stiffness
-factored once in the link frame, frictionless contact solved exactly on the surface points
-near the collider (:mod:`gausstac_maniskill.fem.contact`). No time step, no pseudo-mass.
+The pad solved at equilibrium instead of relaxed by the explicit MPM: one cube element per
+particle (selective reduced integration, no volumetric locking), its linear stiffness factored
+once in the link frame, contact solved on the surface points near the collider
+(:mod:`gausstac_maniskill.fem.contact`). No time step, no pseudo-mass.
 
 1. **Thin layer** (the set-up of ``bench thinlayer``: h = 4 mm bonded to a rigid base,
    E = 0.3 MPa, δ = 0.1·h, a/h = 0.3 … 3, a quarter with symmetry planes), pressed by the

@@ -1,18 +1,19 @@
-"""Frictionless contact of a linear elastic body with a rigid collider, at equilibrium.
+"""Contact of an elastic body with a rigid collider, at equilibrium.
 
 The body (:mod:`.hex`) is held by its fixed degrees of freedom and touched only at its
 surface points. A force f_d at point d moves point s by W_sd f_d, where W = N K⁻¹ Nᵀ is the
-body's compliance at its surface points (N: trilinear interpolation, K: the stiffness with
-the fixed degrees of freedom removed). The contact problem is then one on the points near
+body's compliance at its surface points (N: trilinear interpolation, K: the linear stiffness
+with the fixed degrees of freedom removed). The contact problem is then one on the points near
 the collider (Signorini's conditions, linearised at the present surface):
 
     λ ≥ 0,   g = φ + Σ_d (n_s · W_sd n_d) λ_d ≥ 0,   λ · g = 0,
 
 with φ the collider's signed distance at each point, n its outward normal there and λ the
-normal force. It is solved exactly (:func:`solve_lcp`), the surface moved, φ and n read
-again, until the surface stops moving. K is factored once; W's column for a point is
-computed by three solves the first time the point comes near a collider, and kept, so a
-press or a slide costs solves only for the points it reaches.
+normal force. Frictionless, it is solved exactly (:func:`solve_lcp`); with Coulomb friction
+(an :class:`Indenter`) by Tresca iterations (:func:`solve_frictional`). A finite-strain body
+repeats that inside fixed-point iterations on K (:meth:`QuasiStaticBody.solve`). K is factored
+once; W's column for a point is computed by three solves the first time the point comes near
+a collider, and kept, so a press or a slide costs solves only for the points it reaches.
 """
 from __future__ import annotations
 
@@ -487,7 +488,8 @@ class QuasiStaticBody:
                 raise SimulationError(f"{self.name}: {err} at iteration {it}; the press is too deep for "
                                       "the pad, or the step too large") from None
             u_load = self._solve_nodes(-remainder)
-            b = phi + np.einsum("si,si->s", n, self._interp(u_load) - us)  # gap with no contact force
+            us_load = self._interp(u_load)
+            b = phi + np.einsum("si,si->s", n, us_load - us)  # gap with no contact force
             taken |= b < margin
             idx = np.flatnonzero(taken)
             f = np.zeros((0, 3))
@@ -496,7 +498,7 @@ class QuasiStaticBody:
                 nc = n[idx]
                 offset = None
                 if friction is not None:
-                    offset = (self.points + self._interp(u_load) - friction.hold)[idx]
+                    offset = (self.points + us_load - friction.hold)[idx]
                 f = self._contact_forces(idx, nc, b[idx], offset, friction)
                 u_new = u_load + self.nodal_displacement(idx, f)
             moved = float(np.abs(u_new - u).max())
@@ -510,13 +512,9 @@ class QuasiStaticBody:
         force = np.zeros((self.num_points, 3))
         force[idx] = f
         us = self._interp(u)
-        load = np.zeros((len(body.nodes), 3))
-        if len(idx):
-            rows = body.element_nodes[self.point_elements[idx]]
-            np.add.at(load, rows.ravel(), (self._weights[idx][:, :, None] * f[:, None, :]).reshape(-1, 3))
-        fint = neo_hookean_forces(body, u, self.E, self.nu)
-        free = ~self.fixed
-        residual = float(np.linalg.norm((fint - load)[free]) / max(np.linalg.norm(load[free]), 1e-30))
+        load = self._load(idx, f[None])[:, 0]  # free degrees of freedom, in elimination order
+        fint = neo_hookean_forces(body, u, self.E, self.nu).ravel()[self._free]
+        residual = float(np.linalg.norm(fint - load) / max(np.linalg.norm(load), 1e-30))
         return ContactResult(force, us, sdf(self.points + us)[0], it, len(idx), u, residual)
 
 
@@ -528,16 +526,15 @@ class _Friction:
         if not isinstance(indenter, Indenter):
             raise ConfigError(f"{body.name}: friction needs an Indenter (its frame holds the stuck points)")
         self.indenter, self.mu, self.tol = indenter, float(indenter.friction), tol
-        if warm is not None and warm.pose is not None:
-            # where each point was, carried by the collider's motion since
+        held = warm is not None and warm.pose is not None
+        if held:  # where each point was, carried by the collider's motion since
             local = Indenter(indenter.local_sdf, warm.pose).to_local(body.points + warm.displacement)
         else:
             local = indenter.to_local(body.points)
         phi, n = indenter.local_sdf(local)
         local = local - phi[:, None] * n  # a point that comes into contact holds where it lands: its foot on the surface
-        if warm is not None and warm.pose is not None:
-            stuck = warm.state == 1
-            local[stuck] = warm.anchors[stuck]
+        if held:
+            local[warm.state == 1] = warm.anchors[warm.state == 1]
         self.rest = body.points
         self.local = local
         self.hold = indenter.to_body(local)

@@ -46,10 +46,6 @@ class VoxelBody:
     def num_dofs(self) -> int:
         return 3 * len(self.nodes)
 
-    def node_positions(self) -> np.ndarray:
-        """[V, 3] rest positions of the nodes [m]."""
-        return self.origin + self.nodes * self.size
-
     def element_dofs(self) -> np.ndarray:
         """[E, 24] degrees of freedom of each element (node-major)."""
         return (self.element_nodes[:, :, None] * 3 + np.arange(3)).reshape(len(self.voxels), 24)
@@ -105,11 +101,11 @@ def element_stiffness(size: float, E: float, nu: float) -> np.ndarray:
     m = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     dev = 2.0 * mu * (np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5]) - np.outer(m, m) / 3.0)
     K = np.zeros((24, 24))
-    gauss = (2.0 * CORNERS - 1.0) / np.sqrt(3.0)
-    for xi in gauss:
-        B = _strain_matrix(_shape_gradients(xi, size))
+    G, G0 = _gauss_gradients(size)
+    for g in G:
+        B = _strain_matrix(g)
         K += B.T @ dev @ B * (size ** 3 / 8.0)
-    B0 = _strain_matrix(_shape_gradients(np.zeros(3), size))
+    B0 = _strain_matrix(G0)
     vol = m @ B0  # [24] volume change per unit nodal displacement / element volume
     return K + bulk * np.outer(vol, vol) * size ** 3
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from .contact import QuasiStaticBody
-from .hex import voxel_body
+from .hex import CORNERS, voxel_body
 
 __all__ = ["pad_body", "layer_body", "collider_indenter"]
 
@@ -40,18 +40,16 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
     soft = ~pad.kinematic
     body = voxel_body(ijk[soft], origin, s)
     # the bond: every node the soft elements share with a kinematic particle's cube
-    bound = {tuple(v) for v in (ijk[pad.kinematic][:, None, :] + _corners()).reshape(-1, 3)}
-    fixed = np.array([tuple(v) in bound for v in body.nodes])
+    span = ijk.max(0) + 2  # lattice nodes run 0 … max + 1 on each axis
+
+    def key(v):
+        return (v[..., 0] * span[1] + v[..., 1]) * span[2] + v[..., 2]
+
+    fixed = np.isin(key(body.nodes), key(ijk[pad.kinematic][:, None, :] + CORNERS[None]))
     surface = np.flatnonzero(pad.surface[soft])
     rest = pad.rest[soft][surface]
     points = rest + pad.depth[soft][surface, None] * pad.normal[soft][surface]
     return QuasiStaticBody(body, E, nu, fixed, points, surface, name=f"pad {pad.name!r}", model=model)
-
-
-def _corners() -> np.ndarray:
-    from .hex import CORNERS
-
-    return CORNERS[None]
 
 
 def layer_body(h: float, half_width: float, size: float, E: float, nu: float, model: str = "linear") -> QuasiStaticBody:
