@@ -10,12 +10,16 @@ zero maps; they are carried rigidly by their link and wake up as soon as an obje
 comes near. A pad never falls asleep deformed.
 
 Time integration: pads are quasi-static (dynamic relaxation with a pseudo-mass,
-see :mod:`gausstac_maniskill.mpm.solver`); free soft objects move with their
+see :mod:`gausstac_maniskill.mpm.solver`; or, with ``pad_solver="fem"``, solved at
+equilibrium each step, :mod:`gausstac_maniskill.fem`); free soft objects move with their
 physical mass. Default numerics are chosen for robot control steps (20–100 Hz):
 grid spacing 1 mm (pad particles every 0.5 mm). Units: SI.
 """
 from __future__ import annotations
 
+import copy
+import time
+import warnings
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
@@ -26,6 +30,7 @@ from .errors import ConfigError
 from .mpm import MPMWorld
 from .mpm.colliders import Collider
 from .tactile import Pad, build_pad, pad_mesh
+from .tactile.extract import TaxelBinning, tactile_maps
 from .tactile.readout import TactileReadout
 from .transforms import as_pose_matrix, turn_angle
 from .urdf import default_hand_urdf
@@ -69,12 +74,20 @@ class GaussTacSim:
             instead of a world of its own (:class:`~gausstac_maniskill.batch.BatchedCosim`
             does this); its links and groups are named ``env{env}/<name>`` there. A scene in
             a shared world does not step it (the batch does): use the batch's ``step``.
+        pad_solver: ``"mpm"`` (default): the pads are MPM particles relaxed with a pseudo-mass,
+            in contact with rigid and soft objects. ``"fem"``: each awake pad is solved at
+            equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
+            one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
+            the nearest rigid object only; soft objects and shared (batched) worlds are refused,
+            the splat camera draws these pads at rest, and :meth:`flat_state` is not available.
+        fem_model: the ``"fem"`` pads' material model, ``"linear"`` (fast; small strain) or
+            ``"neo_hookean"`` (finite strain; seconds per step at the default resolution).
     """
 
     def __init__(self, pads: Sequence[PadSpec], link_poses: Mapping[str, np.ndarray], *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
                  sleep_margin: float = 5e-3, pad_surface: str = "mesh", world: MPMWorld | None = None,
-                 env: int = 0):
+                 env: int = 0, pad_solver: str = "mpm", fem_model: str = "linear"):
         self.urdf = urdf or default_hand_urdf()
         if world is None:
             self.settings = settings or default_hand_settings()
@@ -88,6 +101,16 @@ class GaussTacSim:
         self.sleep_margin = float(sleep_margin)
         if pad_surface not in ("particles", "mesh"):
             raise ConfigError(f"GaussTacSim(pad_surface={pad_surface!r}) must be 'particles' or 'mesh'")
+        if pad_solver not in ("mpm", "fem"):
+            raise ConfigError(f"GaussTacSim(pad_solver={pad_solver!r}) must be 'mpm' or 'fem'")
+        if pad_solver == "fem" and (world is not None or pad_surface != "mesh"):
+            raise ConfigError("GaussTacSim(pad_solver='fem') needs a world of its own and pad_surface='mesh' "
+                              "(the equilibrium pads are touched on the link mesh, one scene at a time)")
+        self.pad_solver = pad_solver
+        self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
+        self._warned: set[str] = set()
+        self._binning: dict[str, TaxelBinning] = {}
+        self.pad_solve_time = 0.0  # wall time [s] of the last step's equilibrium solves (pad_solver="fem")
         self.pads: dict[str, Pad] = {}
         self._objects: dict[str, int] = {}
         self._soft: dict[str, str] = {}
@@ -110,6 +133,11 @@ class GaussTacSim:
                                  contact_radius=pad.contact_radius if pad_surface == "mesh" else None,
                                  bond_distance=spec.thickness - pad.depth, bond_normal=pad.normal @ T[:3, :3].T)
             self.pads[spec.name] = pad
+            if pad_solver == "fem":
+                from .fem.sensor import EquilibriumPad
+
+                self._fem[spec.name] = EquilibriumPad(pad, model=fem_model)
+                self.world.set_awake(self._w(spec.name), False)  # the MPM never steps it
         self._link_pose = {k: as_pose_matrix(v, f"link_poses[{k!r}]") for k, v in link_poses.items()}
         self._maps: dict[str, dict[str, torch.Tensor]] = {}
         self._awake = {name: True for name in self.pads}
@@ -158,6 +186,9 @@ class GaussTacSim:
         (``settings.soft_friction``), and their contact force maps read that contact."""
         if name in self._objects or name in self._soft or name in self.pads:
             raise ConfigError(f"object {name!r} already exists")
+        if self._fem:
+            raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium (pad_solver='fem') touch rigid "
+                              "objects only; use pad_solver='mpm' for soft objects")
         kwargs.setdefault("field", 1)
         if isinstance(kwargs.get("link"), str):
             kwargs["link"] = self._w(kwargs["link"])
@@ -176,14 +207,38 @@ class GaussTacSim:
         exerted on rigid object ``name`` during the last step (for two-way coupling)."""
         if name not in self._objects:
             raise ConfigError(f"unknown rigid object {name!r}; objects: {sorted(self._objects)}")
-        return self.world.collider_wrench(self._objects[name])
+        f, tau = self.world.collider_wrench(self._objects[name])
+        origin = self.world.colliders[self._objects[name]].pose[:3, 3]
+        for pad, fp in self._fem.items():
+            if fp.holder == name:
+                x, fc = fp.contact_points(self._link_pose[fp.pad.spec.link])
+                f, tau = f - fc.sum(0), tau - np.cross(x - origin, fc).sum(0)
+        return f, tau
 
     def link_wrench(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         """Reaction force [N] and torque [N·m] (about the link origin, world frame) that the
         pads bound to hand link ``link`` passed to it during the last step: what objects
         pushed on them, through a massless layer (for two-way coupling of the hand; equal
         and opposite to the rigid objects' share of :meth:`object_wrench`)."""
-        return self.world.link_wrench(self._w(link))
+        f, tau = self.world.link_wrench(self._w(link))
+        for row in self._fem_contacts(link).values():
+            f, tau = f + row[:3], tau + row[3:6]
+        return f, tau
+
+    def _fem_contacts(self, link: str) -> dict[str, np.ndarray]:
+        """:meth:`link_contacts`' rows of the equilibrium pads on ``link``, by object."""
+        out: dict[str, np.ndarray] = {}
+        for fp in self._fem.values():
+            if fp.pad.spec.link != link or not fp.touching:
+                continue
+            T = self._link_pose[link]
+            x, fc = fp.contact_points(T)
+            row = np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0), [fp.indentation()]])
+            if fp.holder in out:
+                row[:6] += out[fp.holder][:6]
+                row[6] = max(row[6], out[fp.holder][6])
+            out[fp.holder] = row
+        return out
 
     def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:
         """Per object that hand link ``link``'s pads touched in the last step, ``[7]``: the
@@ -194,7 +249,12 @@ class GaussTacSim:
         sum to :meth:`link_wrench`."""
         rows = self.world.link_contacts(self._w(link))
         names = {i: n for n, i in self._objects.items()}
-        return {names.get(i): r for i, r in enumerate(rows) if (i in names or i == len(rows) - 1) and np.any(r[:6])}
+        out = {names.get(i): r for i, r in enumerate(rows) if (i in names or i == len(rows) - 1) and np.any(r[:6])}
+        for name, row in self._fem_contacts(link).items():
+            if name in out:
+                row = np.concatenate([out[name][:6] + row[:6], [max(out[name][6], row[6])]])
+            out[name] = row
+        return out
 
     # ------------------------------------------------------------------ stepping
     def step(self, link_poses: Mapping[str, np.ndarray], dt: float,
@@ -231,9 +291,41 @@ class GaussTacSim:
         self._update_sleep()
 
     def end_step(self) -> None:
-        """Second half of :meth:`step`, after the world stepped: forget the last maps."""
+        """Second half of :meth:`step`, after the world stepped: solve the equilibrium pads
+        (``pad_solver="fem"``) at the step's end poses, forget the last maps."""
+        if self._fem:
+            self._solve_pads()
         self._maps = {}
         self._posed = None
+
+    def _solve_pads(self) -> None:
+        """Each awake equilibrium pad against the rigid object nearest its surface points (those
+        within one element of it); a pad with none within reach is at rest. With two objects
+        within reach, only the nearer is solved, and a warning says so (once per pad)."""
+        from .mpm.colliders import signed_distance
+
+        t0 = time.perf_counter()
+        for name, fp in self._fem.items():
+            if not self._awake[name]:
+                continue
+            T = self._link_pose[fp.pad.spec.link]
+            body = fp.body
+            local = body.points if fp.result is None else body.points + fp.result.displacement
+            pts = local @ T[:3, :3].T + T[:3, 3]
+            near = sorted((float(signed_distance(self.world.colliders[i], pts)[0].min()), obj)
+                          for obj, i in self._objects.items())
+            near = [(phi, obj) for phi, obj in near if phi < body.body.size]
+            if not near:
+                fp.release()
+                continue
+            if len(near) > 1 and name not in self._warned:
+                self._warned.add(name)
+                warnings.warn(f"pad {name!r} (pad_solver='fem') is within reach of {[o for _, o in near]}; "
+                              f"only the nearest, {near[0][1]!r}, is solved (one object per pad and step)",
+                              stacklevel=3)
+            obj = near[0][1]
+            fp.solve(self.world.colliders[self._objects[obj]], T, key=obj)
+        self.pad_solve_time = time.perf_counter() - t0
 
     def _update_sleep(self) -> None:
         """Wake pads near an object (collider or soft group), put the others to sleep.
@@ -273,6 +365,11 @@ class GaussTacSim:
                 for lo, hi in soft_boxes:
                     d = float(np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1).min())
                     near |= d - reach < self.sleep_margin
+            if name in self._fem:  # solved at equilibrium: away from every object it is at rest
+                if not near:
+                    self._fem[name].release()
+                self._awake[name] = near
+                continue
             if not near and self._awake[name]:
                 x = self.world.positions(self._w(name)).astype(np.float64)
                 settled = self._relative_speed(name, x) * self.world.last_dt_ctrl < 0.2 * REST_TOLERANCE
@@ -384,8 +481,33 @@ class GaussTacSim:
         sleeping pad reads all zeros. One launch reads every pad on the device
         (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`)."""
         if not self._maps:
-            self._maps = {name: {k: v[0] for k, v in m.items()} for name, m in self.readout().maps().items()}
+            if len(self._fem) < len(self.pads):
+                self._maps = {name: {k: v[0] for k, v in m.items()} for name, m in self.readout().maps().items()}
+            for name in self._fem:
+                self._maps[name] = self._fem_maps(name)
         return self._maps
+
+    def _fem_maps(self, name: str) -> dict[str, torch.Tensor]:
+        """The maps of equilibrium pad ``name``: :func:`~.tactile.extract.tactile_maps` of its
+        particles' state (:meth:`EquilibriumPad.particle_state`), on the Taichi arch's device."""
+        from . import backend
+
+        fp, pad = self._fem[name], self.pads[name]
+        if name not in self._binning:
+            self._binning[name] = TaxelBinning.for_pad(pad)
+        T = self._link_pose[pad.spec.link]
+        x, _, sigma, f = fp.particle_state(T)
+        maps = tactile_maps(pad, self._binning[name], x, T, f, sigma)
+        device = backend.torch_device()
+        return {k: v.to(device) for k, v in maps.items()}
+
+    def pad_contact_forces(self, pad: str) -> np.ndarray:
+        """[N, 3] world contact force [N] on each of ``pad``'s particles in the last step (from
+        rigid objects; zero where none)."""
+        name = self._pad(pad).name
+        if name in self._fem:
+            return self._fem[name].particle_state(self._link_pose[self.pads[name].spec.link])[3]
+        return self.world.contact_forces(self._w(name))
 
     def readout(self) -> TactileReadout:
         """The :class:`~gausstac_maniskill.tactile.readout.TactileReadout` of this scene's pads."""
@@ -421,6 +543,8 @@ class GaussTacSim:
         p = self._pad(pad)
         if not self._awake[p.name]:
             return np.zeros(3)
+        if p.name in self._fem:  # the same virtual work, on the equilibrium's elements (link frame)
+            return p.sensor_frame[:3, :3].T @ self._fem[p.name].stress_force()
         grad_phi = (p.normal @ self.world.binding_rotation(self._w(p.name)).T) / p.spec.thickness  # world at binding
         grad_phi[p.kinematic] = 0.0
         f = self.world.virtual_work_force(self._w(p.name), grad_phi)
@@ -436,6 +560,9 @@ class GaussTacSim:
 
         A sleeping pad is not simulated; it is reported carried rigidly by its link."""
         name = self._pad(pad).name
+        if name in self._fem:
+            x, F, _, _ = self._fem[name].particle_state(self._link_pose[self.pads[name].spec.link])
+            return x.astype(np.float32), F.astype(np.float32)
         g = self._w(name)
         return self._carried(name, self.world.positions(g), self.world.deformation_gradients(g))
 
@@ -453,7 +580,11 @@ class GaussTacSim:
             g = self.group(name)
             # the group's rows: all of [start, stop), or those of ``index`` in it (ascending)
             lo, hi = (g.start, g.stop) if index is None else np.searchsorted(index, (g.start, g.stop))
-            if hi > lo:
+            if hi > lo and name in self._fem:
+                rows = np.arange(g.count) if index is None else index[lo:hi] - g.start
+                xp, Fp = self.pad_particles(name)
+                x[lo:hi], F[lo:hi] = xp[rows], Fp[rows]
+            elif hi > lo:
                 x[lo:hi], F[lo:hi] = self._carried(name, x[lo:hi], F[lo:hi])
         return x, F
 
@@ -502,14 +633,20 @@ class GaussTacSim:
     def state_dict(self) -> dict:
         """Full state (MPM world, link poses, sleep flags); restore with :meth:`load_state_dict`.
         In a shared world, this env's part only: it loads into the same scene alone and back."""
-        return {"world": self.world.state_dict(env=self._state_env),
-                "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
-                "awake": dict(self._awake)}
+        state = {"world": self.world.state_dict(env=self._state_env),
+                 "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
+                 "awake": dict(self._awake)}
+        if self._fem:  # the equilibrium pads' last solutions (their warm start and friction holds)
+            state["fem"] = {name: (copy.deepcopy(fp.result), fp.holder) for name, fp in self._fem.items()}
+        return state
 
     def flat_state(self) -> dict[str, np.ndarray]:
         """The state of :meth:`state_dict` as a flat dict of fixed-shape numpy arrays
         (no ``None``, no nesting), so that several identical scenes stack along a batch
         axis — the form ManiSkill's ``get_state_dict`` and ``RecordEpisode`` store."""
+        if self._fem:
+            raise ConfigError("flat_state: pads solved at equilibrium (pad_solver='fem') keep a contact state "
+                              "that is not flattened yet; use state_dict / load_state_dict")
         w = self.world.state_dict(env=self._state_env)
         out = {f"p_{k}": v for k, v in w["particles"].items()}
         n_groups = len(w["awake"])
@@ -563,6 +700,10 @@ class GaussTacSim:
         self.world.load_state_dict(state["world"], env=self._state_env)
         self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
         self._awake = dict(state["awake"])
+        for name, (result, holder) in state.get("fem", {}).items():
+            fp = self._fem[name]
+            fp.release()
+            fp.result, fp.holder = copy.deepcopy(result), holder
         self._maps = {}
         self._posed = None
 

@@ -141,7 +141,7 @@ def _collider(kind: str, pose: np.ndarray, friction: float):
 def _contact_area(sim, pad) -> float:
     """Projected area [m²] of the pad particles with a contact force: their rest sensor
     coordinates binned on the particle lattice (h × h cells)."""
-    f = sim.world.contact_forces(INDEX)
+    f = sim.pad_contact_forces(INDEX)
     s = pad.sensor_coords()[np.linalg.norm(f, axis=1) > 0]
     if not len(s):
         return 0.0
@@ -151,12 +151,12 @@ def _contact_area(sim, pad) -> float:
 
 def make_sim(dx: float, indenter: str, thickness: float | None = None, friction: float = FRICTION,
              mass_scaling: float | None = None, pad_surface: str = "mesh", patch_radius=False,
-             cfl: float | None = None):
+             cfl: float | None = None, pad_solver: str = "mpm", fem_model: str = "linear"):
     """The benchmark's scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
     :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
     factor ``mass_scaling``, ``patch_radius`` [m] or None (False: the default's) and Courant
     number ``cfl``;
-    ``pad_surface`` as in :class:`GaussTacSim`) and ``indenter``
+    ``pad_surface``, ``pad_solver`` and ``fem_model`` as in :class:`GaussTacSim`) and ``indenter``
     ("plate" | "sphere") 0.2 mm clear of its apex. Returns (sim, W): W the sensor frame's
     world pose (4x4)."""
     from ..cosim import GaussTacSim, default_hand_settings
@@ -167,7 +167,7 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
     if cfl is not None:
         extra["cfl"] = float(cfl)
     sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra),
-                      pad_surface=pad_surface)
+                      pad_surface=pad_surface, pad_solver=pad_solver, fem_model=fem_model)
     W = LINK_POSE @ sim.pads[INDEX].sensor_frame
     sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
     return sim, W
@@ -175,11 +175,14 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
 
 def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
              friction: float = FRICTION, bar=None, mass_scaling: float | None = None,
-             pad_surface: str = "mesh", patch_radius=False, cfl: float | None = None) -> dict:
+             pad_surface: str = "mesh", patch_radius=False, cfl: float | None = None, pad_solver: str = "mpm",
+             fem_model: str = "linear") -> dict:
     """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
     (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
     (default: :func:`default_hand_settings`'); ``patch_radius`` [m] the active patch (None: off,
-    False: the default's); ``cfl`` the Courant number (default: the settings').
+    False: the default's); ``cfl`` the Courant number (default: the settings'); ``pad_solver``
+    ``"fem"`` solves the pad at equilibrium instead (with ``fem_model``): its ``step_ms`` is
+    the equilibrium solve's wall time plus the MPM world's (which then holds no particles).
 
     Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
     "phases": [...]}``; each phase (``"press"`` / ``"slide"`` at depth ``d`` [m]) holds
@@ -189,7 +192,8 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
     """
     t0 = time.perf_counter()
-    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling, pad_surface, patch_radius, cfl)
+    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling, pad_surface, patch_radius, cfl,
+                      pad_solver, fem_model)
     pad = sim.pads[INDEX]
     spec = pad.spec
     build_s = time.perf_counter() - t0
@@ -199,7 +203,7 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
 
     def step(z: float, x: float):
         maps = sim.step({INDEX: LINK_POSE}, DT, {"indenter": indenter_pose(indenter, W, z, x)})[INDEX]
-        walls.append(sim.world.last_step.wall_time)
+        walls.append(sim.world.last_step.wall_time + sim.pad_solve_time)
         subs.append(sim.world.last_step.substeps)
         active.append(sim.world.last_step.active_particles)
         if bar is not None:
@@ -374,8 +378,9 @@ def plot_maps(cases: list[dict], out_dir: str) -> list[str]:
 
 
 def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=None, protocol=FULL,
-        friction=FRICTION, progress=True) -> list[dict]:
-    """All (dx, indenter) cases, coarsest first, with one tqdm bar over every control step."""
+        friction=FRICTION, progress=True, pad_solver: str = "mpm", fem_model: str = "linear") -> list[dict]:
+    """All (dx, indenter) cases, coarsest first, with one tqdm bar over every control step
+    (``pad_solver``, ``fem_model``: :func:`run_case`)."""
     from tqdm import tqdm
 
     per_case = 1 + len(depths) * (protocol.press + protocol.slide + 2 * protocol.hold)
@@ -384,7 +389,8 @@ def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=N
         for dx in sorted(dxs, reverse=True):
             for ind in indenters:
                 bar.set_description(f"{ind} dx={dx * 1e3:g} mm")
-                cases.append(run_case(dx, ind, depths, thickness, protocol, friction, bar))
+                cases.append(run_case(dx, ind, depths, thickness, protocol, friction, bar, pad_solver=pad_solver,
+                                      fem_model=fem_model))
     return cases
 
 
@@ -486,6 +492,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="Courant numbers of extra curve points: every --dx grid at the default mass scaling")
     ap.add_argument("--hold", type=int, default=CURVE.hold,
                     help="held control steps of each curve point (the force is read over the second half)")
+    ap.add_argument("--pad-solver", default="mpm", choices=["mpm", "fem"],
+                    help="the pad's solver (GaussTacSim's pad_solver; convergence tables only)")
+    ap.add_argument("--fem-model", default="linear", choices=["linear", "neo_hookean"],
+                    help="the fem pad's material model (with --pad-solver fem)")
     ap.add_argument("--pad-surface", default="mesh", choices=["particles", "mesh"],
                     help="where the indenter touches the pad (GaussTacSim's pad_surface; curve only)")
     args = ap.parse_args(argv)
@@ -511,12 +521,14 @@ def main(argv: list[str] | None = None) -> int:
     arch = backend.init(args.arch)
     os.makedirs(args.out, exist_ok=True)
     t0 = time.perf_counter()
-    cases = run(dxs, args.indenters, args.depths, args.thickness, protocol, args.friction)
+    cases = run(dxs, args.indenters, args.depths, args.thickness, protocol, args.friction,
+                pad_solver=args.pad_solver, fem_model=args.fem_model)
     ana = analyse(cases, default_dx)
     spec = index_spec(args.thickness)
     head = (f"Index pad convergence on {arch} ({os.cpu_count()} cores): thickness {spec.thickness * 1e3:g} mm, "
             f"E = {spec.material.E / 1e6:g} MPa, nu = {spec.material.nu:g}, friction {args.friction:g}, "
-            f"sphere R = {SPHERE_RADIUS * 1e3:g} mm, slide {SLIDE * 1e3:g} mm, protocol {asdict(protocol)} "
+            f"sphere R = {SPHERE_RADIUS * 1e3:g} mm, slide {SLIDE * 1e3:g} mm, protocol {asdict(protocol)}, "
+            f"pad solver {args.pad_solver}{' (' + args.fem_model + ')' if args.pad_solver == 'fem' else ''} "
             f"(50 ms steps), total {time.perf_counter() - t0:.0f} s")
     text = head + "\n\n" + format_tables(cases, ana, default_dx)
     print(text)

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..errors import ConfigError
 
-__all__ = ["CORNERS", "VoxelBody", "voxel_body", "element_stiffness", "stiffness", "trilinear", "dissection_order"]
+__all__ = ["CORNERS", "VoxelBody", "voxel_body", "element_stiffness", "stiffness", "trilinear", "dissection_order",
+           "neo_hookean_forces", "centre_state"]
 
 #: Corner offsets (i, j, k) of an element's 8 nodes, in node order.
 CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], np.int64)
@@ -199,3 +200,36 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     for i in range(3):
         f[:, i] = np.bincount(body.element_nodes.ravel(), fe[:, :, i].ravel(), minlength=len(body.nodes))
     return f
+
+
+def centre_state(body: VoxelBody, u: np.ndarray, E: float, nu: float, model: str = "linear"):
+    """Deformation gradient F [E, 3, 3] and Cauchy stress σ [E, 3, 3] [Pa] of each element of
+    ``body`` displaced by ``u`` [V, 3] [m], at its centre (where its particle sits).
+
+    ``"linear"``: F = I + ∇u, σ = λ tr(ε) I + 2μ ε, ε the symmetric part of ∇u (the mean strain
+    of the element's Gauss points: on a cube the trilinear terms cancel between them).
+    ``"neo_hookean"``: the law of :func:`neo_hookean_forces`; the isochoric Kirchhoff stress
+    μ J^(−2/3) dev(F Fᵀ) averaged over the 2×2×2 Gauss points, the volumetric one K ln J₀ I with
+    J₀ of the centre, σ = τ / J₀.
+    """
+    mu = E / (2.0 * (1.0 + nu))
+    G, G0 = _gauss_gradients(body.size)
+    ue = u[body.element_nodes]  # [E, 8, 3]
+    eye = np.eye(3)
+    grad = np.einsum("eai,aj->eij", ue, G0)
+    F0 = eye + grad
+    if model == "linear":
+        lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+        eps = 0.5 * (grad + grad.transpose(0, 2, 1))
+        return F0, lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * eye + 2.0 * mu * eps
+    if model != "neo_hookean":
+        raise ConfigError(f"centre_state: model={model!r} must be 'linear' or 'neo_hookean'")
+    bulk = E / (3.0 * (1.0 - 2.0 * nu))
+    F = eye + np.einsum("eai,gaj->egij", ue, G)
+    J = np.linalg.det(F)
+    B = np.einsum("egij,egkj->egik", F, F)
+    dev = B - np.trace(B, axis1=2, axis2=3)[..., None, None] / 3.0 * eye
+    tau_iso = (mu * J[..., None, None] ** (-2.0 / 3.0) * dev).mean(1)
+    J0 = np.linalg.det(F0)
+    tau = tau_iso + bulk * np.log(np.maximum(J0, 1e-12))[:, None, None] * eye
+    return F0, tau / J0[:, None, None]

@@ -1,0 +1,157 @@
+"""One pad solved at equilibrium on a moving link, read as the MPM's pads are read.
+
+:class:`EquilibriumPad` holds a pad's quasi-static body (:func:`~.pad.pad_body`, built the
+first time the pad touches something), the last contact solution (the warm state: where
+stuck points hold, the finite-strain iterate) and turns it into what the tactile maps, the
+wrenches and the renderer read from a pad: each particle's world position, deformation
+gradient, Cauchy stress and contact force.
+
+The body has one cube element per soft particle, centred on it, so a particle's
+displacement is the mean of its element's eight nodes and its stress the element's at its
+centre (:func:`~.hex.centre_state`). A surface point (on the link mesh, ``depth`` along
+``normal`` from its particle) passes its contact force to its particle. Kinematic particles
+ride with the link. Units: SI; "link frame" is the pad's link's frame, "world" the scene's.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import ConfigError
+from .contact import ContactResult
+from .hex import centre_state
+from .pad import collider_indenter, pad_body
+
+__all__ = ["EquilibriumPad"]
+
+
+class EquilibriumPad:
+    """A :class:`~gausstac_maniskill.tactile.pad.Pad` solved at equilibrium against one rigid
+    collider at a time (no inertia, no time step: what a pad on a link is at control rates).
+
+    Args:
+        pad: the pad (rest geometry in the link frame, particles on a lattice).
+        model: ``"linear"`` (small strain; one factored solve per new contact point, then
+            dense algebra on the contact points) or ``"neo_hookean"`` (finite strain, fixed-point
+            iterations on the linear factor: accurate at the pad's tens of per cent strain,
+            seconds per step at 0.5 mm elements). See :class:`~.contact.QuasiStaticBody`.
+        geometry: where a ``"linear"`` body reads the contact conditions, ``"deformed"``
+            (default: at the displaced surface, as the MPM does) or ``"rest"``.
+    """
+
+    def __init__(self, pad, model: str = "linear", geometry: str = "deformed"):
+        if model not in ("linear", "neo_hookean"):
+            raise ConfigError(f"EquilibriumPad({pad.name!r}): model={model!r} must be 'linear' or 'neo_hookean'")
+        if geometry not in ("rest", "deformed"):
+            raise ConfigError(f"EquilibriumPad({pad.name!r}): geometry={geometry!r} must be 'rest' or 'deformed'")
+        self.pad, self.model, self.geometry = pad, model, geometry
+        self.soft = np.flatnonzero(~pad.kinematic)  # pad particle of each element
+        self._body = None
+        self.result: ContactResult | None = None  # the last solve; None: at rest, nothing touches
+        self.holder = None  # key of the collider ``result`` holds on
+        self.solve_time = 0.0  # wall time [s] of the last solve (and of building the body, the first time)
+        self._nodes = None
+
+    @property
+    def body(self):
+        """The pad's :class:`~.contact.QuasiStaticBody` (assembled and factored on first use)."""
+        if self._body is None:
+            self._body = pad_body(self.pad, model=self.model)
+        return self._body
+
+    @property
+    def point_particles(self) -> np.ndarray:
+        """[S] the pad particle of each of the body's surface points."""
+        return self.soft[self.body.point_elements]
+
+    # ------------------------------------------------------------------ solving
+    def solve(self, collider, link_pose: np.ndarray, key=None) -> ContactResult:
+        """Equilibrium with ``collider`` (an MPM :class:`~gausstac_maniskill.mpm.colliders.Collider`
+        at its world pose, its friction coefficient) and the link at world pose ``link_pose``
+        [4, 4]. ``key`` names the collider: the last solution warms the next one (and keeps the
+        friction holds) only while it is the same collider."""
+        t0 = time.perf_counter()
+        warm = self.result if self.result is not None and key == self.holder else None
+        self.result = self.body.solve(collider_indenter(collider, link_pose), geometry=self.geometry, warm=warm)
+        self.holder = key
+        self._nodes = None
+        self.solve_time = time.perf_counter() - t0
+        return self.result
+
+    def release(self) -> None:
+        """Nothing touches the pad: the unloaded equilibrium is the rest shape, exactly."""
+        self.result, self.holder, self._nodes, self.solve_time = None, None, None, 0.0
+
+    @property
+    def touching(self) -> bool:
+        """Whether the last solve left any contact force on the pad."""
+        return self.result is not None and bool(np.any(self.result.force))
+
+    def node_displacement(self) -> np.ndarray:
+        """[V, 3] displacement [m] of every node of the body, link frame (zeros at rest; a
+        linear body solves once for it after each contact solve, then keeps it)."""
+        if self._nodes is None:
+            res = self.result
+            if res is None:
+                self._nodes = np.zeros((len(self.body.body.nodes), 3))
+            elif res.nodes is not None:
+                self._nodes = res.nodes
+            else:
+                idx = np.flatnonzero(np.abs(res.force).sum(1) > 0)
+                self._nodes = (self.body.nodal_displacement(idx, res.force[idx]) if len(idx)
+                               else np.zeros((len(self.body.body.nodes), 3)))
+        return self._nodes
+
+    # ------------------------------------------------------------------ readout
+    def particle_state(self, link_pose: np.ndarray):
+        """The pad's particles as the MPM world would hold them, world frame:
+        positions [N, 3] m, deformation gradients [N, 3, 3] (link rotation times the
+        element's F), Cauchy stresses [N, 3, 3] Pa (zero on kinematic particles) and contact
+        forces [N, 3] N (on the particles under a surface point; zero elsewhere)."""
+        pad, T = self.pad, np.asarray(link_pose, float)
+        R, t = T[:3, :3], T[:3, 3]
+        n = pad.num_particles
+        local = pad.rest.astype(np.float64).copy()
+        F = np.tile(np.eye(3), (n, 1, 1))
+        sigma = np.zeros((n, 3, 3))
+        force = np.zeros((n, 3))
+        if self.result is not None:
+            body = self.body
+            u = self.node_displacement()
+            local[self.soft] += u[body.body.element_nodes].mean(1)
+            F[self.soft], sigma[self.soft] = centre_state(body.body, u, body.E, body.nu, self.model)
+            np.add.at(force, self.point_particles, self.result.force)
+        return (local @ R.T + t, R @ F, R @ sigma @ R.T, force @ R.T)
+
+    def contact_points(self, link_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The loaded contact points of the last solve, world frame: their displaced positions
+        [m, 3] m and the forces [m, 3] N the collider exerts on the pad there. The pad has no
+        mass: it passes them to its link, and the collider receives the opposite forces."""
+        if self.result is None:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        T, res = np.asarray(link_pose, float), self.result
+        idx = np.flatnonzero(np.abs(res.force).sum(1) > 0)
+        return (self.body.points[idx] + res.displacement[idx]) @ T[:3, :3].T + T[:3, 3], res.force[idx] @ T[:3, :3].T
+
+    def indentation(self) -> float:
+        """Largest displacement [m] of a loaded contact point (0 when nothing touches)."""
+        if self.result is None:
+            return 0.0
+        loaded = np.abs(self.result.force).sum(1) > 0
+        return float(np.linalg.norm(self.result.displacement[loaded], axis=1).max()) if loaded.any() else 0.0
+
+    def stress_force(self) -> np.ndarray:
+        """Total contact force [3] N on the pad read from its stress, link frame, by virtual
+        work with φ = 1 − d/h (d the rest depth below the pad surface, h the layer thickness):
+        Σ_e V J σ F⁻ᵀ ∇φ over the elements at their centres, the quadrature of
+        :meth:`GaussTacSim.pad_stress_force` on the MPM. At equilibrium it equals the contact
+        force up to that one-point quadrature."""
+        if self.result is None:
+            return np.zeros(3)
+        body = self.body
+        F, sigma = centre_state(body.body, self.node_displacement(), body.E, body.nu, self.model)
+        grad_phi = self.pad.normal[self.soft] / self.pad.spec.thickness
+        J = np.linalg.det(F)
+        grad_x = np.linalg.solve(np.transpose(F, (0, 2, 1)), grad_phi[..., None])[..., 0]
+        return body.body.size ** 3 * np.einsum("n,nij,nj->i", J, sigma, grad_x)

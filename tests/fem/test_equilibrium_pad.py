@@ -1,0 +1,143 @@
+"""The pad solved at equilibrium inside the co-simulator (fem/sensor.py, GaussTacSim(pad_solver="fem"))."""
+import numpy as np
+import pytest
+
+from gausstac_maniskill.errors import ConfigError
+
+DX = 2e-3  # 1 mm elements: the coarsest lattice, for speed
+
+
+def _scene(friction=0.5, nu=None, dx=DX, indenter="sphere"):
+    import dataclasses
+
+    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+
+    spec = bp.index_spec()
+    if nu is not None:
+        spec = dataclasses.replace(spec, material=dataclasses.replace(spec.material, nu=nu))
+    with pytest.warns(Warning) if dx > 1e-3 else _nothing():
+        sim = GaussTacSim([spec], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=dx), pad_solver="fem")
+    W = bp.LINK_POSE @ sim.pads[bp.INDEX].sensor_frame
+    sim.add_rigid_object("indenter", bp._collider(indenter, bp.indenter_pose(indenter, W, bp.GAP), friction))
+
+    def press(z, x=0.0):
+        maps = sim.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"indenter": bp.indenter_pose(indenter, W, z, x)})[bp.INDEX]
+        return W[:3, :3].T @ sim.object_wrench("indenter")[0], maps  # on the indenter, sensor axes
+
+    return sim, W, press
+
+
+class _nothing:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *a):
+        return False
+
+
+def test_fem_pad_press_reads_consistent_forces_and_returns_to_rest():
+    """Guards, not physics: the force map sums the same point forces as the indenter's
+    reaction, and the link receives what the indenter pushes (a massless pad). Physics: the
+    stress read by virtual work (one-point quadrature of the weak form) agrees with the
+    contact force, and the pad is exactly at rest once the indenter has left."""
+    from gausstac_maniskill.bench import pad as bp
+
+    sim, W, press = _scene()
+    F0, m0 = press(bp.GAP)
+    assert not np.any(F0) and float(m0["force"].abs().sum()) == 0.0
+    forces = []
+    for z in (-0.5e-3, -1e-3):
+        F, maps = press(z)
+        forces.append(F[2])
+        assert F[2] > 0
+        assert float(maps["force"].sum()) == pytest.approx(F[2], rel=1e-5)
+        assert float(maps["force"].min()) >= 0.0  # no pulling taxel
+        f_link, _ = sim.link_wrench(bp.INDEX)
+        np.testing.assert_allclose(f_link, -sim.object_wrench("indenter")[0], atol=1e-9)
+        stress = -sim.pad_stress_force(bp.INDEX)[2]
+        assert stress == pytest.approx(F[2], rel=0.10)  # measured +7.8 % at 1 mm elements (1 mm press)
+        depth = float(maps["depth"].max())
+        assert 0.3 * -z < depth < -z  # the surface yields less than the press
+    assert forces[1] > 2.0 * forces[0]  # contact stiffens as the patch grows
+    contacts = sim.link_contacts(bp.INDEX)
+    assert list(contacts) == ["indenter"] and contacts["indenter"][6] > 0
+    F, maps = press(3e-3)  # away: unloaded equilibrium is the rest shape, exactly
+    assert not np.any(F)
+    for k in ("depth", "shear"):
+        assert float(maps[k].abs().max()) < 1e-12  # m: rounding of the link pose's round trip
+    for k in ("force", "pressure"):
+        assert float(maps[k].abs().max()) == 0.0
+    x, _ = sim.pad_particles(bp.INDEX)
+    pad = sim.pads[bp.INDEX]
+    np.testing.assert_allclose(x, pad.rest @ bp.LINK_POSE[:3, :3].T + bp.LINK_POSE[:3, 3], atol=1e-7)
+
+
+def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
+    from gausstac_maniskill.bench import pad as bp
+
+    sim, W, press = _scene(friction=0.5)
+    press(bp.GAP)
+    press(-0.5e-3)
+    press(-1e-3)
+    saved = sim.state_dict()
+    F_pressed, m_pressed = press(-1e-3)  # a held step from the saved state
+    F_slid, maps = press(-1e-3, 1e-3)
+    assert F_slid[0] < -0.1 * F_slid[2]  # the indenter is held back along -x
+    assert abs(F_slid[0]) <= 0.55 * F_slid[2] + 1e-9  # and not beyond Coulomb's bound (μ = 0.5, curved surface)
+    assert float(maps["shear"][..., 0].max()) > 1e-5  # the surface is dragged along +x
+    sim.load_state_dict(saved)
+    F_again, m_again = press(-1e-3)  # the same held step from the restored state: bit-exact
+    np.testing.assert_array_equal(F_again, F_pressed)
+    for k in m_pressed:
+        np.testing.assert_array_equal(m_again[k].numpy(), m_pressed[k].numpy())
+
+
+def test_fem_pad_near_incompressible_is_stable_and_stiffer():
+    """ν = 0.499: no locking in the elements (selective reduced integration), a finite press;
+    a bonded thin layer stiffens as ν → 0.5, so it reads more than at ν = 0.48."""
+    from gausstac_maniskill.bench import pad as bp
+
+    out = []
+    for nu in (0.48, 0.499):
+        sim, W, press = _scene(friction=0.0, nu=nu)
+        press(bp.GAP)
+        F, maps = press(-1e-3)
+        assert np.isfinite(maps["pressure"].numpy()).all()
+        out.append(F[2])
+    assert 0 < out[0] < out[1] < 3.0 * out[0]
+
+
+def test_fem_pad_bad_input():
+    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+
+    args = ([bp.index_spec()], {bp.INDEX: bp.LINK_POSE})
+    with pytest.raises(ConfigError, match="pad_solver"):
+        GaussTacSim(*args, pad_solver="implicit")
+    with pytest.raises(ConfigError, match="pad_surface='mesh'"):
+        GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem", pad_surface="particles")
+    with pytest.warns(Warning):
+        sim = GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem")
+    with pytest.raises(ConfigError, match="rigid objects only"):
+        sim.add_soft_object("sponge", np.zeros((8, 3)) + [0, 0, 0.2], bp.index_spec().material)
+    with pytest.raises(ConfigError, match="state_dict"):
+        sim.flat_state()
+    from gausstac_maniskill.fem.sensor import EquilibriumPad
+
+    with pytest.raises(ConfigError, match="model"):
+        EquilibriumPad(sim.pads[bp.INDEX], model="hooke")
+
+
+def test_centre_state_neo_hookean_linearises_to_the_linear_stress():
+    """The two material laws of the pad agree at small strain (the stress read for the maps)."""
+    from gausstac_maniskill.fem.hex import centre_state, voxel_body
+
+    ijk = np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    body = voxel_body(ijk, np.zeros(3), 1e-3)
+    u = np.random.default_rng(1).normal(size=(len(body.nodes), 3)) * 1e-9
+    F_lin, s_lin = centre_state(body, u, 2e5, 0.48, "linear")
+    F_nh, s_nh = centre_state(body, u, 2e5, 0.48, "neo_hookean")
+    np.testing.assert_allclose(F_lin, F_nh)
+    np.testing.assert_allclose(s_nh, s_lin, atol=1e-4 * np.abs(s_lin).max())
+    assert np.abs(s_lin).max() > 0
