@@ -18,6 +18,6 @@ timeout "${T_KERN:-70}" python3 -m gausstac_maniskill.bench kernels --arch cuda 
 echo "bench kernels: exit $?"; grep -A2 "^index pad" "$OUT/kernels.log"
 GAUSSTAC_COMPILE=fast GAUSSTAC_TEST_ARCH=cuda timeout "${T_TEST:-240}" python3 -m pytest -m "not slow" \
     -p no:cacheprovider -n 14 --dist loadfile -v -rfE --tb=short --timeout 150 \
-    tests/mpm tests/tactile tests/test_batch.py tests/test_cosim.py tests/splat/test_rasterizer.py \
+    tests/mpm tests/tactile tests/fem tests/test_batch.py tests/test_cosim.py tests/splat/test_rasterizer.py \
     > "$OUT/tests.log" 2>&1; echo "CUDA tests: exit $?"
 grep -E "^(FAILED|ERROR)|passed|failed" "$OUT/tests.log" | tail -40

@@ -13,7 +13,7 @@ for p in manylinux1 manylinux2014 manylinux_2_17 manylinux_2_24 manylinux_2_27 m
          manylinux_2_34 manylinux_2_35; do plat+=(--platform "${p}_x86_64"); done
 python3 -m pip install -q --no-deps --target "$site" "${plat[@]}" \
     taichi==1.7.4 dill mani_skill==3.0.1 mujoco==4.0.0 mujoco-core==4.0.0 trimesh rtree plyfile \
-    pytorch-msssim gymnasium Farama-Notifications transforms3d dacite
+    pytorch-msssim gymnasium Farama-Notifications transforms3d dacite threadpoolctl
 keep=$(mktemp -d)
 cp -r "$site/mani_skill/assets/robots/allegro" "$keep/"
 rm -rf "$site/mani_skill" "$site/taichi/_lib/c_api" "$site/taichi/examples" \

@@ -105,7 +105,7 @@ def test_centred_press_map_is_symmetric(pressed):
     # mirror symmetry across the finger's axis (rows), and roughly along it
     assert np.abs(depth - depth[::-1, :]).max() < 0.1 * depth.max()
     assert np.abs(depth - depth[:, ::-1]).max() < 0.25 * depth.max()
-    force = maps[INDEX]["force"].numpy()
+    force = maps[INDEX]["force"].cpu().numpy()
     rr, cc = np.mgrid[0:H, 0:W]
     cy, cx = (force * rr).sum() / force.sum(), (force * cc).sum() / force.sum()
     assert abs(cy - (H - 1) / 2) < 0.5 and abs(cx - (W - 1) / 2) < 1.0
@@ -207,7 +207,7 @@ def test_flat_state_round_trip_is_bit_exact(hand_poses):
     again = sim.step(hand_poses, 0.02, {"ball": centre(0.9e-3)})
     assert np.array_equal(sim.world.positions(), x_ref)
     for k in ("depth", "shear", "force"):
-        assert np.array_equal(again[INDEX][k].numpy(), ref[INDEX][k].numpy())
+        assert np.array_equal(again[INDEX][k].cpu().numpy(), ref[INDEX][k].cpu().numpy())
     bad = dict(flat, link_pose=flat["link_pose"][:1])
     with pytest.raises(ConfigError, match="link poses"):
         sim.load_flat_state(bad)

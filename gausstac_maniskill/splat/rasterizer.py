@@ -531,7 +531,7 @@ def _rasterize_tiles(starts: _i64_1, vals: _i64_1, rec: _f32_3,
                         while todo_row != 0:  # each unfinished pixel once, lowest column first
                             low = todo_row & (~todo_row + ti.u32(1))
                             todo_row ^= low
-                            col = 31 - ti.cast(ti.math.clz(low), ti.i32)
+                            col = 31 - ti.math.clz(ti.cast(low, ti.i32))  # CUDA's clz takes i32, not u32
                             dx = px0 + col + 0.5 - u
                             power = (half_a * dx + lin) * dx + const
                             if power >= thr:  # inside the support: o·exp(power) may reach 1/255
@@ -592,8 +592,9 @@ class RenderOutput:
                            torch.zeros_like(self.depth))
 
     def composited_depth(self, background_depth: torch.Tensor) -> torch.Tensor:
-        """[C, H, W] Σ wᵢ zᵢ + T·background_depth (depth matching the composited rgb)."""
-        return self.depth + (1.0 - self.alpha) * background_depth
+        """[C, H, W] Σ wᵢ zᵢ + T·background_depth (depth matching the composited rgb), on the
+        outputs' device (``background_depth`` [C, H, W] m may be on any)."""
+        return self.depth + (1.0 - self.alpha) * torch.as_tensor(background_depth, device=self.depth.device)
 
 
 def _check_finite(name: str, t: torch.Tensor) -> None:

@@ -24,8 +24,8 @@ def maps_figure(maps: Mapping[str, Mapping], pads: Sequence[str] | None = None, 
     pads = list(pads or maps)
     fig, axes = plt.subplots(1, len(pads), figsize=(3.2 * len(pads), 3.0), dpi=100, squeeze=False)
     for ax, name in zip(axes[0], pads):
-        d = np.asarray(maps[name]["depth"]) * 1e3
-        s = np.asarray(maps[name]["shear"]) * 1e3
+        d = _host(maps[name]["depth"]) * 1e3
+        s = _host(maps[name]["shear"]) * 1e3
         im = ax.imshow(d, cmap="magma", vmin=0.0, vmax=depth_max * 1e3, origin="lower")
         yy, xx = np.mgrid[0:d.shape[0], 0:d.shape[1]]
         step = max(1, d.shape[0] // 8)
@@ -58,3 +58,8 @@ def write_video(path: str, frames: Sequence[np.ndarray], fps: int = 10) -> None:
     with imageio.get_writer(path, fps=fps, macro_block_size=1) as w:
         for f in frames:
             w.append_data(np.asarray(f))
+
+
+def _host(a) -> np.ndarray:
+    """A map as a NumPy array on the host (torch tensors on any device, or arrays)."""
+    return a.detach().cpu().numpy() if hasattr(a, "detach") else np.asarray(a)

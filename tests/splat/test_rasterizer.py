@@ -27,9 +27,11 @@ def cameras():
 
 
 def compare(out, ref):
+    """Largest |Δ| of rgb, depth, alpha against the dense reference (on the CPU; the
+    rasterizer's outputs are on the Taichi arch's device)."""
     rgb, depth, alpha = ref
-    return ((out.rgb - rgb).abs().max().item(), (out.depth - depth).abs().max().item(),
-            (out.alpha - alpha).abs().max().item())
+    return ((out.rgb.cpu() - rgb.cpu()).abs().max().item(), (out.depth.cpu() - depth.cpu()).abs().max().item(),
+            (out.alpha.cpu() - alpha.cpu()).abs().max().item())
 
 
 @pytest.mark.parametrize("sh_degree", [0, 1, 2, 3])
@@ -216,9 +218,9 @@ def test_keys_padded_for_the_radix_sort_render_the_same(monkeypatch, scene_facto
 def test_empty_set_renders_background():
     V, K = cameras()
     out = render(GaussianSet.empty(sh_degree=2), V, K, W, H, background=BG)
-    assert torch.equal(out.rgb, torch.tensor(BG).expand(3, H, W, 3))
-    assert torch.equal(out.alpha, torch.zeros(3, H, W))
-    assert torch.equal(out.depth, torch.zeros(3, H, W))
+    assert torch.equal(out.rgb.cpu(), torch.tensor(BG).expand(3, H, W, 3))
+    assert torch.equal(out.alpha.cpu(), torch.zeros(3, H, W))
+    assert torch.equal(out.depth.cpu(), torch.zeros(3, H, W))
 
 
 def test_everything_behind_camera_renders_background(scene_factory):
@@ -226,7 +228,7 @@ def test_everything_behind_camera_renders_background(scene_factory):
     V = look_at([0, -3, 0], [0, -6, 0])[None]  # looking away from the blob
     K = intrinsics_from_fov(W, H, 1.0)[None]
     out = render(g, V, K, W, H, background=BG)
-    assert torch.equal(out.alpha, torch.zeros(1, H, W))
+    assert torch.equal(out.alpha.cpu(), torch.zeros(1, H, W))
 
 
 def test_background_image(reference, scene_factory):
@@ -253,8 +255,8 @@ def test_depth_aware_compositing_occludes(reference, scene_factory):
     bg_depth[:, :4] = float("inf")
     out = render(g, V, K, W, H, background=bg, background_depth=bg_depth)
     # in front of everything: exactly the background image
-    assert torch.equal(out.rgb[:, 4:, : W // 2], bg[:, 4:, : W // 2])
-    assert torch.equal(out.alpha[:, 4:, : W // 2], torch.zeros(3, H - 4, W // 2))
+    assert torch.equal(out.rgb[:, 4:, : W // 2].cpu(), bg[:, 4:, : W // 2])
+    assert torch.equal(out.alpha[:, 4:, : W // 2].cpu(), torch.zeros(3, H - 4, W // 2))
     ref = reference(g.means, g.covariances(), g.opacities, g.sh, V, K, W, H, background=bg,
                     background_depth=bg_depth)
     assert compare(out, ref)[0] <= 1e-3
@@ -263,7 +265,7 @@ def test_depth_aware_compositing_occludes(reference, scene_factory):
     assert (out.alpha[right] < free.alpha[right] - 0.05).any(), "far Gaussians must be hidden"
     assert torch.equal(out.rgb[:, :4], free.rgb[:, :4])  # no surface: unchanged
     comp = out.composited_depth(bg_depth)
-    assert torch.allclose(comp[:, 4:, : W // 2], bg_depth[:, 4:, : W // 2])
+    assert torch.allclose(comp[:, 4:, : W // 2].cpu(), bg_depth[:, 4:, : W // 2])
 
 
 @pytest.mark.parametrize("name", ["means", "quats", "scales", "opacities", "sh", "viewmats", "Ks"])
@@ -485,10 +487,10 @@ def test_support_terms_kept_per_gaussian(scene_factory):
     o[0] = 0.5 / 255.0
     inp = _gaussian_inputs(g.means, g.quats, g.scales, o, g.sh, None, None)
     ln255o = torch.log(o.double() * 255.0)
-    assert torch.equal(inp.opacity[:, 0], o)
-    assert torch.allclose(inp.opacity[:, 1].double(), ln255o, rtol=0, atol=1e-6)
+    assert torch.equal(inp.opacity[:, 0].cpu(), o.cpu())
+    assert torch.allclose(inp.opacity[:, 1].double().cpu(), ln255o.cpu(), rtol=0, atol=1e-6)
     k = torch.sqrt(2.0 * ln255o.clamp_min(0.0)) * SUPPORT_SLACK
-    assert torch.allclose(inp.opacity[:, 2].double(), k, rtol=1e-6, atol=0)
+    assert torch.allclose(inp.opacity[:, 2].double().cpu(), k.cpu(), rtol=1e-6, atol=0)
     assert inp.opacity[0, 2] == 0.0
 
 
