@@ -17,7 +17,6 @@ grid spacing 1 mm (pad particles every 0.5 mm). Units: SI.
 """
 from __future__ import annotations
 
-import copy
 import time
 import warnings
 from typing import Callable, Mapping, Sequence
@@ -637,7 +636,7 @@ class GaussTacSim:
                  "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
                  "awake": dict(self._awake)}
         if self._fem:  # the equilibrium pads' last solutions (their warm start and friction holds)
-            state["fem"] = {name: (copy.deepcopy(fp.result), fp.holder) for name, fp in self._fem.items()}
+            state["fem"] = {name: fp.state() for name, fp in self._fem.items()}
         return state
 
     def flat_state(self) -> dict[str, np.ndarray]:
@@ -700,10 +699,8 @@ class GaussTacSim:
         self.world.load_state_dict(state["world"], env=self._state_env)
         self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
         self._awake = dict(state["awake"])
-        for name, (result, holder) in state.get("fem", {}).items():
-            fp = self._fem[name]
-            fp.release()
-            fp.result, fp.holder = copy.deepcopy(result), holder
+        for name, pad_state in state.get("fem", {}).items():
+            self._fem[name].load_state(pad_state)
         self._maps = {}
         self._posed = None
 

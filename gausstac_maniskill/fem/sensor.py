@@ -14,6 +14,7 @@ ride with the link. Units: SI; "link frame" is the pad's link's frame, "world" t
 """
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -52,6 +53,7 @@ class EquilibriumPad:
         self.holder = None  # key of the collider ``result`` holds on
         self.solve_time = 0.0  # wall time [s] of the last solve (and of building the body, the first time)
         self._nodes = None
+        self._pose = None  # the collider's frame in the link frame at the last solve [4, 4]
 
     @property
     def body(self):
@@ -72,16 +74,48 @@ class EquilibriumPad:
         [4, 4]. ``key`` names the collider: the last solution warms the next one (and keeps the
         friction holds) only while it is the same collider."""
         t0 = time.perf_counter()
+        indenter = collider_indenter(collider, link_pose)
         warm = self.result if self.result is not None and key == self.holder else None
-        self.result = self.body.solve(collider_indenter(collider, link_pose), geometry=self.geometry, warm=warm)
-        self.holder = key
+        if warm is not None and self._relative_motion(indenter.pose) <= self.hold_tolerance:
+            # the collider has not moved relative to the link: the equilibrium (and with friction
+            # every hold: a zero increment slips nowhere) is the last one, to the solver's tolerance
+            self.solve_time = time.perf_counter() - t0
+            return self.result
+        self.result = self.body.solve(indenter, geometry=self.geometry, warm=warm)
+        self.holder, self._pose = key, indenter.pose
         self._nodes = None
         self.solve_time = time.perf_counter() - t0
         return self.result
 
+    @property
+    def hold_tolerance(self) -> float:
+        """[m] the contact solve's tolerance (:meth:`QuasiStaticBody.solve`'s default, 1e-4 of an
+        element): a collider that moved less than this relative to the link, at every surface
+        point of the pad, leaves the last equilibrium standing."""
+        return 1e-4 * self.pad.spacing
+
+    def _relative_motion(self, pose: np.ndarray) -> float:
+        """[m] how far the collider's motion since the last solve (``pose``: its frame in the link
+        frame now) moves the pad's surface points, at most (inf without a last solve)."""
+        if self._pose is None:
+            return float("inf")
+        D = pose @ np.linalg.inv(self._pose)
+        p = self.body.points
+        return float(np.abs(p @ (D[:3, :3] - np.eye(3)).T + D[:3, 3]).max())
+
     def release(self) -> None:
         """Nothing touches the pad: the unloaded equilibrium is the rest shape, exactly."""
-        self.result, self.holder, self._nodes, self.solve_time = None, None, None, 0.0
+        self.result, self.holder, self._nodes, self._pose, self.solve_time = None, None, None, None, 0.0
+
+    def state(self) -> dict:
+        """A copy of what the next solve starts from (restore with :meth:`load_state`)."""
+        return copy.deepcopy({"result": self.result, "holder": self.holder, "pose": self._pose})
+
+    def load_state(self, state: dict) -> None:
+        """Restore a :meth:`state` of this pad."""
+        self.release()
+        s = copy.deepcopy(state)
+        self.result, self.holder, self._pose = s["result"], s["holder"], s["pose"]
 
     @property
     def touching(self) -> bool:

@@ -91,6 +91,24 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     np.testing.assert_array_equal(F_again, F_pressed)
     for k in m_pressed:
         np.testing.assert_array_equal(m_again[k].cpu().numpy(), m_pressed[k].cpu().numpy())
+    sim.load_state_dict(saved)  # and the same slide from it (the restored state's pose is the saved one)
+    np.testing.assert_array_equal(press(-1e-3, 1e-3)[0], F_slid)
+
+
+def test_fem_pad_held_step_keeps_the_equilibrium():
+    """Guards the held-step shortcut: an unchanged relative pose keeps the last solution (no
+    solve); a motion beyond the solver's tolerance solves again."""
+    from gausstac_maniskill.bench import pad as bp
+
+    sim, W, press = _scene(friction=0.5)
+    press(bp.GAP)
+    press(-1e-3)
+    fp = sim._fem[bp.INDEX]
+    res = fp.result
+    press(-1e-3)
+    assert fp.result is res
+    press(-1e-3 - 10 * fp.hold_tolerance)
+    assert fp.result is not res and fp.result.total_force[2] != res.total_force[2]
 
 
 def test_fem_pad_near_incompressible_is_stable_and_stiffer():
