@@ -395,7 +395,8 @@ def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=N
 
 
 def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress: bool = True,
-                pad_surface: str = "mesh", hold: int = CURVE.hold) -> dict:
+                pad_surface: str = "mesh", hold: int = CURVE.hold, pad_solver: str = "mpm",
+                fem_model: str = "linear") -> dict:
     """Speed against force error on the product pad (``bench pad --curve``).
 
     ``points``: (dx [m], mass_scaling, patch_radius [m] or None[, Courant number]) tuples; each
@@ -407,7 +408,8 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
     estimate :meth:`GaussTacSim.pad_pressure_force`), for the consistency of the readings.
     The reference is the Richardson extrapolation of Fn over the three finest grids at the
     default mass scaling when it gives an order in (0.5, 4), else the finest run; errors
-    are Fn / reference − 1.
+    are Fn / reference − 1. ``pad_solver``, ``fem_model``: :func:`run_case`'s (the pad solved at
+    equilibrium has no mass scaling, patch or Courant number: give it dx points only).
     Returns ``{"runs": [...], "reference": float, "reference_from": str}``.
     """
     from tqdm import tqdm
@@ -419,7 +421,7 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
                                       key=lambda t: (-t[0], t[1], t[2] or 0.0, t[3] or 0.0)):
             bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}, patch {pr}, cfl {cfl}")
             c = run_case(dx, indenter, [depth], protocol=protocol, bar=bar, mass_scaling=ms, pad_surface=pad_surface,
-                         patch_radius=pr, cfl=cfl)
+                         patch_radius=pr, cfl=cfl, pad_solver=pad_solver, fem_model=fem_model)
             runs.append(dict(dx=dx, mass_scaling=ms, patch_radius=pr, cfl=c.get("cfl", cfl), active=c["active"],
                              particles=c["particles"],
                              substeps=c["substeps"],
@@ -493,7 +495,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hold", type=int, default=CURVE.hold,
                     help="held control steps of each curve point (the force is read over the second half)")
     ap.add_argument("--pad-solver", default="mpm", choices=["mpm", "fem"],
-                    help="the pad's solver (GaussTacSim's pad_solver; convergence tables only)")
+                    help="the pad's solver (GaussTacSim's pad_solver; with --curve, --dx points only)")
     ap.add_argument("--fem-model", default="linear", choices=["linear", "neo_hookean"],
                     help="the fem pad's material model (with --pad-solver fem)")
     ap.add_argument("--pad-surface", default="mesh", choices=["particles", "mesh"],
@@ -502,13 +504,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.curve:
         arch = backend.init(args.arch)
         dxs = args.dx or [2e-3, 1.5e-3, default_dx, 0.75e-3, 0.5e-3]
-        points = [(dx, default_ms, None) for dx in dxs] + [(default_dx, m, None) for m in args.mass_scaling]
-        points += [(default_dx, m, r) for r in args.patch_radius for m in sorted({default_ms, 4000.0})]
-        points += [(dx, default_ms, None, c) for c in args.cfl for dx in dxs]
+        points = [(dx, default_ms, None) for dx in dxs]
+        if args.pad_solver == "mpm":
+            points += [(default_dx, m, None) for m in args.mass_scaling]
+            points += [(default_dx, m, r) for r in args.patch_radius for m in sorted({default_ms, 4000.0})]
+            points += [(dx, default_ms, None, c) for c in args.cfl for dx in dxs]
         t0 = time.perf_counter()
         curve = speed_curve(points, args.indenters[0], args.depths[-1], pad_surface=args.pad_surface,
-                            hold=args.hold)
-        text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, "
+                            hold=args.hold, pad_solver=args.pad_solver, fem_model=args.fem_model)
+        text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, pad solver {args.pad_solver}"
+                f"{' (' + args.fem_model + ')' if args.pad_solver == 'fem' else ''}, "
                 f"total {time.perf_counter() - t0:.0f} s\n\n"
                 + format_curve(curve, args.indenters[0], args.depths[-1]))
         print(text)

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from .contact import ContactResult
-from .hex import centre_state
+from .hex import centre_state, neo_hookean_forces
 from .pad import collider_indenter, pad_body
 
 __all__ = ["EquilibriumPad"]
@@ -54,6 +54,8 @@ class EquilibriumPad:
         self.solve_time = 0.0  # wall time [s] of the last solve (and of building the body, the first time)
         self._nodes = None
         self._pose = None  # the collider's frame in the link frame at the last solve [4, 4]
+        #: outer iterations of a solve before it gives up (the finite-strain fixed point takes up to ~200)
+        self.max_iterations = 60 if model == "linear" else 400
 
     @property
     def body(self):
@@ -81,7 +83,7 @@ class EquilibriumPad:
             # every hold: a zero increment slips nowhere) is the last one, to the solver's tolerance
             self.solve_time = time.perf_counter() - t0
             return self.result
-        self.result = self.body.solve(indenter, geometry=self.geometry, warm=warm)
+        self.result = self.body.solve(indenter, geometry=self.geometry, warm=warm, max_iterations=self.max_iterations)
         self.holder, self._pose = key, indenter.pose
         self._nodes = None
         self.solve_time = time.perf_counter() - t0
@@ -176,16 +178,18 @@ class EquilibriumPad:
         return float(np.linalg.norm(self.result.displacement[loaded], axis=1).max()) if loaded.any() else 0.0
 
     def stress_force(self) -> np.ndarray:
-        """Total contact force [3] N on the pad read from its stress, link frame, by virtual
-        work with φ = 1 − d/h (d the rest depth below the pad surface, h the layer thickness):
-        Σ_e V J σ F⁻ᵀ ∇φ over the elements at their centres, the quadrature of
-        :meth:`GaussTacSim.pad_stress_force` on the MPM. At equilibrium it equals the contact
-        force up to that one-point quadrature."""
+        """Total contact force [3] N on the pad read from its stress, link frame: the sum of the
+        elements' internal nodal forces over the nodes not held by the bond (minus the bond's
+        reaction). At equilibrium it equals the contact force up to the solve's residual, by
+        construction of the method: a check that the solve converged, not an independent
+        physics reading. (The MPM's virtual-work reading with one-point quadrature at the
+        element centres reads +8 % at 1 mm and +13 % at 0.5 mm elements here, from the
+        lattice's staircase bond.)"""
         if self.result is None:
             return np.zeros(3)
-        body = self.body
-        F, sigma = centre_state(body.body, self.node_displacement(), body.E, body.nu, self.model)
-        grad_phi = self.pad.normal[self.soft] / self.pad.spec.thickness
-        J = np.linalg.det(F)
-        grad_x = np.linalg.solve(np.transpose(F, (0, 2, 1)), grad_phi[..., None])[..., 0]
-        return body.body.size ** 3 * np.einsum("n,nij,nj->i", J, sigma, grad_x)
+        body, u = self.body, self.node_displacement()
+        if self.model == "linear":
+            f_int = (body._K @ u.ravel()).reshape(-1, 3)
+        else:
+            f_int = neo_hookean_forces(body.body, u, body.E, body.nu)
+        return np.where(body.fixed, 0.0, f_int).sum(0)

@@ -38,9 +38,10 @@ class _nothing:
 
 def test_fem_pad_press_reads_consistent_forces_and_returns_to_rest():
     """Guards, not physics: the force map sums the same point forces as the indenter's
-    reaction, and the link receives what the indenter pushes (a massless pad). Physics: the
-    stress read by virtual work (one-point quadrature of the weak form) agrees with the
-    contact force, and the pad is exactly at rest once the indenter has left."""
+    reaction, the link receives what the indenter pushes (a massless pad), and the elements'
+    internal forces balance the contact (the solve converged). Physics: the press stiffens
+    as the patch grows, the surface yields less than the press, no taxel pulls, and the pad
+    is exactly at rest once the indenter has left."""
     from gausstac_maniskill.bench import pad as bp
 
     sim, W, press = _scene()
@@ -55,8 +56,8 @@ def test_fem_pad_press_reads_consistent_forces_and_returns_to_rest():
         assert float(maps["force"].min()) >= 0.0  # no pulling taxel
         f_link, _ = sim.link_wrench(bp.INDEX)
         np.testing.assert_allclose(f_link, -sim.object_wrench("indenter")[0], atol=1e-9)
-        stress = -sim.pad_stress_force(bp.INDEX)[2]
-        assert stress == pytest.approx(F[2], rel=0.10)  # measured +7.8 % at 1 mm elements (1 mm press)
+        stress = -sim.pad_stress_force(bp.INDEX)[2]  # the elements' internal forces: equal at equilibrium
+        assert stress == pytest.approx(F[2], rel=1e-3)  # (a guard on the solve's convergence)
         depth = float(maps["depth"].max())
         assert 0.3 * -z < depth < -z  # the surface yields less than the press
     assert forces[1] > 2.0 * forces[0]  # contact stiffens as the patch grows
