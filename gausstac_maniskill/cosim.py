@@ -538,11 +538,13 @@ class GaussTacSim:
         (:meth:`MPMWorld.virtual_work_force`). Exact at
         equilibrium up to quadrature, for any contact position on the layer; unlike the
         pressure map it does not assume the load is carried along the sensor axis.
+        A pad solved at equilibrium (``pad_solver="fem"``) sums its elements' internal nodal
+        forces off the bond instead: equal to the contact force at equilibrium by construction.
         """
         p = self._pad(pad)
         if not self._awake[p.name]:
             return np.zeros(3)
-        if p.name in self._fem:  # the same virtual work, on the equilibrium's elements (link frame)
+        if p.name in self._fem:  # the elements' internal forces off the bond (EquilibriumPad.stress_force)
             return p.sensor_frame[:3, :3].T @ self._fem[p.name].stress_force()
         grad_phi = (p.normal @ self.world.binding_rotation(self._w(p.name)).T) / p.spec.thickness  # world at binding
         grad_phi[p.kinematic] = 0.0
