@@ -232,11 +232,8 @@ class GaussTacSim:
                 continue
             T = self._link_pose[link]
             x, fc = fp.contact_points(T)
-            row = np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0), [fp.indentation()]])
-            if fp.holder in out:
-                row[:6] += out[fp.holder][:6]
-                row[6] = max(row[6], out[fp.holder][6])
-            out[fp.holder] = row
+            _add_contact(out, fp.holder,
+                         np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0), [fp.indentation()]]))
         return out
 
     def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:
@@ -250,9 +247,7 @@ class GaussTacSim:
         names = {i: n for n, i in self._objects.items()}
         out = {names.get(i): r for i, r in enumerate(rows) if (i in names or i == len(rows) - 1) and np.any(r[:6])}
         for name, row in self._fem_contacts(link).items():
-            if name in out:
-                row = np.concatenate([out[name][:6] + row[:6], [max(out[name][6], row[6])]])
-            out[name] = row
+            _add_contact(out, name, row)
         return out
 
     # ------------------------------------------------------------------ stepping
@@ -705,6 +700,14 @@ class GaussTacSim:
             self._fem[name].load_state(pad_state)
         self._maps = {}
         self._posed = None
+
+
+def _add_contact(rows: dict, name, row: np.ndarray) -> None:
+    """Add a :meth:`GaussTacSim.link_contacts` row [7] (force, torque, indentation) to ``rows``
+    under ``name``: forces and torques add, the deeper indentation stands."""
+    if name in rows:
+        row = np.concatenate([rows[name][:6] + row[:6], [max(rows[name][6], row[6])]])
+    rows[name] = row
 
 
 def _sweep(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, float]:

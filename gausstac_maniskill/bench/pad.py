@@ -468,6 +468,11 @@ def format_curve(curve: dict, indenter: str, depth: float) -> str:
     return "\n".join(out)
 
 
+def _solver(args) -> str:
+    """The pad solver of the command line, as the tables' headers name it."""
+    return f"{args.pad_solver} ({args.fem_model})" if args.pad_solver == "fem" else args.pad_solver
+
+
 def main(argv: list[str] | None = None) -> int:
     from ..cosim import default_hand_settings
 
@@ -512,8 +517,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         curve = speed_curve(points, args.indenters[0], args.depths[-1], pad_surface=args.pad_surface,
                             hold=args.hold, pad_solver=args.pad_solver, fem_model=args.fem_model)
-        text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, pad solver {args.pad_solver}"
-                f"{' (' + args.fem_model + ')' if args.pad_solver == 'fem' else ''}, "
+        text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, pad solver {_solver(args)}, "
                 f"total {time.perf_counter() - t0:.0f} s\n\n"
                 + format_curve(curve, args.indenters[0], args.depths[-1]))
         print(text)
@@ -533,7 +537,7 @@ def main(argv: list[str] | None = None) -> int:
     head = (f"Index pad convergence on {arch} ({os.cpu_count()} cores): thickness {spec.thickness * 1e3:g} mm, "
             f"E = {spec.material.E / 1e6:g} MPa, nu = {spec.material.nu:g}, friction {args.friction:g}, "
             f"sphere R = {SPHERE_RADIUS * 1e3:g} mm, slide {SLIDE * 1e3:g} mm, protocol {asdict(protocol)}, "
-            f"pad solver {args.pad_solver}{' (' + args.fem_model + ')' if args.pad_solver == 'fem' else ''} "
+            f"pad solver {_solver(args)} "
             f"(50 ms steps), total {time.perf_counter() - t0:.0f} s")
     text = head + "\n\n" + format_tables(cases, ana, default_dx)
     print(text)

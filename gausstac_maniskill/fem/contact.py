@@ -389,6 +389,17 @@ class QuasiStaticBody:
             u += self._columns[int(p)] @ f
         return u
 
+    def internal_forces(self, u: np.ndarray) -> np.ndarray:
+        """[V, 3] internal nodal forces [N] of the body displaced by ``u`` [V, 3] [m], under its
+        own model (linear: K u; neo-Hookean: :func:`~.hex.neo_hookean_forces`).
+
+        Raises:
+            FloatingPointError: a neo-Hookean element is inverted.
+        """
+        if self.model == "linear":
+            return (self._K @ u.ravel()).reshape(-1, 3)
+        return neo_hookean_forces(self.body, u, self.E, self.nu)
+
     def nodal_displacement(self, points, forces) -> np.ndarray:
         """[V, 3] displacement [m] of every node under ``forces`` [m, 3] [N] at surface ``points`` [m]
         (one solve)."""
@@ -513,7 +524,7 @@ class QuasiStaticBody:
             us = self._interp(u)
             phi, n = sdf(self.points + us)
             try:
-                remainder = neo_hookean_forces(body, u, self.E, self.nu) - (self._K @ u.ravel()).reshape(-1, 3)
+                remainder = self.internal_forces(u) - (self._K @ u.ravel()).reshape(-1, 3)
             except FloatingPointError as err:
                 raise SimulationError(f"{self.name}: {err} at iteration {it}; the press is too deep for "
                                       "the pad, or the step too large") from None
@@ -543,7 +554,7 @@ class QuasiStaticBody:
         force[idx] = f
         us = self._interp(u)
         load = self._load(idx, f[None])[:, 0]  # free degrees of freedom, in elimination order
-        fint = neo_hookean_forces(body, u, self.E, self.nu).ravel()[self._free]
+        fint = self.internal_forces(u).ravel()[self._free]
         residual = float(np.linalg.norm(fint - load) / max(np.linalg.norm(load), 1e-30))
         return ContactResult(force, us, sdf(self.points + us)[0], it, len(idx), u, residual)
 

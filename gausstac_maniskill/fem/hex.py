@@ -91,14 +91,18 @@ def _strain_matrix(g: np.ndarray) -> np.ndarray:
     return B
 
 
+def _moduli(E: float, nu: float) -> tuple[float, float]:
+    """Shear modulus μ = E / (2(1 + ν)) and bulk modulus K = E / (3(1 − 2ν)) [Pa]."""
+    return E / (2.0 * (1.0 + nu)), E / (3.0 * (1.0 - 2.0 * nu))
+
+
 def element_stiffness(size: float, E: float, nu: float) -> np.ndarray:
     """[24, 24] stiffness [N/m] of a cube of edge ``size`` [m] of a linear isotropic solid
     (Young's modulus ``E`` [Pa], Poisson's ratio ``nu`` < 0.5): deviatoric part on 2×2×2
     Gauss points, volumetric part (bulk modulus K = E / (3(1 − 2ν))) on the centre point."""
     if not -1.0 < nu < 0.5:
         raise ConfigError(f"element_stiffness: nu={nu!r} must lie in (-1, 0.5)")
-    mu = E / (2.0 * (1.0 + nu))
-    bulk = E / (3.0 * (1.0 - 2.0 * nu))
+    mu, bulk = _moduli(E, nu)
     m = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     dev = 2.0 * mu * (np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5]) - np.outer(m, m) / 3.0)
     K = np.zeros((24, 24))
@@ -179,8 +183,7 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point).
     """
-    mu = E / (2.0 * (1.0 + nu))
-    bulk = E / (3.0 * (1.0 - 2.0 * nu))
+    mu, bulk = _moduli(E, nu)
     G, G0 = _gauss_gradients(body.size)
     ue = u[body.element_nodes]  # [E, 8, 3]
     eye = np.eye(3)
@@ -212,19 +215,18 @@ def centre_state(body: VoxelBody, u: np.ndarray, E: float, nu: float, model: str
     μ J^(−2/3) dev(F Fᵀ) averaged over the 2×2×2 Gauss points, the volumetric one K ln J₀ I with
     J₀ of the centre, σ = τ / J₀.
     """
-    mu = E / (2.0 * (1.0 + nu))
+    mu, bulk = _moduli(E, nu)
     G, G0 = _gauss_gradients(body.size)
     ue = u[body.element_nodes]  # [E, 8, 3]
     eye = np.eye(3)
     grad = np.einsum("eai,aj->eij", ue, G0)
     F0 = eye + grad
     if model == "linear":
-        lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+        lam = bulk - 2.0 * mu / 3.0
         eps = 0.5 * (grad + grad.transpose(0, 2, 1))
         return F0, lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * eye + 2.0 * mu * eps
     if model != "neo_hookean":
         raise ConfigError(f"centre_state: model={model!r} must be 'linear' or 'neo_hookean'")
-    bulk = E / (3.0 * (1.0 - 2.0 * nu))
     F = eye + np.einsum("eai,gaj->egij", ue, G)
     J = np.linalg.det(F)
     B = np.einsum("egij,egkj->egik", F, F)

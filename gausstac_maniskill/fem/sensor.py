@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from .contact import ContactResult
-from .hex import centre_state, neo_hookean_forces
+from .hex import centre_state
 from .pad import collider_indenter, pad_body
 
 __all__ = ["EquilibriumPad"]
@@ -52,7 +52,7 @@ class EquilibriumPad:
         self.result: ContactResult | None = None  # the last solve; None: at rest, nothing touches
         self.holder = None  # key of the collider ``result`` holds on
         self.solve_time = 0.0  # wall time [s] of the last solve (and of building the body, the first time)
-        self._nodes = None
+        self._cache, self._cache_of = {}, object()  # what _derived() computed, and from which result
         self._pose = None  # the collider's frame in the link frame at the last solve [4, 4]
         #: outer iterations of a solve before it gives up (the finite-strain fixed point takes up to ~200)
         self.max_iterations = 60 if model == "linear" else 400
@@ -91,7 +91,6 @@ class EquilibriumPad:
         self.result = self.body.solve(indenter, geometry=self.geometry, warm=warm, max_iterations=self.max_iterations,
                                       margin=self.margin)
         self.holder, self._pose = key, indenter.pose
-        self._nodes = None
         self.solve_time = time.perf_counter() - t0
         return self.result
 
@@ -113,7 +112,7 @@ class EquilibriumPad:
 
     def release(self) -> None:
         """Nothing touches the pad: the unloaded equilibrium is the rest shape, exactly."""
-        self.result, self.holder, self._nodes, self._pose, self.solve_time = None, None, None, None, 0.0
+        self.result, self.holder, self._pose, self.solve_time = None, None, None, 0.0
 
     def state(self) -> dict:
         """A copy of what the next solve starts from (restore with :meth:`load_state`)."""
@@ -130,20 +129,48 @@ class EquilibriumPad:
         """Whether the last solve left any contact force on the pad."""
         return self.result is not None and bool(np.any(self.result.force))
 
+    def _derived(self) -> dict:
+        """The quantities computed from the last solution (node displacements, the particles'
+        link-frame state), each once per solution: a new result starts an empty dict."""
+        if self._cache_of is not self.result:
+            self._cache, self._cache_of = {}, self.result
+        return self._cache
+
     def node_displacement(self) -> np.ndarray:
         """[V, 3] displacement [m] of every node of the body, link frame (zeros at rest; a
         linear body solves once for it after each contact solve, then keeps it)."""
-        if self._nodes is None:
+        d = self._derived()
+        if "nodes" not in d:
             res = self.result
             if res is None:
-                self._nodes = np.zeros((len(self.body.body.nodes), 3))
+                d["nodes"] = np.zeros((len(self.body.body.nodes), 3))
             elif res.nodes is not None:
-                self._nodes = res.nodes
+                d["nodes"] = res.nodes
             else:
                 idx = np.flatnonzero(np.abs(res.force).sum(1) > 0)
-                self._nodes = (self.body.nodal_displacement(idx, res.force[idx]) if len(idx)
-                               else np.zeros((len(self.body.body.nodes), 3)))
-        return self._nodes
+                d["nodes"] = (self.body.nodal_displacement(idx, res.force[idx]) if len(idx)
+                              else np.zeros((len(self.body.body.nodes), 3)))
+        return d["nodes"]
+
+    def _local_particles(self):
+        """The particles' positions, F, Cauchy stresses and contact forces in the link frame
+        (:meth:`particle_state`), computed once per solution."""
+        d = self._derived()
+        if "particles" not in d:
+            pad = self.pad
+            n = pad.num_particles
+            local = pad.rest.astype(np.float64).copy()
+            F = np.tile(np.eye(3), (n, 1, 1))
+            sigma = np.zeros((n, 3, 3))
+            force = np.zeros((n, 3))
+            if self.result is not None:
+                body = self.body
+                u = self.node_displacement()
+                local[self.soft] += u[body.body.element_nodes].mean(1)
+                F[self.soft], sigma[self.soft] = centre_state(body.body, u, body.E, body.nu, self.model)
+                np.add.at(force, self.point_particles, self.result.force)
+            d["particles"] = (local, F, sigma, force)
+        return d["particles"]
 
     # ------------------------------------------------------------------ readout
     def particle_state(self, link_pose: np.ndarray):
@@ -151,19 +178,9 @@ class EquilibriumPad:
         positions [N, 3] m, deformation gradients [N, 3, 3] (link rotation times the
         element's F), Cauchy stresses [N, 3, 3] Pa (zero on kinematic particles) and contact
         forces [N, 3] N (on the particles under a surface point; zero elsewhere)."""
-        pad, T = self.pad, np.asarray(link_pose, float)
+        T = np.asarray(link_pose, float)
         R, t = T[:3, :3], T[:3, 3]
-        n = pad.num_particles
-        local = pad.rest.astype(np.float64).copy()
-        F = np.tile(np.eye(3), (n, 1, 1))
-        sigma = np.zeros((n, 3, 3))
-        force = np.zeros((n, 3))
-        if self.result is not None:
-            body = self.body
-            u = self.node_displacement()
-            local[self.soft] += u[body.body.element_nodes].mean(1)
-            F[self.soft], sigma[self.soft] = centre_state(body.body, u, body.E, body.nu, self.model)
-            np.add.at(force, self.point_particles, self.result.force)
+        local, F, sigma, force = self._local_particles()
         return (local @ R.T + t, R @ F, R @ sigma @ R.T, force @ R.T)
 
     def contact_points(self, link_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -193,9 +210,5 @@ class EquilibriumPad:
         lattice's staircase bond.)"""
         if self.result is None:
             return np.zeros(3)
-        body, u = self.body, self.node_displacement()
-        if self.model == "linear":
-            f_int = (body._K @ u.ravel()).reshape(-1, 3)
-        else:
-            f_int = neo_hookean_forces(body.body, u, body.E, body.nu)
-        return np.where(body.fixed, 0.0, f_int).sum(0)
+        body = self.body
+        return np.where(body.fixed, 0.0, body.internal_forces(self.node_displacement())).sum(0)
