@@ -79,6 +79,9 @@ class GaussTacSim:
             one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
             the nearest rigid object only; soft objects and shared (batched) worlds are refused,
             the splat camera draws these pads at rest, and :meth:`flat_state` is not available.
+            A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
+            at once): 3 s at the default resolution, plus 40 s on 2 cores for its compliance
+            the first time on a machine (kept under ``~/.cache/gausstac_maniskill``).
         fem_model: the ``"fem"`` pads' material model, ``"linear"`` (fast; small strain) or
             ``"neo_hookean"`` (finite strain; seconds per step at the default resolution).
     """
@@ -291,6 +294,16 @@ class GaussTacSim:
             self._solve_pads()
         self._maps = {}
         self._posed = None
+
+    def prepare_pads(self) -> None:
+        """Build the equilibrium pads' bodies now (``pad_solver="fem"``): assemble and factor
+        each pad's stiffness and compute or load its surface compliance
+        (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`), which otherwise happens in
+        the first step that brings an object within ``sleep_margin`` of the pad. At the
+        default resolution: 3 s per pad, plus 40 s (2 cores) for its compliance the first time
+        on a machine (then read from the disk cache). Does nothing for MPM pads."""
+        for fp in self._fem.values():
+            fp.body  # noqa: B018 (built on first access)
 
     def _solve_pads(self) -> None:
         """Each awake equilibrium pad against the rigid object nearest its surface points (those

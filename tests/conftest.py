@@ -51,6 +51,19 @@ def pytest_runtest_setup(item):
 
 
 @pytest.fixture(scope="session", autouse=True)
+def compliance_cache(tmp_path_factory):
+    """The equilibrium pads' compliance cache in a directory of this session's own: no test
+    reads what an earlier run (or the user) left in ``~/.cache``."""
+    old = os.environ.get("GAUSSTAC_CACHE_DIR")
+    os.environ["GAUSSTAC_CACHE_DIR"] = str(tmp_path_factory.mktemp("gausstac-cache"))
+    yield
+    if old is None:
+        os.environ.pop("GAUSSTAC_CACHE_DIR", None)
+    else:
+        os.environ["GAUSSTAC_CACHE_DIR"] = old
+
+
+@pytest.fixture(scope="session", autouse=True)
 def taichi_backend():
     backend.init(os.environ.get("GAUSSTAC_TEST_ARCH", "cpu"))
     yield

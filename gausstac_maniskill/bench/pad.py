@@ -169,6 +169,7 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
     sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra),
                       pad_surface=pad_surface, pad_solver=pad_solver, fem_model=fem_model)
     W = LINK_POSE @ sim.pads[INDEX].sensor_frame
+    sim.prepare_pads()  # the equilibrium pad's factor and compliance: set-up, not a step's cost
     sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
     return sim, W
 

@@ -112,7 +112,8 @@ def _project(f: np.ndarray, bound: np.ndarray) -> np.ndarray:
 
 
 def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.ndarray, mu: float,
-                     tol: float, max_iterations: int = 50, inner: int = 4000) -> tuple[np.ndarray, np.ndarray]:
+                     tol: float, max_iterations: int = 50, inner: int = 4000,
+                     f0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Signorini contact with Coulomb friction on m points of an elastic body, quasi-static.
 
     Unknowns: the force f_p [3] on each point. Its displacement is W f (``W`` [m, 3, m, 3], the
@@ -128,57 +129,66 @@ def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.n
     the points' displacements, until no bound moves by more than :data:`BOUND_TOL` of the
     largest. Raises :class:`SimulationError` if the bound does not settle.
 
+    The iteration starts from ``f0`` [m, 3] (forces in the frame of ``n``'s points, e.g. the
+    last outer iteration's) or, without one, from the frictionless solution. Points without a
+    normal force are left out of the dense problem while they stay open (a point with no force
+    needs only g ≥ 0, its bound μ f_n being 0); one that would penetrate joins. Exact: the
+    last Tresca problem is solved to ``tol`` with every point that would penetrate in it.
+
     Returns (f [m, 3], state [m] int: 0 open, 1 stuck, 2 slipping).
     """
     m = len(gap0)
     T = tangent_bases(n)
     frame = np.concatenate([n[:, None, :], T], axis=1)  # [m, 3, 3]: rows n, t1, t2
-    M = np.einsum("pai,piqj,qbj->paqb", frame, W, frame).reshape(3 * m, 3 * m)
+    # W in each point's (n, t1, t2) frame: frame_p W_pq frame_qᵀ, one side at a time
+    half = np.einsum("pai,piQ->paQ", frame, W.reshape(m, 3, 3 * m)).reshape(3 * m, m, 3)
+    M = np.einsum("Pqj,qbj->Pqb", half, frame).reshape(3 * m, 3 * m)
     M = 0.5 * (M + M.T)
     b = np.concatenate([gap0[:, None], slip0], axis=1).ravel()
-    f = np.zeros((m, 3))
-    f[:, 0] = solve_lcp(M[0::3, 0::3], gap0)  # frictionless start
-    # Points open in the frictionless solution are left out while they stay open: a point with
-    # no force needs only g ≥ 0 (its bound μ f_n is 0), checked on the solution; one that
-    # would penetrate joins and the problem is solved again. Exact, and the dense problem
-    # shrinks to the contact patch.
-    active = f[:, 0] > 0
-    bound = np.zeros(m)
-    while True:
-        idx = np.flatnonzero(active)
-        rows = (3 * idx[:, None] + np.arange(3)).ravel()
-        f[idx], bound[idx] = _solve_tresca(M[np.ix_(rows, rows)], b[rows], f[idx], mu, tol, max_iterations, inner)
-        f[~active] = 0.0
-        g = gap0 + (M[0::3][:, rows] @ f[idx].ravel())
-        join = ~active & (g < -tol)
-        if not join.any():
-            break
-        active |= join
+    if f0 is None:
+        f = np.zeros((m, 3))
+        f[:, 0] = solve_lcp(M[0::3, 0::3], gap0)  # frictionless start
+    else:
+        f = np.einsum("pai,pi->pa", frame, np.asarray(f0, float).reshape(m, 3))
+    f, bound = _solve_tresca(M, b, f, mu, tol, max_iterations, inner)
     ft = np.linalg.norm(f[:, 1:], axis=1)  # on the bound its last Tresca problem held: slipping
     state = np.where(f[:, 0] <= 0, 0, np.where(ft >= bound * (1 - 1e-6), 2, 1))
     return np.einsum("pai,pa->pi", frame, f), state
 
 
 def _solve_tresca(M, b, f, mu, tol, max_iterations, inner) -> tuple[np.ndarray, np.ndarray]:
-    """Coulomb friction on the points of ``M`` [3k, 3k] (rows n, t1, t2 per point), ``b`` [3k],
-    from ``f`` [k, 3]: Tresca problems with the bound μ f_n of the last iterate, until it settles
-    (:func:`solve_frictional`). An early Tresca problem, whose bound is still far from settled,
-    is solved only as finely as that distance warrants (at most 100× ``tol``); the last one to ``tol``.
-    The matrix products run in float32 (their rounding, ~1e-7 of the displacements, is far
-    below ``tol``). Returns (f [k, 3], the last Tresca problem's bound [k])."""
-    if not len(b):
-        return f, np.zeros(len(f))
+    """Coulomb friction on the points of ``M`` [3m, 3m] (rows n, t1, t2 per point), ``b`` [3m],
+    from ``f`` [m, 3]: Tresca problems with the bound μ f_n of the last iterate, until it settles
+    (:func:`solve_frictional`), on the points with a normal force and those that would
+    penetrate. The first problems are solved loosely (to 100× ``tol``), later ones as finely as
+    the bound's remaining change warrants, the last one to ``tol``. The matrix products run in
+    float32 (their rounding, ~1e-7 of the displacements, is far below ``tol``). One Lipschitz
+    constant serves every subset of points: M's largest eigenvalue bounds each principal
+    submatrix's. Returns (f [m, 3], the last Tresca problem's bound [m])."""
+    m = len(f)
+    f = _project(f, np.full(m, np.inf))
+    if not m:
+        return f, np.zeros(0)
     L = float(np.linalg.eigvalsh(M)[-1]) if len(b) <= 1200 else _largest_eigenvalue(M)
     M32 = M.astype(np.float32)
+    normal = M32[0::3]  # [m, 3m] the normal rows: every point's gap
+    active = f[:, 0] > 0
     bound = mu * f[:, 0]
-    loose = 1.0
+    loose = 100.0
     for _ in range(max_iterations):
-        f = _fista(M32, b, f, bound, L, tol * loose, inner)
+        idx = np.flatnonzero(active)
+        rows = (3 * idx[:, None] + np.arange(3)).ravel()
+        f[idx] = _fista(M32[np.ix_(rows, rows)], b[rows], f[idx], bound[idx], L, tol * loose, inner)
+        f[~active] = 0.0
+        join = ~active & (b[0::3] + normal[:, rows] @ f[idx].ravel().astype(np.float32) < -tol)
         new = mu * f[:, 0]
         change = np.abs(new - bound).max() / max(new.max(), 1e-300)
-        if change <= BOUND_TOL and loose == 1.0:
+        if join.any():  # solve again with them, no more finely than now
+            active |= join
+        elif change <= BOUND_TOL and loose == 1.0:
             return f, bound
-        loose = float(np.clip(change / (10.0 * BOUND_TOL), 1.0, 100.0))
+        else:
+            loose = float(np.clip(change / (10.0 * BOUND_TOL), 1.0, 100.0))
         bound = new
     raise SimulationError(f"friction: the Coulomb bound did not settle in {max_iterations} Tresca iterations")
 
@@ -309,6 +319,7 @@ class QuasiStaticBody:
 
         if model not in ("linear", "neo_hookean"):
             raise ConfigError(f"{name}: model={model!r} must be 'linear' or 'neo_hookean'")
+        self._args = (body, E, nu, fixed, points, point_elements, name, model)  # to rebuild it (pickling)
         self.body, self.E, self.nu, self.name, self.model = body, float(E), float(nu), name, model
         fixed = np.asarray(fixed, bool)
         if fixed.ndim == 1:
@@ -334,7 +345,13 @@ class QuasiStaticBody:
         self.point_elements = np.asarray(point_elements, np.int64)
         nodes, self._weights = trilinear(body, self.points, self.point_elements)
         self._point_rows = self._row[nodes[:, :, None] * 3 + np.arange(3)]  # [S, 8, 3]
-        self._columns: dict[int, np.ndarray] = {}
+        self._columns: dict[int, np.ndarray] = {}  # point -> its compliance column [S, 3, 3], as solved
+        self._compliance: np.ndarray | None = None  # [3S, 3S] all of W, once computed (precompute_compliance)
+
+    def __reduce__(self):
+        """Pickled as its description; unpickling assembles and factors it again (the factor
+        itself cannot be pickled)."""
+        return (type(self), self._args)
 
     @property
     def num_points(self) -> int:
@@ -342,8 +359,19 @@ class QuasiStaticBody:
 
     @property
     def columns_solved(self) -> int:
-        """Surface points whose compliance column has been computed so far."""
-        return len(self._columns)
+        """Surface points whose compliance column has been computed so far (all of them after
+        :meth:`precompute_compliance`)."""
+        return self.num_points if self._compliance is not None else len(self._columns)
+
+    def precompute_compliance(self, workers: int | None = None, progress: bool = True, cache: bool = True) -> None:
+        """Compute (or load from the disk cache) the compliance among all surface points now,
+        so that contact solves need no sparse solve for it: :func:`~.compliance.surface_compliance`
+        (float32, 36 S² bytes; about 75 s on one core for 2000 points, the first time)."""
+        from .compliance import surface_compliance
+
+        if self._compliance is None:
+            self._compliance = surface_compliance(self, workers=workers, progress=progress, cache=cache)
+            self._columns = {}
 
     # ------------------------------------------------------------------ linear algebra
     def _load(self, points: np.ndarray, forces: np.ndarray) -> np.ndarray:
@@ -361,28 +389,51 @@ class QuasiStaticBody:
         padded = np.vstack([u, np.zeros((1, u.shape[1]))])
         return np.einsum("sa,saik->sik", self._weights, padded[self._point_rows])
 
+    def solve_columns(self, points) -> np.ndarray:
+        """[k, S, 3, 3] compliance columns of surface ``points`` [k]: entry [d, s, i, j] is the
+        displacement [m] of surface point s along axis i under a unit force [N] at ``points[d]``
+        along axis j (three solves per point)."""
+        points = np.asarray(points, np.int64)
+        k = len(points)
+        unit = np.zeros((3 * k, k, 3))
+        for c in range(k):
+            unit[3 * c:3 * c + 3, c, :] = np.eye(3)
+        disp = self._at_points(self._lu.solve(self._load(points, unit)))  # [S, 3 (i), 3k (d, j)]
+        return disp.reshape(self.num_points, 3, k, 3).transpose(2, 0, 1, 3)
+
     def _ensure_columns(self, points) -> None:
+        if self._compliance is not None:
+            return
         need = [int(p) for p in points if int(p) not in self._columns]
         for start in range(0, len(need), COLUMN_BATCH):
-            chunk = np.array(need[start:start + COLUMN_BATCH])
-            unit = np.zeros((3 * len(chunk), len(chunk), 3))
-            for c in range(len(chunk)):
-                unit[3 * c:3 * c + 3, c, :] = np.eye(3)
-            u = self._lu.solve(self._load(chunk, unit))
-            disp = self._at_points(u)  # [S, 3, 3m]
-            for c, p in enumerate(chunk):
-                self._columns[int(p)] = np.ascontiguousarray(disp[:, :, 3 * c:3 * c + 3])  # [S, 3 (u), 3 (f)]
+            chunk = need[start:start + COLUMN_BATCH]
+            for p, col in zip(chunk, self.solve_columns(chunk)):
+                self._columns[p] = np.ascontiguousarray(col)
+
+    def compliance_among(self, points) -> np.ndarray:
+        """[m, 3, m, 3] compliance W [m/N] among surface ``points`` [m]: entry [s, i, d, j] is the
+        displacement of ``points[s]`` along i under a unit force at ``points[d]`` along j."""
+        points = np.asarray(points, np.int64)
+        m = len(points)
+        if self._compliance is not None:
+            rows = (3 * points[:, None] + np.arange(3)).ravel()
+            return self._compliance[np.ix_(rows, rows)].astype(np.float64).reshape(m, 3, m, 3)
+        self._ensure_columns(points)
+        return np.stack([self._columns[int(p)][points] for p in points], axis=2)
 
     def _normal_compliance(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """[m, m] normal compliance A_sd = n_s · W_sd n_d [m/N] among surface ``points`` [m] with unit
         ``normals`` [m, 3]."""
-        self._ensure_columns(points)
-        cols = np.stack([self._columns[int(p)][points] @ n for p, n in zip(points, normals)], axis=1)  # [s, d, 3]
-        return np.einsum("sdi,si->sd", cols, normals)
+        return np.einsum("si,sidj,dj->sd", normals, self.compliance_among(points), normals, optimize=True)
 
     def displacement_of(self, points, forces) -> np.ndarray:
         """[S, 3] displacement [m] of every surface point under ``forces`` [m, 3] [N] at ``points`` [m]
-        (from the kept compliance columns)."""
+        (from the compliance: all of it, or the kept columns)."""
+        points = np.asarray(points, np.int64)
+        forces = np.asarray(forces, float).reshape(-1, 3)
+        if self._compliance is not None:  # W is symmetric: the rows of the loaded points
+            rows = (3 * points[:, None] + np.arange(3)).ravel()
+            return (forces.ravel().astype(np.float32) @ self._compliance[rows]).astype(np.float64).reshape(-1, 3)
         self._ensure_columns(points)
         u = np.zeros((self.num_points, 3))
         for p, f in zip(points, forces):
@@ -463,11 +514,15 @@ class QuasiStaticBody:
         with ``friction``, position offset from their holds ``offset`` [m, 3] + W f."""
         if friction is None:
             return solve_lcp(self._normal_compliance(idx, n), gap0)[:, None] * n
-        self._ensure_columns(idx)
-        W = np.stack([self._columns[int(p)][idx] for p in idx], axis=2)  # [m (s), 3, m (d), 3]
+        W = self.compliance_among(idx)  # [m (s), 3, m (d), 3]
+        f0 = None
+        if len(friction.idx):  # the last iteration's (or step's) forces: near this solution
+            f0 = np.zeros((len(idx), 3))
+            common, here, there = np.intersect1d(idx, friction.idx, assume_unique=True, return_indices=True)
+            f0[here] = friction.force[there]
         f, friction.state = solve_frictional(W, n, gap0, np.einsum("pai,pi->pa", tangent_bases(n), offset),
-                                             friction.mu, friction.tol)
-        friction.idx = idx
+                                             friction.mu, friction.tol, f0=f0)
+        friction.idx, friction.force = idx, f
         return f
 
     def _solve_linear(self, sdf, geometry, margin, tol, max_iterations, friction=None) -> ContactResult:
@@ -579,7 +634,13 @@ class _Friction:
         self.rest = body.points
         self.local = local
         self.hold = indenter.to_body(local)
+        # the points of the last solve and their forces [m, 3], the next solve's start: the
+        # last step's loaded points, then the last outer iteration's (solve_frictional's f0)
         self.idx = np.zeros(0, np.int64)
+        self.force = np.zeros((0, 3))
+        if held:
+            self.idx = np.flatnonzero(np.abs(warm.force).sum(1) > 0)
+            self.force = warm.force[self.idx]
         self.state = np.zeros(0, np.int64)
 
     def finish(self, res: ContactResult) -> None:

@@ -20,11 +20,17 @@ import time
 import numpy as np
 
 from ..errors import ConfigError
+from .compliance import estimated_bytes
 from .contact import ContactResult
 from .hex import centre_state
 from .pad import collider_indenter, pad_body
 
-__all__ = ["EquilibriumPad"]
+__all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES"]
+
+#: Largest compliance [bytes] an :class:`EquilibriumPad` computes in full by default (the index
+#: pad at the default dx = 1 mm: 1994 surface points, 143 MB; at dx = 0.75 mm, 452 MB: solved
+#: point by point instead).
+PRECOMPUTE_BYTES = 256 * 2 ** 20
 
 
 class EquilibriumPad:
@@ -39,14 +45,21 @@ class EquilibriumPad:
             seconds per step at 0.5 mm elements). See :class:`~.contact.QuasiStaticBody`.
         geometry: where a ``"linear"`` body reads the contact conditions, ``"deformed"``
             (default: at the displaced surface, as the MPM does) or ``"rest"``.
+        precompute: compute the body's compliance among all its surface points when the body
+            is built (:meth:`~.contact.QuasiStaticBody.precompute_compliance`: 40 s on the
+            2-core VM for the index pad at the default resolution, the first time on a machine,
+            then read from the disk cache in 0.1 s), so that a press or a slide costs no sparse
+            solve; or (False) solve each point's column when it first comes into contact.
+            Default (None): precompute when that compliance takes at most
+            :data:`PRECOMPUTE_BYTES` of memory.
     """
 
-    def __init__(self, pad, model: str = "linear", geometry: str = "deformed"):
+    def __init__(self, pad, model: str = "linear", geometry: str = "deformed", precompute: bool | None = None):
         if model not in ("linear", "neo_hookean"):
             raise ConfigError(f"EquilibriumPad({pad.name!r}): model={model!r} must be 'linear' or 'neo_hookean'")
         if geometry not in ("rest", "deformed"):
             raise ConfigError(f"EquilibriumPad({pad.name!r}): geometry={geometry!r} must be 'rest' or 'deformed'")
-        self.pad, self.model, self.geometry = pad, model, geometry
+        self.pad, self.model, self.geometry, self.precompute = pad, model, geometry, precompute
         self.soft = np.flatnonzero(~pad.kinematic)  # pad particle of each element
         self._body = None
         self.result: ContactResult | None = None  # the last solve; None: at rest, nothing touches
@@ -64,9 +77,16 @@ class EquilibriumPad:
 
     @property
     def body(self):
-        """The pad's :class:`~.contact.QuasiStaticBody` (assembled and factored on first use)."""
+        """The pad's :class:`~.contact.QuasiStaticBody`, assembled and factored on first use
+        (and its compliance computed or loaded, see ``precompute``)."""
         if self._body is None:
-            self._body = pad_body(self.pad, model=self.model)
+            body = pad_body(self.pad, model=self.model)
+            precompute = self.precompute
+            if precompute is None:
+                precompute = estimated_bytes(body.num_points) <= PRECOMPUTE_BYTES
+            if precompute:
+                body.precompute_compliance()
+            self._body = body
         return self._body
 
     @property

@@ -142,6 +142,7 @@ def _coulomb_violations(W, n, gap0, slip0, mu, f, state):
 
 def test_frictional_solver_meets_every_coulomb_condition():
     from gausstac_maniskill.fem import solve_frictional
+    from gausstac_maniskill.fem.contact import BOUND_TOL
 
     rng = np.random.default_rng(1)
     m = 12
@@ -155,7 +156,8 @@ def test_frictional_solver_meets_every_coulomb_condition():
         f, state = solve_frictional(W, n, gap0, slip0, mu, tol=1e-10)
         v = _coulomb_violations(W, n, gap0, slip0, mu, f, state)
         assert v["penetration"] < 1e-9 and v["open_gap"] < 1e-9 and v["pull"] == 0.0
-        assert v["cone"] < 1e-6 * np.abs(f).max() and v["stuck_slip"] < 1e-8
+        # the cone holds to the bound's settling tolerance (BOUND_TOL of the largest bound)
+        assert v["cone"] <= BOUND_TOL * mu * np.abs(f).max() and v["stuck_slip"] < 1e-8
         assert v["cos"] < -0.999  # a slipping point is pulled back along its slip
         assert (state == 2).any() and (state == 1).any()
 

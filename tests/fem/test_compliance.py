@@ -1,0 +1,89 @@
+"""The compliance among all surface points, computed once and kept on disk (fem/compliance.py).
+
+These tests guard bookkeeping, not physics: the full compliance must be the same matrix the
+contact solve builds column by column (so the forces do not depend on which path served
+them), the disk cache must return what was stored (and nothing stale or damaged), and the
+worker processes must compute what one process does. The physics of the solve is tested in
+test_contact.py and test_equilibrium_pad.py."""
+import os
+
+import numpy as np
+import pytest
+
+from gausstac_maniskill.bench.quasistatic import sphere
+from gausstac_maniskill.fem import compliance, layer_body
+
+
+def _layer(nu=0.45, E=0.3e6):
+    return layer_body(2e-3, 3e-3, 1e-3, E, nu)
+
+
+def _lazy_matrix(body):
+    """W [3S, 3S] from the body's own column solves, rows (d, j), columns (s, i)."""
+    S = body.num_points
+    return body.solve_columns(np.arange(S)).transpose(0, 3, 1, 2).reshape(3 * S, 3 * S)
+
+
+def test_full_compliance_is_the_column_by_column_one(tmp_path, monkeypatch):
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    lazy, full = _layer(), _layer()
+    full.precompute_compliance(progress=False)
+    W = full._compliance
+    ref = _lazy_matrix(lazy)
+    assert W.dtype == np.float32 and W.shape == ref.shape
+    assert np.abs(W - ref).max() < 1e-6 * np.abs(ref).max()
+    assert np.array_equal(W, W.T)  # stored symmetric (Maxwell-Betti)
+    assert full.columns_solved == full.num_points
+    # a press reads the same forces either way
+    ball = sphere(4e-3, [0.0, 0.0, 2e-3 + 4e-3 - 2e-4])
+    fa, fb = lazy.solve(ball).force, full.solve(ball).force
+    assert np.abs(fa).sum() > 0 and np.abs(fa - fb).max() < 1e-5 * np.abs(fa).max()
+
+
+def test_cache_round_trip_scales_with_E_and_keys_on_nu(tmp_path, monkeypatch):
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    first = _layer()
+    first.precompute_compliance(progress=False)
+    files = os.listdir(tmp_path)
+    assert len(files) == 1 and files[0].startswith("compliance-")
+
+    stiffer = _layer(E=0.6e6)  # same shape and nu: loaded, not solved, and W ∝ 1/E
+    monkeypatch.setattr(type(stiffer), "solve_columns", lambda self, p: pytest.fail("solved instead of loaded"))
+    stiffer.precompute_compliance(progress=False)
+    np.testing.assert_allclose(stiffer._compliance, 0.5 * first._compliance, rtol=1e-6)
+    monkeypatch.undo()
+
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    other = _layer(nu=0.49)  # another nu: another file
+    other.precompute_compliance(progress=False)
+    assert len(os.listdir(tmp_path)) == 2
+    assert compliance.compliance_key(other) != compliance.compliance_key(first)
+
+
+def test_damaged_cache_is_recomputed_with_a_warning(tmp_path, monkeypatch):
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    body = _layer()
+    path = tmp_path / f"compliance-{compliance.compliance_key(body)}.npy"
+    path.write_bytes(b"not a numpy file")
+    with pytest.warns(UserWarning, match=str(path.name)):
+        body.precompute_compliance(progress=False)
+    np.testing.assert_allclose(body._compliance, _lazy_matrix(_layer()), rtol=1e-5, atol=1e-6 * np.abs(
+        body._compliance).max())
+    assert np.load(path).shape == body._compliance.shape  # replaced by a good file
+
+
+def test_cache_off_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", "off")
+    assert compliance.cache_dir() is None
+    monkeypatch.chdir(tmp_path)
+    _layer().precompute_compliance(progress=False)
+    assert not os.listdir(tmp_path)
+
+
+def test_worker_processes_compute_what_one_process_does(monkeypatch):
+    monkeypatch.setattr(compliance, "CHUNK", 4)  # 36 points: 9 chunks shared by the two workers
+    one, two = (layer_body(2e-3, 6e-3, 1e-3, 0.3e6, 0.45) for _ in range(2))
+    assert one.num_points == 36
+    one.precompute_compliance(workers=1, progress=False, cache=False)
+    two.precompute_compliance(workers=2, progress=False, cache=False)
+    np.testing.assert_allclose(two._compliance, one._compliance, rtol=1e-6, atol=1e-7 * np.abs(one._compliance).max())
