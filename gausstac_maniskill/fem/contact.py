@@ -160,8 +160,8 @@ def _solve_tresca(M, b, f, mu, tol, max_iterations, inner) -> tuple[np.ndarray, 
     """Coulomb friction on the points of ``M`` [3m, 3m] (rows n, t1, t2 per point), ``b`` [3m],
     from ``f`` [m, 3]: Tresca problems with the bound μ f_n of the last iterate, until it settles
     (:func:`solve_frictional`), on the points with a normal force and those that would
-    penetrate. The first problems are solved loosely (to 100× ``tol``), later ones as finely as
-    the bound's remaining change warrants, the last one to ``tol``. The matrix products run in
+    penetrate. The first problem is solved to ``tol``, later ones only as finely as the bound's
+    remaining change warrants (at most 100× ``tol``), the last one to ``tol``. The matrix products run in
     float32 (their rounding, ~1e-7 of the displacements, is far below ``tol``). One Lipschitz
     constant serves every subset of points: M's largest eigenvalue bounds each principal
     submatrix's. Returns (f [m, 3], the last Tresca problem's bound [m])."""
@@ -174,7 +174,7 @@ def _solve_tresca(M, b, f, mu, tol, max_iterations, inner) -> tuple[np.ndarray, 
     normal = M32[0::3]  # [m, 3m] the normal rows: every point's gap
     active = f[:, 0] > 0
     bound = mu * f[:, 0]
-    loose = 100.0
+    loose = 1.0  # the first problem to tol: a loose start leaves the bound to settle on FISTA's noise
     for _ in range(max_iterations):
         idx = np.flatnonzero(active)
         rows = (3 * idx[:, None] + np.arange(3)).ravel()
