@@ -2,7 +2,7 @@
 # The GPU checks, on the lent machine (see scripts/gpu_pack.sh): the batched co-simulator and
 # the kernel profile on Taichi cuda, then the CUDA tests of the MPM, tactile and splat paths.
 # Each part has its own time limit (seconds: T_BATCH, T_KERN, T_PAD, T_TEST; 0 skips a part; T_PAD
-# is off unless set) so that a slow part leaves the others their time; logs go to $OUT.
+# is off unless set; TESTS narrows the tests) so that a slow part leaves the others their time; logs go to $OUT.
 cd "$(dirname "$0")/.."
 export PYTHONUNBUFFERED=1
 OUT=${OUT:-out/gpu}; mkdir -p "$OUT"
@@ -27,6 +27,6 @@ rm -rf "$OUT/cache"; grep -E "^\| (sphere|plate)|build|ms" "$OUT/pad.log" | head
 fi
 GAUSSTAC_COMPILE=fast GAUSSTAC_TEST_ARCH=cuda timeout "${T_TEST:-240}" python3 -m pytest -m "not slow" \
     -p no:cacheprovider -n 14 --dist loadfile -v -rfE --tb=short --timeout 150 \
-    tests/mpm tests/tactile tests/fem tests/test_batch.py tests/test_cosim.py tests/splat/test_rasterizer.py \
+    ${TESTS:-tests/mpm tests/tactile tests/fem tests/test_batch.py tests/test_cosim.py tests/splat/test_rasterizer.py} \
     > "$OUT/tests.log" 2>&1; echo "CUDA tests: exit $?"
 grep -E "^(FAILED|ERROR)|passed|failed" "$OUT/tests.log" | tail -40
