@@ -210,7 +210,7 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
         if bar is not None:
             bar.update(1)
         F = W[:3, :3].T @ sim.object_wrench("indenter")[0]  # on the indenter, sensor axes
-        return F, {k: maps[k].numpy().astype(np.float64) for k in MAPS}
+        return F, {k: maps[k].cpu().numpy().astype(np.float64) for k in MAPS}
 
     def hold(phase: str, d: float, z: float, x: float) -> dict:
         Fs, ms, areas, Fstress = [], [], [], []
