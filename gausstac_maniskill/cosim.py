@@ -78,7 +78,7 @@ class GaussTacSim:
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
             one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
             the nearest rigid object only; soft objects and shared (batched) worlds are refused,
-            the splat camera draws these pads at rest, and :meth:`flat_state` is not available.
+            and :meth:`flat_state` is not available.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
             at once): 3 s at the default resolution, plus 40 s on 2 cores for its compliance
             the first time on a machine (kept under ``~/.cache/gausstac_maniskill``).
@@ -596,6 +596,23 @@ class GaussTacSim:
             elif hi > lo:
                 x[lo:hi], F[lo:hi] = self._carried(name, x[lo:hi], F[lo:hi])
         return x, F
+
+    def equilibrium_frames(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The frames of the world particles ``rows`` ([P'] ascending world indices) that lie on
+        pads solved at equilibrium (``pad_solver="fem"``), which the MPM world holds at rest:
+        (their positions in ``rows`` [k], their frames (F | x) [k, 3, 4] float32, world frame,
+        from :meth:`pad_particles`). The splat camera draws these pads with them."""
+        where, frames = [np.zeros(0, np.int64)], [np.zeros((0, 3, 4), np.float32)]
+        rows = np.asarray(rows)
+        for name in self._fem:
+            g = self.group(name)
+            lo, hi = np.searchsorted(rows, (g.start, g.stop))
+            if hi > lo:
+                x, F = self.pad_particles(name)
+                local = rows[lo:hi] - g.start
+                where.append(np.arange(lo, hi))
+                frames.append(np.concatenate([F[local], x[local, :, None]], axis=2))
+        return np.concatenate(where), np.concatenate(frames)
 
     def _carried(self, name: str, x: np.ndarray, F: np.ndarray):
         D = self._carry(name)

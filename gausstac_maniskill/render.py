@@ -359,7 +359,8 @@ class SceneGaussians:
 
     def soft_frames(self) -> torch.Tensor:
         """[P', 3, 4] frames (F_p | x_p) of :meth:`soft_rows`' particles, sleeping pads carried
-        by their links, read on the device in one launch (Taichi arch's torch device)."""
+        by their links, read on the device in one launch (Taichi arch's torch device); pads
+        solved at equilibrium from their solution (:meth:`GaussTacSim.equilibrium_frames`)."""
         from .mpm.gather import read_particle_frames
 
         self.framed()
@@ -369,7 +370,11 @@ class SceneGaussians:
             dev = backend.torch_device()
             self._rows_device = (torch.as_tensor(self._particles, dtype=torch.int32, device=dev),
                                  torch.as_tensor(self._carry, device=dev))
-        return read_particle_frames(self.sim.world, *self._rows_device, self.sim.pad_carries())
+        frames = read_particle_frames(self.sim.world, *self._rows_device, self.sim.pad_carries())
+        where, solved = self.sim.equilibrium_frames(self._particles)  # pads the world holds at rest
+        if len(where):
+            frames[torch.as_tensor(where, device=frames.device)] = torch.as_tensor(solved, device=frames.device)
+        return frames
 
     def posed(self, soft: torch.Tensor | None = None) -> PosedScene:
         """The scene at the simulator's current link, object and particle state, with the layers;

@@ -93,8 +93,7 @@ def test_layer_frames_render_like_its_posed_set():
         assert isinstance(layer.framed(), FramedGaussians) and layer.framed() is layer.framed()
 
 
-@pytest.fixture(scope="module")
-def pressed_scene():
+def _pressed_scene(pad_solver: str = "mpm"):
     """An Allegro co-simulator with the hand's Gaussians, a ball (with Gaussians) pressed into
     the index pad so that its soft Gaussians deform, and a captured wall (SH degree 1) behind
     the fingertip as a layer; returns (sim, viewmats [1, 4, 4], Ks [1, 3, 3])."""
@@ -110,7 +109,7 @@ def pressed_scene():
 
     src = MujocoPoseSource()
     poses = dict(zip(src.link_names, src.link_poses()[0].numpy()))
-    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=2e-3))
+    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=2e-3), pad_solver=pad_solver)
     index = "link_3.0_tip"
     apex = poses[index] @ sim.pads[index].sensor_frame
     R = 6e-3
@@ -129,6 +128,11 @@ def pressed_scene():
         sim.step(poses, 0.02, {"ball": ball(1.0e-3 * (k + 1) / 6)})
     view = look_at(apex[:3, 3] + 0.12 * apex[:3, 2] + np.array([0.0, 0.0, 0.04]), apex[:3, 3])
     return sim, view[None], intrinsics_from_fov(96, 80, 0.9)[None]
+
+
+@pytest.fixture(scope="module")
+def pressed_scene():
+    return _pressed_scene()
 
 
 def world_space(sim):
@@ -159,6 +163,24 @@ def test_scene_frames_render_like_the_world_space_path(pressed_scene):
     for name in ("rgb", "depth", "alpha"):
         assert (getattr(a, name) - getattr(b, name)).abs().max() < 1e-4, name
     assert torch.allclose(posed.world().means, world.means, atol=1e-6)
+
+
+def test_pads_at_equilibrium_are_drawn_deformed():
+    """A pad solved at equilibrium (pad_solver="fem") is held at rest in the MPM world; the
+    camera draws it from its solution, as the world-space path (sim.particles) places it."""
+    sim, V, Kc = _pressed_scene("fem")
+    scene = sim._scene
+    rows = scene.binding.particle_index.numpy()
+    x, F = sim.particles()
+    assert np.abs(F[rows] - np.eye(3)).max() > 1e-3, "the pad should deform"
+    frames = scene.soft_frames().cpu().numpy()
+    particles, _ = scene.soft_rows()
+    np.testing.assert_allclose(frames[:, :, 3], x[particles], atol=1e-6)
+    np.testing.assert_allclose(frames[:, :, :3], F[particles], atol=1e-6)
+    a = scene.posed().render(V, Kc, 96, 80, background=(1.0, 1.0, 1.0))
+    b = world_space(sim).render(V, Kc, 96, 80, background=(1.0, 1.0, 1.0))
+    for name in ("rgb", "depth", "alpha"):
+        assert (getattr(a, name) - getattr(b, name)).abs().max() < 1e-4, name
 
 
 def test_soft_gaussians_with_view_dependent_colour_turn_with_polar_F(pressed_scene):
