@@ -78,7 +78,7 @@ class GaussTacSim:
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
             one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
             the nearest rigid object only; soft objects and shared (batched) worlds are refused,
-            and :meth:`flat_state` is not available.
+            and the splat camera draws them from their solution.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
             at once): 3 s at the default resolution, plus 40 s on 2 cores for its compliance
             the first time on a machine (kept under ``~/.cache/gausstac_maniskill``).
@@ -669,10 +669,9 @@ class GaussTacSim:
     def flat_state(self) -> dict[str, np.ndarray]:
         """The state of :meth:`state_dict` as a flat dict of fixed-shape numpy arrays
         (no ``None``, no nesting), so that several identical scenes stack along a batch
-        axis — the form ManiSkill's ``get_state_dict`` and ``RecordEpisode`` store."""
-        if self._fem:
-            raise ConfigError("flat_state: pads solved at equilibrium (pad_solver='fem') keep a contact state "
-                              "that is not flattened yet; use state_dict / load_state_dict")
+        axis — the form ManiSkill's ``get_state_dict`` and ``RecordEpisode`` store. Pads
+        solved at equilibrium add their last solution as ``fem{i}_*`` (i: the pad's index in
+        :attr:`pads`; :meth:`EquilibriumPad.flat_state`)."""
         w = self.world.state_dict(env=self._state_env)
         out = {f"p_{k}": v for k, v in w["particles"].items()}
         n_groups = len(w["awake"])
@@ -694,6 +693,9 @@ class GaussTacSim:
             link_pose=np.stack([self._link_pose[k] for k in sorted(self._link_pose)]),
             pad_awake=np.array([self._awake[k] for k in self.pads], bool),
         )
+        for i, name in enumerate(self.pads):
+            if name in self._fem:
+                out.update({f"fem{i}_{k}": v for k, v in self._fem[name].flat_state(sorted(self._objects)).items()})
         return out
 
     def load_flat_state(self, state: Mapping[str, np.ndarray]) -> None:
@@ -720,6 +722,14 @@ class GaussTacSim:
         self.load_state_dict({"world": world,
                               "link_pose": {k: np.asarray(T, np.float64) for k, T in zip(names, state["link_pose"])},
                               "awake": {k: bool(a) for k, a in zip(self.pads, state["pad_awake"])}})
+        for i, name in enumerate(self.pads):
+            if name in self._fem:
+                prefix = f"fem{i}_"
+                if prefix + "force" not in state:
+                    raise ConfigError(f"load_flat_state: the state has no {prefix}* entries for pad {name!r}, "
+                                      "which this scene solves at equilibrium (pad_solver='fem')")
+                self._fem[name].load_flat_state({k[len(prefix):]: v for k, v in state.items()
+                                                 if k.startswith(prefix)}, sorted(self._objects))
 
     def load_state_dict(self, state: dict) -> None:
         """Restore a :meth:`state_dict` of a scene built the same way (bit-exact)."""

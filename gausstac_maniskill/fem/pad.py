@@ -17,7 +17,7 @@ from ..errors import ConfigError
 from .contact import QuasiStaticBody
 from .hex import CORNERS, voxel_body
 
-__all__ = ["pad_body", "layer_body", "collider_indenter"]
+__all__ = ["pad_body", "pad_lattice", "layer_body", "collider_indenter"]
 
 
 def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = "linear") -> QuasiStaticBody:
@@ -33,10 +33,7 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
     E = mat.E if E is None else E
     nu = mat.nu if nu is None else nu
     s = pad.spacing
-    origin = pad.rest.min(0) - 0.5 * s
-    ijk = np.round((pad.rest - origin) / s - 0.5).astype(np.int64)
-    if np.abs((pad.rest - origin) / s - 0.5 - ijk).max() > 1e-6:
-        raise ConfigError(f"pad {pad.name!r}: particles are not on a lattice of spacing {s:g} m")
+    origin, ijk = pad_lattice(pad)
     soft = ~pad.kinematic
     body = voxel_body(ijk[soft], origin, s)
     # the bond: every node the soft elements share with a kinematic particle's cube
@@ -50,6 +47,17 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
     rest = pad.rest[soft][surface]
     points = rest + pad.depth[soft][surface, None] * pad.normal[soft][surface]
     return QuasiStaticBody(body, E, nu, fixed, points, surface, name=f"pad {pad.name!r}", model=model)
+
+
+def pad_lattice(pad) -> tuple[np.ndarray, np.ndarray]:
+    """(origin [3] m, ijk [N, 3] int): the lattice of ``pad``'s particles (spacing
+    ``pad.spacing``) and each particle's cell on it. Raises ConfigError off a lattice."""
+    s = pad.spacing
+    origin = pad.rest.min(0) - 0.5 * s
+    ijk = np.round((pad.rest - origin) / s - 0.5).astype(np.int64)
+    if np.abs((pad.rest - origin) / s - 0.5 - ijk).max() > 1e-6:
+        raise ConfigError(f"pad {pad.name!r}: particles are not on a lattice of spacing {s:g} m")
+    return origin, ijk
 
 
 def layer_body(h: float, half_width: float, size: float, E: float, nu: float, model: str = "linear") -> QuasiStaticBody:

@@ -15,15 +15,17 @@ ride with the link. Units: SI; "link frame" is the pad's link's frame, "world" t
 from __future__ import annotations
 
 import copy
+import functools
 import time
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from ..errors import ConfigError
 from .compliance import estimated_bytes
 from .contact import ContactResult
-from .hex import centre_state
-from .pad import collider_indenter, pad_body
+from .hex import centre_state, voxel_body
+from .pad import collider_indenter, pad_body, pad_lattice
 
 __all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES"]
 
@@ -133,6 +135,63 @@ class EquilibriumPad:
     def release(self) -> None:
         """Nothing touches the pad: the unloaded equilibrium is the rest shape, exactly."""
         self.result, self.holder, self._pose, self.solve_time = None, None, None, 0.0
+
+    @functools.cached_property
+    def shape(self) -> tuple[int, int]:
+        """(S, V): the body's surface points and nodes, from the pad alone (no assembly)."""
+        origin, ijk = pad_lattice(self.pad)
+        nodes = voxel_body(ijk[self.soft], origin, self.pad.spacing).nodes
+        return int(self.pad.surface[self.soft].sum()), len(nodes)
+
+    def flat_state(self, holders: Sequence[str]) -> dict[str, np.ndarray]:
+        """:meth:`state` as a flat dict of fixed-shape arrays (S, V from :attr:`shape`), so that
+        the states of identical scenes stack; the holder is stored as its index in ``holders``
+        (the names a holder may have), −1 for none."""
+        S, V = self.shape
+        r = self.result
+        out = {"solved": np.array([r is not None]), "force": np.zeros((S, 3)), "displacement": np.zeros((S, 3)),
+               "gap": np.zeros(S), "contact_state": np.zeros(S, np.int64), "anchors": np.full((S, 3), np.nan),
+               "result_pose": np.eye(4), "has_result_pose": np.array([False]), "nodes": np.zeros((V, 3)),
+               "has_nodes": np.array([False]), "counts": np.zeros(2, np.int64), "residual": np.zeros(1),
+               "holder": np.array([-1 if self.holder is None else list(holders).index(self.holder)]),
+               "pose": np.eye(4) if self._pose is None else self._pose.copy(),
+               "has_pose": np.array([self._pose is not None])}
+        if r is not None:
+            out.update(force=r.force.copy(), displacement=r.displacement.copy(), gap=r.gap.copy(),
+                       counts=np.array([r.iterations, r.candidates], np.int64), residual=np.array([r.residual]))
+            if r.state is not None:
+                out["contact_state"] = r.state.copy()
+            if r.anchors is not None:
+                out["anchors"] = r.anchors.copy()
+            if r.pose is not None:
+                out["result_pose"], out["has_result_pose"] = r.pose.copy(), np.array([True])
+            if r.nodes is not None:
+                out["nodes"], out["has_nodes"] = r.nodes.copy(), np.array([True])
+        return out
+
+    def load_flat_state(self, state: Mapping[str, np.ndarray], holders: Sequence[str]) -> None:
+        """Restore a :meth:`flat_state` of this pad (bit-exact)."""
+        S, V = self.shape
+        if np.shape(state["force"]) != (S, 3) or np.shape(state["nodes"]) != (V, 3):
+            raise ConfigError(f"EquilibriumPad({self.pad.name!r}).load_flat_state: the state holds "
+                              f"{np.shape(state['force'])[0]} surface points and {np.shape(state['nodes'])[0]} "
+                              f"nodes, this pad has {S} and {V} (another pad or resolution)")
+        self.release()
+        h = int(np.asarray(state["holder"]).ravel()[0])
+        self.holder = None if h < 0 else list(holders)[h]
+        self._pose = np.array(state["pose"], np.float64) if bool(np.asarray(state["has_pose"]).ravel()[0]) else None
+        if not bool(np.asarray(state["solved"]).ravel()[0]):
+            return
+        flag = lambda k: bool(np.asarray(state[k]).ravel()[0])  # noqa: E731
+        counts = np.asarray(state["counts"]).ravel()
+        self.result = ContactResult(
+            np.array(state["force"], np.float64), np.array(state["displacement"], np.float64),
+            np.array(state["gap"], np.float64), int(counts[0]), int(counts[1]),
+            nodes=np.array(state["nodes"], np.float64) if flag("has_nodes") else None,
+            residual=float(np.asarray(state["residual"]).ravel()[0]),
+            state=np.array(state["contact_state"], np.int64),
+            anchors=np.array(state["anchors"], np.float64) if flag("has_result_pose") else None,
+            pose=np.array(state["result_pose"], np.float64) if flag("has_result_pose") else None)
 
     def state(self) -> dict:
         """A copy of what the next solve starts from (restore with :meth:`load_state`)."""

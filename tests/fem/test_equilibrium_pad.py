@@ -89,6 +89,18 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     sim.load_state_dict(saved)  # and the same slide from it (the restored state's pose is the saved one)
     np.testing.assert_array_equal(press(-1e-3, 1e-3)[0], F_slid)
 
+    # the flat form (what ManiSkill's get_state_dict and RecordEpisode store), into a fresh scene
+    sim.load_state_dict(saved)
+    flat = sim.flat_state()
+    assert flat["fem0_solved"][0] and flat["fem0_has_result_pose"][0] and flat["fem0_holder"][0] == 0
+    other, _, press_other = _scene(friction=0.5)
+    other.load_flat_state(flat)
+    np.testing.assert_array_equal(press_other(-1e-3, 1e-3)[0], F_slid)
+    flat_again = other.flat_state()  # (after a step: another state, the same shapes)
+    assert {k: np.shape(v) for k, v in flat_again.items()} == {k: np.shape(v) for k, v in flat.items()}
+    with pytest.raises(ConfigError, match="fem0_"):
+        other.load_flat_state({k: v for k, v in flat.items() if not k.startswith("fem0_")})
+
 
 def test_fem_pad_held_step_keeps_the_equilibrium():
     """Guards the held-step shortcut: an unchanged relative pose keeps the last solution (no
@@ -134,8 +146,8 @@ def test_fem_pad_bad_input():
         sim = GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem")
     with pytest.raises(ConfigError, match="rigid objects only"):
         sim.add_soft_object("sponge", np.zeros((8, 3)) + [0, 0, 0.2], bp.index_spec().material)
-    with pytest.raises(ConfigError, match="state_dict"):
-        sim.flat_state()
+    rest = sim.flat_state()  # at rest, before any solve: no body assembled for it
+    assert not rest["fem0_solved"][0] and sim._fem[bp.INDEX]._body is None
     from gausstac_maniskill.fem.sensor import EquilibriumPad
 
     with pytest.raises(ConfigError, match="model"):
