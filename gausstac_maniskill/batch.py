@@ -60,12 +60,16 @@ class BatchedCosim:
         pads: pad descriptions, the same in every env.
         link_names: the L links whose poses :meth:`step` receives (every pad link among them).
         link_poses: [B, L, 4, 4] initial world poses [m] of those links; B is the env count.
-        urdf, settings, sleep_margin, pad_surface: as :class:`~gausstac_maniskill.cosim.GaussTacSim`.
+        urdf, settings, sleep_margin, pad_surface, pad_solver, fem_model: as
+            :class:`~gausstac_maniskill.cosim.GaussTacSim`. With ``pad_solver="fem"`` every env
+            solves its pads at equilibrium after the world's step, one env after another on the
+            host, with one body (factor and compliance) per pad shared by all envs.
     """
 
     def __init__(self, pads: Sequence[PadSpec], link_names: Sequence[str], link_poses, *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
-                 sleep_margin: float = 5e-3, pad_surface: str = "mesh"):
+                 sleep_margin: float = 5e-3, pad_surface: str = "mesh", pad_solver: str = "mpm",
+                 fem_model: str = "linear"):
         self.link_names = list(link_names)
         P = _as_batch(link_poses, "BatchedCosim link_poses")
         if P.ndim != 4 or P.shape[1] != len(self.link_names):
@@ -73,8 +77,12 @@ class BatchedCosim:
                               f"(one pose per link of link_names), got {list(P.shape)}")
         self.world = MPMWorld(settings or default_hand_settings())
         self.scenes = [GaussTacSim(pads, self._env_poses(P, b), urdf=urdf, world=self.world, env=b,
-                                   sleep_margin=sleep_margin, pad_surface=pad_surface)
+                                   sleep_margin=sleep_margin, pad_surface=pad_surface, pad_solver=pad_solver,
+                                   fem_model=fem_model)
                        for b in range(P.shape[0])]
+        for scene in self.scenes[1:]:  # one body per pad (its factor and compliance) for every env
+            for name, fp in scene._fem.items():
+                fp.share_body(self.scenes[0]._fem[name])
         self.pad_names = [p.name for p in pads]
         self._readout: TactileReadout | None = None
         self._splat = BatchScene()
@@ -140,7 +148,13 @@ class BatchedCosim:
         if self._readout is None:
             self._readout = TactileReadout(self.world, list(self.scenes[0].pads.values()),
                                            [s.pad_slots() for s in self.scenes])
-        return self._readout.maps(device)
+        maps = self._readout.maps(device)
+        for b, scene in enumerate(self.scenes):  # pads solved at equilibrium: the world holds them at rest
+            for name, fp in scene._fem.items():
+                if fp.result is not None:
+                    for k, v in scene._fem_maps(name).items():
+                        maps[name][k][b] = v.to(maps[name][k].device)
+        return maps
 
     def render(self, viewmats, Ks, width: int, height: int, camera_env=None, **kwargs):
         """Render every env's splat scene (:meth:`GaussTacSim.attach_gaussians`) in one

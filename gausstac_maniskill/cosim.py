@@ -77,8 +77,9 @@ class GaussTacSim:
             in contact with rigid and soft objects. ``"fem"``: each awake pad is solved at
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
             one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
-            the nearest rigid object only; soft objects and shared (batched) worlds are refused,
-            and the splat camera draws them from their solution.
+            the nearest rigid object only; soft objects are refused. The splat camera draws
+            these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)
+            every env solves its own, with one body per pad.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
             at once): 3 s at the default resolution, plus 40 s on 2 cores for its compliance
             the first time on a machine (kept under ``~/.cache/gausstac_maniskill``).
@@ -105,9 +106,9 @@ class GaussTacSim:
             raise ConfigError(f"GaussTacSim(pad_surface={pad_surface!r}) must be 'particles' or 'mesh'")
         if pad_solver not in ("mpm", "fem"):
             raise ConfigError(f"GaussTacSim(pad_solver={pad_solver!r}) must be 'mpm' or 'fem'")
-        if pad_solver == "fem" and (world is not None or pad_surface != "mesh"):
-            raise ConfigError("GaussTacSim(pad_solver='fem') needs a world of its own and pad_surface='mesh' "
-                              "(the equilibrium pads are touched on the link mesh, one scene at a time)")
+        if pad_solver == "fem" and pad_surface != "mesh":
+            raise ConfigError("GaussTacSim(pad_solver='fem') needs pad_surface='mesh' "
+                              "(the equilibrium pads are touched on the link mesh)")
         self.pad_solver = pad_solver
         self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
         self._warned: set[str] = set()

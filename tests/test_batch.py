@@ -222,3 +222,34 @@ def test_batch_renders_every_env_in_one_call(setup, monkeypatch):
             assert torch.equal(out.__dict__[key][c], alone.__dict__[key][0]), (c, key)
     with pytest.raises(ConfigError, match=r"camera_env must hold one env index in \[0, 3\)"):
         batch.render(V, K, width, height, camera_env=[0, 1, 3, 0])
+
+
+def test_batched_pads_at_equilibrium_read_what_each_scene_alone_reads(setup):
+    """pad_solver="fem" in a batch: each env solves its own pads (one body per pad for all
+    envs), its maps are those of the same scene alone, an env with nothing near reads zeros,
+    and an env's flat state moves into the scene alone."""
+    names, poses, settings, _ = setup
+    settings = default_hand_settings(dx=2e-3)
+    specs = [s for s in allegro_pad_specs() if s.link == INDEX]
+    with pytest.warns(Warning):  # 2 mm: a coarse pad, for speed
+        batch = BatchedCosim(specs, names, poses[:2], settings=settings, pad_solver="fem")
+        alone = GaussTacSim(specs, dict(zip(names, poses[0])), settings=settings, pad_solver="fem")
+    apex = poses[0][names.index(INDEX)] @ alone.pads[INDEX].sensor_frame
+    ball = lambda d: make_pose(apex[:3, 3] + apex[:3, 2] * (R - d))  # noqa: E731
+    far = make_pose(apex[:3, 3] + [0.0, 0.0, 0.3])
+    batch.add_rigid_object("ball", [Sphere(radius=R, pose=ball(-0.5e-3), friction=0.5),
+                                    Sphere(radius=R, pose=far, friction=0.5)])
+    alone.add_rigid_object("ball", Sphere(radius=R, pose=ball(-0.5e-3), friction=0.5))
+    for k in range(3):
+        d = 0.8e-3 * (k + 1) / 3
+        maps = batch.step(poses[:2], DT, {"ball": np.stack([ball(d), far])})[INDEX]
+        ref = alone.step(dict(zip(names, poses[0])), DT, {"ball": ball(d)})[INDEX]
+    assert batch.scenes[1]._fem[INDEX].body is batch.scenes[0]._fem[INDEX].body
+    assert float(ref["force"].sum()) > 0.05
+    for key in ("depth", "shear", "force", "pressure"):
+        np.testing.assert_array_equal(maps[key][0].cpu().numpy(), ref[key].cpu().numpy())
+        assert float(maps[key][1].abs().max()) == 0.0
+    np.testing.assert_array_equal(batch.scenes[0].object_wrench("ball")[0], alone.object_wrench("ball")[0])
+    flat = batch.scenes[0].flat_state()
+    alone.load_flat_state(flat)
+    np.testing.assert_array_equal(alone.flat_state()["fem0_force"], flat["fem0_force"])

@@ -64,6 +64,7 @@ class EquilibriumPad:
         self.pad, self.model, self.geometry, self.precompute = pad, model, geometry, precompute
         self.soft = np.flatnonzero(~pad.kinematic)  # pad particle of each element
         self._body = None
+        self._source: EquilibriumPad | None = None  # the pad whose body this one uses (share_body)
         self.result: ContactResult | None = None  # the last solve; None: at rest, nothing touches
         self.holder = None  # key of the collider ``result`` holds on
         self.solve_time = 0.0  # wall time [s] of the last solve (and of building the body, the first time)
@@ -77,10 +78,20 @@ class EquilibriumPad:
         #: instead of 752 for the plate's, than with one element, the body's default)
         self.margin = 0.0
 
+    def share_body(self, other: "EquilibriumPad") -> None:
+        """Use ``other``'s body (the same pad in another env of a batch): one factor and one
+        compliance for all envs. The body is immutable once built; each pad keeps its own state."""
+        if other.shape != self.shape or other.model != self.model:
+            raise ConfigError(f"EquilibriumPad({self.pad.name!r}).share_body: the other pad differs "
+                              f"(points, nodes {other.shape} vs {self.shape}; model {other.model!r} vs {self.model!r})")
+        self._source = other
+
     @property
     def body(self):
         """The pad's :class:`~.contact.QuasiStaticBody`, assembled and factored on first use
         (and its compliance computed or loaded, see ``precompute``)."""
+        if self._source is not None:
+            return self._source.body
         if self._body is None:
             body = pad_body(self.pad, model=self.model)
             precompute = self.precompute
