@@ -187,6 +187,13 @@ class GaussTacEnv(BaseEnv):
             below :data:`PAD_REACTION_MIN_FREQ`. ``False`` (default): the hand is driven
             kinematically as far as the pads are concerned (the rigid cores still stop a
             finger), and the pads crush against their cores when a finger presses hard.
+        pad_solver: ``"mpm"`` (default: the pads are explicit MPM particles) or ``"fem"``: each
+            env's pads solved at equilibrium after every MPM step
+            (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`; no pseudo-mass, no time
+            step, rigid objects only: a task with a soft object raises a ``ConfigError``).
+            At the default ``mpm_dx`` a pad's first contact on a machine computes its
+            compliance (40 s on 2 cores, then cached; BENCHMARKS.md, issue 10).
+        fem_model: the ``"fem"`` pads' material, ``"linear"`` (default) or ``"neo_hookean"``.
     """
 
     SUPPORTED_ROBOTS = ["allegro_hand_right_gausstac"]
@@ -196,12 +203,17 @@ class GaussTacEnv(BaseEnv):
                  mpm_sleep_margin: float = 5.0e-3, splat_size=(128, 128), render_size=(256, 256),
                  splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
-                 pad_reaction: bool = False, splat_lod: bool = True, splat_cull: bool = True, **kwargs):
+                 pad_reaction: bool = False, splat_lod: bool = True, splat_cull: bool = True,
+                 pad_solver: str = "mpm", fem_model: str = "linear", **kwargs):
         backend.ensure_init()
         _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
         self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
+        if pad_solver not in ("mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
+            raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'mpm' or 'fem' "
+                              "and fem_model 'linear' or 'neo_hookean'")
+        self.pad_solver, self.fem_model = pad_solver, fem_model
         self.mpm_sleep_margin = float(mpm_sleep_margin)
         self.splat_size = tuple(int(v) for v in splat_size)
         self.render_size = tuple(int(v) for v in render_size)
@@ -489,7 +501,8 @@ class GaussTacEnv(BaseEnv):
             settings = dataclasses.replace(settings, hold_scaling=1.0)
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
                                    urdf=agent.pad_urdf(), settings=settings,
-                                   sleep_margin=self.mpm_sleep_margin)
+                                   sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver,
+                                   fem_model=self.fem_model)
         self.cosims = self._batch.scenes
         for name, obj in self._rigid.items():
             cols = [copy.deepcopy(obj.collider) for _ in range(self.num_envs)]

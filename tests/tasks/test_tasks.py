@@ -95,6 +95,40 @@ def test_press_force_is_the_tactile_force_sum_and_tracks_the_target():
         env.close()
 
 
+def test_press_cube_with_pads_at_equilibrium():
+    """pad_solver="fem" in a task: the expert presses the cube to its target force with the
+    index pad solved at equilibrium (2 mm grid: 1 mm elements, for speed); the recorded state
+    carries the pad's solution and restores it; a task with a soft object is refused."""
+    with pytest.warns(Warning, match="spans only"):
+        env = _make("GaussTac-PressCube-v1", pad_solver="fem", mpm_dx=2e-3)
+        try:
+            obs, _ = env.reset(seed=3)
+            expert = make_expert(env)
+            expert.reset()
+            for _ in range(40):
+                obs, _, _, _, info = env.step(expert.act(obs))
+                if info["success"].all():
+                    break
+            assert info["success"].all(), info
+            target = env.unwrapped.target_force
+            assert (info["force"] - target).abs().item() < 0.15 * target.item()
+            for pad in ("thumb", "middle", "ring"):
+                assert obs["tactile"][pad]["force"].abs().sum() == 0
+            state = env.unwrapped.get_state_dict()
+            assert bool(state["gausstac"]["fem1_solved"].all())  # the index pad (pads: thumb, index, ...)
+            action = expert.act(obs)
+            a = env.step(action)[0]["tactile"]["index"]["force"]
+            env.unwrapped.set_state_dict(state)
+            b = env.step(action)[0]["tactile"]["index"]["force"]
+            assert torch.equal(a, b)
+        finally:
+            env.close()
+        with pytest.raises(ConfigError, match="rigid objects only"):
+            _make("GaussTac-SqueezeSponge-v1", pad_solver="fem", mpm_dx=2e-3)
+    with pytest.raises(ConfigError, match="pad_solver"):
+        _make("GaussTac-PressCube-v1", pad_solver="implicit")
+
+
 def test_invalid_gesture_name_is_a_clear_error():
     with pytest.raises(ConfigError, match="gesture='wave'.*choose from"):
         _make("GaussTac-Gesture-v1", gesture="wave")
