@@ -151,8 +151,8 @@ class BatchedCosim:
         maps = self._readout.maps(device)
         for b, scene in enumerate(self.scenes):  # pads solved at equilibrium: the world holds them at rest
             for name, fp in scene._fem.items():
-                if fp.result is not None:
-                    for k, v in scene._fem_maps(name).items():
+                if fp.result is not None:  # (the scene's maps: computed once per step, whoever reads them)
+                    for k, v in scene.tactile()[name].items():
                         maps[name][k][b] = v.to(maps[name][k].device)
         return maps
 

@@ -113,6 +113,7 @@ class GaussTacSim:
         self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
         self._warned: set[str] = set()
         self._binning: dict[str, TaxelBinning] = {}
+        self._zero_maps: dict[str, dict] = {}  # equilibrium pad -> its maps at rest (zeros), by shape
         self.pad_solve_time = 0.0  # wall time [s] of the last step's equilibrium solves (pad_solver="fem")
         self.pads: dict[str, Pad] = {}
         self._objects: dict[str, int] = {}
@@ -497,17 +498,24 @@ class GaussTacSim:
 
     def _fem_maps(self, name: str) -> dict[str, torch.Tensor]:
         """The maps of equilibrium pad ``name``: :func:`~.tactile.extract.tactile_maps` of its
-        particles' state (:meth:`EquilibriumPad.particle_state`), on the Taichi arch's device."""
+        particles' state (:meth:`EquilibriumPad.particle_state`), on the Taichi arch's device;
+        exact zeros while nothing touches it (its equilibrium is then its rest shape)."""
         from . import backend
 
         fp, pad = self._fem[name], self.pads[name]
         if name not in self._binning:
             self._binning[name] = TaxelBinning.for_pad(pad)
         T = self._link_pose[pad.spec.link]
+        if fp.result is None and name in self._zero_maps:
+            return {k: v.clone() for k, v in self._zero_maps[name].items()}
         x, _, sigma, f = fp.particle_state(T)
         maps = tactile_maps(pad, self._binning[name], x, T, f, sigma)
         device = backend.torch_device()
-        return {k: v.to(device) for k, v in maps.items()}
+        maps = {k: v.to(device) for k, v in maps.items()}
+        if fp.result is None:  # (the shapes and dtypes, once)
+            self._zero_maps[name] = {k: torch.zeros_like(v) for k, v in maps.items()}
+            return self._fem_maps(name)
+        return maps
 
     def pad_contact_forces(self, pad: str) -> np.ndarray:
         """[N, 3] world contact force [N] on each of ``pad``'s particles in the last step (from

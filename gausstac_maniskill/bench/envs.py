@@ -3,7 +3,7 @@ tactile / render, reset time, and the task outcome, against SAPIEN's own camera 
 ManiSkill's FSR-tactile Allegro task.
 
 ``python -m gausstac_maniskill.bench envs [--steps N] [--settle N] [--dx 2e-3 1.5e-3] [--tasks ID ...]
-[--no-fsr] [--out DIR]``
+[--pad-solvers mpm fem] [--no-fsr] [--out DIR]``
 
 Rows:
 
@@ -12,7 +12,8 @@ Rows:
   more steps, or the task's time limit (``--steps N``: at most N timed steps). The mean
   step is therefore one of the episode as a user records it, approach included. PressCube
   also runs at finer MPM grids (``--dx``), where the "outcome" column is the force error at
-  the end (speed vs accuracy);
+  the end (speed vs accuracy), with each of ``--pad-solvers`` (``fem``: the pads solved at
+  equilibrium, ``GaussTacEnv(pad_solver="fem")``; its time is in the MPM column);
 * the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
   CPU machine: rigid meshes only, no pad deformation), made in the same process and stepped
   in turn with the splat run, so that both see the same machine load (the "camera side by
@@ -59,7 +60,7 @@ class _Run:
     """One GaussTac env driven by its scripted expert, with the step timings it recorded."""
 
     def __init__(self, env_id: str, camera: str = "splat", dx: float = 2e-3, resets: int = 3,
-                 steps: int | None = None, settle: int = 5):
+                 steps: int | None = None, settle: int = 5, pad_solver: str = "mpm"):
         import gymnasium as gym
         from mani_skill.utils.registration import REGISTERED_ENVS
 
@@ -67,7 +68,7 @@ class _Run:
 
         self.env_id = env_id
         self.env = gym.make(env_id, obs_mode="rgb", sim_backend="physx_cpu", control_mode="pd_joint_pos",
-                            camera=camera, mpm_dx=dx, splat_size=(128, 128))
+                            camera=camera, mpm_dx=dx, splat_size=(128, 128), pad_solver=pad_solver)
         self.base = self.env.unwrapped
         reset_s = []
         for k in range(resets):
@@ -115,9 +116,9 @@ class _Run:
 
 
 def run_gausstac(env_id: str, steps: int | None = None, camera: str = "splat", dx: float = 2e-3,
-                 resets: int = 3, settle: int = 5) -> dict:
+                 resets: int = 3, settle: int = 5, pad_solver: str = "mpm") -> dict:
     """One expert episode of ``env_id`` (see the module docstring); its timings and outcome."""
-    run = _Run(env_id, camera, dx, resets, steps, settle)
+    run = _Run(env_id, camera, dx, resets, steps, settle, pad_solver)
     while not run.finished:
         run.step()
     return run.close()
@@ -183,6 +184,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out/bench", help="folder for envs.json")
     ap.add_argument("--tasks", nargs="+", default=TASKS, choices=TASKS, metavar="ENV_ID",
                     help=f"GaussTac tasks to run (default: all of {', '.join(TASKS)})")
+    ap.add_argument("--pad-solvers", nargs="+", default=["mpm"], choices=["mpm", "fem"],
+                    help="the pads' solvers of the PressCube resolution sweep (GaussTacEnv's pad_solver)")
     ap.add_argument("--no-fsr", action="store_true", help="skip ManiSkill's FSR-tactile Allegro row")
     args = ap.parse_args(argv)
     from .. import backend
@@ -194,10 +197,12 @@ def main(argv=None) -> int:
         splat, sapien = run_side_by_side(env_id, args.steps, settle=args.settle)
         runs.append((env_id, "splat", 2e-3, splat))
         runs.append((env_id, "sapien", 2e-3, sapien))
-    for dx in args.dx:
-        if dx != 2e-3:
-            runs.append(("GaussTac-PressCube-v1", "splat", dx, run_gausstac("GaussTac-PressCube-v1", args.steps,
-                                                                             "splat", dx, settle=args.settle)))
+    for solver in args.pad_solvers:
+        for dx in args.dx:
+            if dx != 2e-3 or solver != "mpm" or "GaussTac-PressCube-v1" not in args.tasks:
+                run = run_gausstac("GaussTac-PressCube-v1", args.steps, "splat", dx, settle=args.settle,
+                                   pad_solver=solver)
+                runs.append((f"GaussTac-PressCube-v1 ({solver} pads)", "splat", dx, run))
     if not args.no_fsr:
         runs.append(("RotateSingleObjectInHandLevel0-v1 (allegro_hand_right_touch)", "sapien", None,
                      run_fsr(args.steps or 15)))
