@@ -42,10 +42,10 @@ def test_scene_occludes_the_hand_only_when_in_front(scene_z, centre_rgb, centre_
     hand, scene = hand_and_scene(scene_z)
     out = PosedGaussians.cat([hand, scene.posed()]).render(CAM, K, W, H)
     c = out.rgb[0, H // 2, W // 2]
-    assert torch.allclose(c, torch.tensor(centre_rgb, dtype=torch.float32), atol=0.02), c
+    assert torch.allclose(c.cpu(), torch.tensor(centre_rgb, dtype=torch.float32), atol=0.02), c
     assert abs(float(out.normalized_depth()[0, H // 2, W // 2]) - centre_depth) < 0.01
     corner = out.rgb[0, 1, 1]  # outside the hand: the scene everywhere
-    assert torch.allclose(corner, torch.tensor([0.0, 0.0, 1.0]), atol=0.02), corner
+    assert torch.allclose(corner.cpu(), torch.tensor([0.0, 0.0, 1.0]), atol=0.02), corner
     # sorted together, not pasted: the order of the parts does not matter
     swapped = PosedGaussians.cat([scene.posed(), hand]).render(CAM, K, W, H)
     assert torch.allclose(swapped.rgb, out.rgb, atol=1e-5)
@@ -162,7 +162,7 @@ def test_scene_frames_render_like_the_world_space_path(pressed_scene):
     assert 0.2 < (b.alpha > 0.5).float().mean() < 0.99
     for name in ("rgb", "depth", "alpha"):
         assert (getattr(a, name) - getattr(b, name)).abs().max() < 1e-4, name
-    assert torch.allclose(posed.world().means, world.means, atol=1e-6)
+    assert torch.allclose(posed.world().means.cpu(), world.means.cpu(), atol=1e-6)
 
 
 def test_pads_at_equilibrium_are_drawn_deformed():
