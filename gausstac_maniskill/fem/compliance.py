@@ -130,7 +130,16 @@ def _compute(body, workers: int | None, progress: bool) -> np.ndarray:
                 out[chunk] = _columns(body, chunk)
                 bar.update(len(chunk))
         else:
-            out = _compute_in_processes(body, workers, bar)
+            try:
+                out = _compute_in_processes(body, workers, bar)
+            except (OSError, RuntimeError) as err:  # a worker could not start or died: one process does it all
+                warnings.warn(f"{body.name}: computing the compliance in {workers} worker processes failed ({err}); "
+                              "computing it in this process instead", stacklevel=3)
+                bar.reset()
+                out = np.empty((S, 3, S, 3), np.float32)
+                for chunk in chunks:
+                    out[chunk] = _columns(body, chunk)
+                    bar.update(len(chunk))
     flat = out.reshape(3 * S, 3 * S)
     flat += flat.T  # W is symmetric (Maxwell-Betti); the solves agree with that to rounding
     flat *= np.float32(0.5)
@@ -155,15 +164,15 @@ def _compute_in_processes(body, workers: int, bar) -> np.ndarray:
     import sys
     import tempfile
 
-    from ..errors import SimulationError
-
     S = body.num_points
     with tempfile.TemporaryDirectory(prefix="gausstac-compliance-") as tmp:
         desc, rows = os.path.join(tmp, "body.pkl"), os.path.join(tmp, "rows.npy")
         with open(desc, "wb") as fh:
             pickle.dump(body, fh)
         np.lib.format.open_memmap(rows, mode="w+", dtype=np.float32, shape=(S, 3, S, 3)).flush()
-        env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+        # the workers import this package as this process found it (an uninstalled checkout on sys.path too)
+        env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+                   PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         procs = [subprocess.Popen([sys.executable, "-m", __name__, desc, rows, str(w), str(workers), str(CHUNK)], env=env,
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                  for w in range(workers)]
@@ -183,8 +192,8 @@ def _compute_in_processes(body, workers: int, bar) -> np.ndarray:
         failed = [(rc, err) for rc, err in failed if rc != 0]
         if failed:
             rc, err = failed[0]
-            raise SimulationError(f"{body.name}: a compliance worker failed (exit status {rc}): "
-                                  f"{err.strip().splitlines()[-1] if err.strip() else 'no message'}")
+            raise RuntimeError(f"a worker exited with status {rc}: "
+                               f"{err.strip().splitlines()[-1] if err.strip() else 'no message'}")
         return np.array(np.load(rows, mmap_mode="r"))
 
 

@@ -87,3 +87,15 @@ def test_worker_processes_compute_what_one_process_does(monkeypatch):
     one.precompute_compliance(workers=1, progress=False, cache=False)
     two.precompute_compliance(workers=2, progress=False, cache=False)
     np.testing.assert_allclose(two._compliance, one._compliance, rtol=1e-6, atol=1e-7 * np.abs(one._compliance).max())
+
+
+def test_failed_workers_fall_back_to_this_process(monkeypatch):
+    import sys
+
+    monkeypatch.setattr(compliance, "CHUNK", 4)
+    monkeypatch.setattr(sys, "executable", sys.executable + "-missing")  # the workers cannot start
+    ref, body = (layer_body(2e-3, 6e-3, 1e-3, 0.3e6, 0.45) for _ in range(2))
+    with pytest.warns(UserWarning, match="worker processes failed"):
+        body.precompute_compliance(workers=2, progress=False, cache=False)
+    ref.precompute_compliance(workers=1, progress=False, cache=False)
+    np.testing.assert_array_equal(body._compliance, ref._compliance)
