@@ -516,13 +516,14 @@ class QuasiStaticBody:
             return solve_lcp(self._normal_compliance(idx, n), gap0)[:, None] * n
         W = self.compliance_among(idx)  # [m (s), 3, m (d), 3]
         f0 = None
-        if len(friction.idx):  # the last iteration's (or step's) forces: near this solution
+        last_idx, last_force = friction.last
+        if len(last_idx):  # the last iteration's (or step's) forces: near this solution
             f0 = np.zeros((len(idx), 3))
-            common, here, there = np.intersect1d(idx, friction.idx, assume_unique=True, return_indices=True)
-            f0[here] = friction.force[there]
+            common, here, there = np.intersect1d(idx, last_idx, assume_unique=True, return_indices=True)
+            f0[here] = last_force[there]
         f, friction.state = solve_frictional(W, n, gap0, np.einsum("pai,pi->pa", tangent_bases(n), offset),
                                              friction.mu, friction.tol, f0=f0)
-        friction.idx, friction.force = idx, f
+        friction.idx, friction.last = idx, (idx, f)
         return f
 
     def _solve_linear(self, sdf, geometry, margin, tol, max_iterations, friction=None) -> ContactResult:
@@ -634,14 +635,14 @@ class _Friction:
         self.rest = body.points
         self.local = local
         self.hold = indenter.to_body(local)
-        # the points of the last solve and their forces [m, 3], the next solve's start: the
-        # last step's loaded points, then the last outer iteration's (solve_frictional's f0)
-        self.idx = np.zeros(0, np.int64)
-        self.force = np.zeros((0, 3))
-        if held:
-            self.idx = np.flatnonzero(np.abs(warm.force).sum(1) > 0)
-            self.force = warm.force[self.idx]
+        self.idx = np.zeros(0, np.int64)  # the points of this solve's last contact problem, and their states
         self.state = np.zeros(0, np.int64)
+        # (points, forces [m, 3]) the next contact problem starts from (solve_frictional's f0): the
+        # last step's loaded points, then the last outer iteration's
+        self.last = (np.zeros(0, np.int64), np.zeros((0, 3)))
+        if held:
+            loaded = np.flatnonzero(np.abs(warm.force).sum(1) > 0)
+            self.last = (loaded, warm.force[loaded])
 
     def finish(self, res: ContactResult) -> None:
         """Store the states and the new holds in ``res``: a stuck point keeps its hold, a

@@ -117,6 +117,22 @@ def test_fem_pad_held_step_keeps_the_equilibrium():
     assert fp.result is not res and fp.result.total_force[2] != res.total_force[2]
 
 
+def test_fem_pad_released_within_reach_reads_zero():
+    """A pressed, frictional pad whose indenter backs off to just clear of it (still within one
+    element: solved, no point in contact) reads zero force and maps (a regression: the last
+    step's warm start was taken for this solve's contact points)."""
+    from gausstac_maniskill.bench import pad as bp
+
+    sim, W, press = _scene(friction=0.5)
+    press(bp.GAP)
+    press(-0.5e-3)
+    F, maps = press(0.3 * DX / 2)  # 0.3 mm clear: within the 1 mm element, touching nothing
+    assert sim._fem[bp.INDEX].result is not None  # it was solved, not released
+    assert not np.any(F) and float(maps["force"].abs().max()) == 0.0
+    F, maps = press(-0.5e-3)  # and presses again from there
+    assert F[2] > 0
+
+
 def test_fem_pad_near_incompressible_is_stable_and_stiffer():
     """ν = 0.499: no locking in the elements (selective reduced integration), a finite press;
     a bonded thin layer stiffens as ν → 0.5, so it reads more than at ν = 0.48."""
