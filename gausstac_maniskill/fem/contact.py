@@ -178,7 +178,8 @@ def _solve_tresca(M, b, f, mu, tol, max_iterations, inner) -> tuple[np.ndarray, 
     for _ in range(max_iterations):
         idx = np.flatnonzero(active)
         rows = (3 * idx[:, None] + np.arange(3)).ravel()
-        f[idx] = _fista(M32[np.ix_(rows, rows)], b[rows], f[idx], bound[idx], L, tol * loose, inner)
+        if len(idx):  # (none: a warm start whose points all came open; the joins below decide)
+            f[idx] = _fista(M32[np.ix_(rows, rows)], b[rows], f[idx], bound[idx], L, tol * loose, inner)
         f[~active] = 0.0
         join = ~active & (b[0::3] + normal[:, rows] @ f[idx].ravel().astype(np.float32) < -tol)
         new = mu * f[:, 0]

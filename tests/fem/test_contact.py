@@ -160,6 +160,12 @@ def test_frictional_solver_meets_every_coulomb_condition():
         assert v["cone"] <= BOUND_TOL * mu * np.abs(f).max() and v["stuck_slip"] < 1e-8
         assert v["cos"] < -0.999  # a slipping point is pulled back along its slip
         assert (state == 2).any() and (state == 1).any()
+        # a warm start with no point loaded (the last step's points all came open) finds the same contact
+        f_warm, state_warm = solve_frictional(W, n, gap0, slip0, mu, tol=1e-10, f0=np.zeros((m, 3)))
+        np.testing.assert_allclose(f_warm, f, atol=1e-6 * np.abs(f).max())
+        assert (state_warm == state).all()
+    f, state = solve_frictional(W, n, np.abs(gap0) + 1e-6, slip0, 0.5, tol=1e-10, f0=np.zeros((m, 3)))
+    assert not f.any() and not state.any()  # nothing touches
 
 
 def _plate_indenter(z, mu, x=0.0):
