@@ -17,6 +17,7 @@ a collider, and kept, so a press or a slide costs solves only for the points it 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -104,10 +105,11 @@ BOUND_TOL = 1e-4
 def _project(f: np.ndarray, bound: np.ndarray) -> np.ndarray:
     """Each point's force [m, 3] (n, t1, t2) onto {f_n ≥ 0, |f_t| ≤ bound}."""
     out = f.copy()
-    out[:, 0] = np.maximum(f[:, 0], 0.0)
-    ft = np.linalg.norm(f[:, 1:], axis=1)
-    scale = np.where(ft > bound, bound / np.maximum(ft, 1e-300), 1.0)
-    out[:, 1:] *= scale[:, None]
+    np.maximum(out[:, 0], 0.0, out=out[:, 0])
+    ft = np.sqrt(f[:, 1] * f[:, 1] + f[:, 2] * f[:, 2])
+    over = ft > bound
+    if over.any():
+        out[over, 1:] *= (bound[over] / ft[over])[:, None]
     return out
 
 
@@ -216,7 +218,7 @@ def _fista(M, b, f0, bound, L, tol, iterations) -> np.ndarray:
         step = x_new - x
         if np.abs(step).max() * L < tol:
             return x_new
-        t_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
+        t_new = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
         if np.sum((y - x_new) * step) > 0:  # the momentum points uphill: restart
             y, t = x_new.copy(), 1.0
         else:

@@ -36,9 +36,10 @@ def _cube_contacts(base):
     return out
 
 
-@pytest.mark.parametrize("mass", [0.01, 0.5])
-def test_expert_lifts_and_holds_the_cube_still(mass):
-    env = _make(control_mode="pd_joint_pos", cube_mass=mass)
+@pytest.mark.parametrize("mass, pad_solver", [(0.01, "mpm"), (0.5, "mpm"), (0.5, "fem")])
+def test_expert_lifts_and_holds_the_cube_still(mass, pad_solver):
+    """(pad_solver="fem": the pads solved at equilibrium carry the cube the same way.)"""
+    env = _make(control_mode="pd_joint_pos", cube_mass=mass, pad_solver=pad_solver)
     try:
         obs, _ = env.reset(seed=0)
         base = env.unwrapped
