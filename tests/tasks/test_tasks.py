@@ -75,22 +75,30 @@ def test_state_obs_mode_flattens_tactile_into_the_vector():
         env.close()
 
 
+def _press_to_target(env, steps: int):
+    """PressCube's expert from seed 3 until success (at most ``steps``), the reported force the
+    index map's sum at every step; then the force within 15 % of the target, on the index pad
+    alone. Returns (obs, expert)."""
+    obs, _ = env.reset(seed=3)
+    expert = make_expert(env)
+    expert.reset()
+    for _ in range(steps):
+        obs, _, _, _, info = env.step(expert.act(obs))
+        assert torch.allclose(info["force"], obs["tactile"]["index"]["force"].sum(dim=(1, 2)), rtol=1e-5)
+        if info["success"].all():
+            break
+    assert info["success"].all(), info
+    target = env.unwrapped.target_force
+    assert (info["force"] - target).abs().item() < 0.15 * target.item()
+    for pad in ("thumb", "middle", "ring"):  # only the index pad touches the cube
+        assert obs["tactile"][pad]["force"].abs().sum() == 0
+    return obs, expert
+
+
 def test_press_force_is_the_tactile_force_sum_and_tracks_the_target():
     env = _make("GaussTac-PressCube-v1")
     try:
-        obs, _ = env.reset(seed=3)
-        expert = make_expert(env)
-        expert.reset()
-        for _ in range(30):
-            obs, _, _, _, info = env.step(expert.act(obs))
-            assert torch.allclose(info["force"], obs["tactile"]["index"]["force"].sum(dim=(1, 2)), rtol=1e-5)
-            if info["success"].all():
-                break
-        target = env.unwrapped.target_force
-        assert (info["force"] - target).abs().item() < 0.15 * target.item()
-        # only the index pad touches the cube
-        for pad in ("thumb", "middle", "ring"):
-            assert obs["tactile"][pad]["force"].abs().sum() == 0
+        _press_to_target(env, 30)
     finally:
         env.close()
 
@@ -102,18 +110,7 @@ def test_press_cube_with_pads_at_equilibrium():
     with pytest.warns(Warning, match="spans only"):
         env = _make("GaussTac-PressCube-v1", pad_solver="fem", mpm_dx=2e-3)
         try:
-            obs, _ = env.reset(seed=3)
-            expert = make_expert(env)
-            expert.reset()
-            for _ in range(40):
-                obs, _, _, _, info = env.step(expert.act(obs))
-                if info["success"].all():
-                    break
-            assert info["success"].all(), info
-            target = env.unwrapped.target_force
-            assert (info["force"] - target).abs().item() < 0.15 * target.item()
-            for pad in ("thumb", "middle", "ring"):
-                assert obs["tactile"][pad]["force"].abs().sum() == 0
+            obs, expert = _press_to_target(env, 40)
             state = env.unwrapped.get_state_dict()
             assert bool(state["gausstac"]["fem1_solved"].all())  # the index pad (pads: thumb, index, ...)
             action = expert.act(obs)
