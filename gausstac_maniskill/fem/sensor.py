@@ -29,7 +29,7 @@ from .contact import ContactResult
 from .hex import centre_state, voxel_body
 from .pad import collider_indenter, pad_body, pad_lattice
 
-__all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES"]
+__all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES", "forget_bodies"]
 
 #: Largest compliance [bytes] an :class:`EquilibriumPad` computes in full by default (the index
 #: pad at the default dx = 1 mm: 1994 surface points, 143 MB; at dx = 0.75 mm, 452 MB: solved
@@ -38,9 +38,15 @@ PRECOMPUTE_BYTES = 256 * 2 ** 20
 #: Bodies kept in this process (the most recently used), by pad geometry, material and model: a
 #: scene rebuilt at every reset (a task's) finds its pads' factors and compliances again instead
 #: of assembling them anew (3 s per pad at the default resolution). Each holds its factor
-#: (~0.5 GB at the default resolution) and compliance (143 MB) while kept.
-BODY_CACHE = 8
+#: (~0.5 GB at the default resolution) and compliance (143 MB) while kept: the four pads of a
+#: hand at the default resolution, about 3 GB. :func:`forget_bodies` lets them go.
+BODY_CACHE = 4
 _BODIES: OrderedDict = OrderedDict()
+
+
+def forget_bodies() -> None:
+    """Drop the bodies kept in this process (their memory returns once no pad uses them)."""
+    _BODIES.clear()
 
 
 def _body_key(pad, model: str) -> str:

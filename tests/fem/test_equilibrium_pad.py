@@ -95,6 +95,10 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     other.load_flat_state(flat)
     np.testing.assert_array_equal(press_other(-1e-3, 1e-3)[0], F_slid)
     assert other._fem[bp.INDEX].body is sim._fem[bp.INDEX].body  # kept in the process, not rebuilt
+    from gausstac_maniskill.fem.sensor import forget_bodies
+
+    forget_bodies()
+    assert _scene(friction=0.5)[0]._fem[bp.INDEX].body is not sim._fem[bp.INDEX].body
     flat_again = other.flat_state()  # (after a step: another state, the same shapes)
     assert {k: np.shape(v) for k, v in flat_again.items()} == {k: np.shape(v) for k, v in flat.items()}
     with pytest.raises(ConfigError, match="fem0_"):
