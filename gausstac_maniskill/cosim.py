@@ -512,9 +512,9 @@ class GaussTacSim:
         maps = tactile_maps(pad, self._binning[name], x, T, f, sigma)
         device = backend.torch_device()
         maps = {k: v.to(device) for k, v in maps.items()}
-        if fp.result is None:  # (the shapes and dtypes, once)
+        if fp.result is None:  # at rest: zeros (their shapes and dtypes kept for the next time)
             self._zero_maps[name] = {k: torch.zeros_like(v) for k, v in maps.items()}
-            return self._fem_maps(name)
+            maps = {k: v.clone() for k, v in self._zero_maps[name].items()}
         return maps
 
     def pad_contact_forces(self, pad: str) -> np.ndarray:
@@ -591,19 +591,18 @@ class GaussTacSim:
         and [P', 3, 3]. (The splat camera reads its particles on the device instead:
         :meth:`carry_rows`, :meth:`pad_carries`, :func:`gausstac_maniskill.mpm.gather.carried_frames`.)"""
         x, F = self.world.positions(), self.world.deformation_gradients()
+        rows = np.arange(len(x)) if index is None else np.asarray(index)
         if index is not None:
-            index = np.asarray(index)
-            x, F = x[index], F[index]
+            x, F = x[rows], F[rows]
         for name in self.pads:
+            if name in self._fem:  # from their solution, below
+                continue
             g = self.group(name)
-            # the group's rows: all of [start, stop), or those of ``index`` in it (ascending)
-            lo, hi = (g.start, g.stop) if index is None else np.searchsorted(index, (g.start, g.stop))
-            if hi > lo and name in self._fem:
-                rows = np.arange(g.count) if index is None else index[lo:hi] - g.start
-                xp, Fp = self.pad_particles(name)
-                x[lo:hi], F[lo:hi] = xp[rows], Fp[rows]
-            elif hi > lo:
+            lo, hi = np.searchsorted(rows, (g.start, g.stop))  # the group's rows among ``rows`` (ascending)
+            if hi > lo:
                 x[lo:hi], F[lo:hi] = self._carried(name, x[lo:hi], F[lo:hi])
+        where, frames = self.equilibrium_frames(rows)
+        x[where], F[where] = frames[:, :, 3], frames[:, :, :3]
         return x, F
 
     def equilibrium_frames(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

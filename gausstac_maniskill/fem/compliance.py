@@ -124,22 +124,19 @@ def _compute(body, workers: int | None, progress: bool) -> np.ndarray:
     bar = tqdm(total=S, desc=f"{body.name}: compliance at {S} surface points (once; cached)", unit="point",
                disable=not progress, leave=False)
     with bar:
-        if workers == 1:
-            out = np.empty((S, 3, S, 3), np.float32)
-            for chunk in chunks:
-                out[chunk] = _columns(body, chunk)
-                bar.update(len(chunk))
-        else:
+        out = None
+        if workers > 1:
             try:
                 out = _compute_in_processes(body, workers, bar)
             except (OSError, RuntimeError) as err:  # a worker could not start or died: one process does it all
                 warnings.warn(f"{body.name}: computing the compliance in {workers} worker processes failed ({err}); "
                               "computing it in this process instead", stacklevel=3)
                 bar.reset()
-                out = np.empty((S, 3, S, 3), np.float32)
-                for chunk in chunks:
-                    out[chunk] = _columns(body, chunk)
-                    bar.update(len(chunk))
+        if out is None:
+            out = np.empty((S, 3, S, 3), np.float32)
+            for chunk in chunks:
+                out[chunk] = _columns(body, chunk)
+                bar.update(len(chunk))
     flat = out.reshape(3 * S, 3 * S)
     flat += flat.T  # W is symmetric (Maxwell-Betti); the solves agree with that to rounding
     flat *= np.float32(0.5)
@@ -173,9 +170,12 @@ def _compute_in_processes(body, workers: int, bar) -> np.ndarray:
         # the workers import this package as this process found it (an uninstalled checkout on sys.path too)
         env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        # stderr to files, not pipes: a worker that writes much there would block on a full pipe
+        # that this process reads only at the end
+        logs = [open(os.path.join(tmp, f"worker{w}.err"), "w+") for w in range(workers)]
         procs = [subprocess.Popen([sys.executable, "-m", __name__, desc, rows, str(w), str(workers), str(CHUNK)], env=env,
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                 for w in range(workers)]
+                                  stdout=subprocess.PIPE, stderr=log, text=True)
+                 for w, log in enumerate(logs)]
         sel = selectors.DefaultSelector()
         for p in procs:
             sel.register(p.stdout, selectors.EVENT_READ)
@@ -188,8 +188,15 @@ def _compute_in_processes(body, workers: int, bar) -> np.ndarray:
                     open_pipes -= 1
                 elif line.strip().isdigit():
                     bar.update(int(line))
-        failed = [(p.wait(), p.stderr.read()) for p in procs]
-        failed = [(rc, err) for rc, err in failed if rc != 0]
+        codes = [p.wait() for p in procs]
+        for p in procs:
+            p.stdout.close()
+        errors = []
+        for log in logs:
+            log.seek(0)
+            errors.append(log.read())
+            log.close()
+        failed = [(rc, err) for rc, err in zip(codes, errors) if rc != 0]
         if failed:
             rc, err = failed[0]
             raise RuntimeError(f"a worker exited with status {rc}: "

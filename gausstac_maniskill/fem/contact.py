@@ -102,6 +102,11 @@ def tangent_bases(n: np.ndarray) -> np.ndarray:
 BOUND_TOL = 1e-4
 
 
+def _xyz_rows(points: np.ndarray) -> np.ndarray:
+    """[3m] the rows (point-major, 3 per point) of ``points`` [m] in a [3S] vector of point values."""
+    return (3 * np.asarray(points)[:, None] + np.arange(3)).ravel()
+
+
 def _project(f: np.ndarray, bound: np.ndarray) -> np.ndarray:
     """Each point's force [m, 3] (n, t1, t2) onto {f_n ≥ 0, |f_t| ≤ bound}."""
     out = f.copy()
@@ -179,7 +184,7 @@ def _solve_tresca(M, b, f, mu, tol, max_iterations, inner) -> tuple[np.ndarray, 
     loose = 1.0  # the first problem to tol: a loose start leaves the bound to settle on FISTA's noise
     for _ in range(max_iterations):
         idx = np.flatnonzero(active)
-        rows = (3 * idx[:, None] + np.arange(3)).ravel()
+        rows = _xyz_rows(idx)
         if len(idx):  # (none: a warm start whose points all came open; the joins below decide)
             f[idx] = _fista(M32[np.ix_(rows, rows)], b[rows], f[idx], bound[idx], L, tol * loose, inner)
         f[~active] = 0.0
@@ -419,7 +424,7 @@ class QuasiStaticBody:
         points = np.asarray(points, np.int64)
         m = len(points)
         if self._compliance is not None:
-            rows = (3 * points[:, None] + np.arange(3)).ravel()
+            rows = _xyz_rows(points)
             return self._compliance[np.ix_(rows, rows)].astype(np.float64).reshape(m, 3, m, 3)
         self._ensure_columns(points)
         return np.stack([self._columns[int(p)][points] for p in points], axis=2)
@@ -435,7 +440,7 @@ class QuasiStaticBody:
         points = np.asarray(points, np.int64)
         forces = np.asarray(forces, float).reshape(-1, 3)
         if self._compliance is not None:  # W is symmetric: the rows of the loaded points
-            rows = (3 * points[:, None] + np.arange(3)).ravel()
+            rows = _xyz_rows(points)
             return (forces.ravel().astype(np.float32) @ self._compliance[rows]).astype(np.float64).reshape(-1, 3)
         self._ensure_columns(points)
         u = np.zeros((self.num_points, 3))

@@ -220,22 +220,24 @@ class EquilibriumPad:
             raise ConfigError(f"EquilibriumPad({self.pad.name!r}).load_flat_state: the state holds "
                               f"{np.shape(state['force'])[0]} surface points and {np.shape(state['nodes'])[0]} "
                               f"nodes, this pad has {S} and {V} (another pad or resolution)")
+        def first(key):  # the one value of a [1] entry
+            return np.asarray(state[key]).ravel()[0]
+
         self.release()
-        h = int(np.asarray(state["holder"]).ravel()[0])
+        h = int(first("holder"))
         self.holder = None if h < 0 else list(holders)[h]
-        self._pose = np.array(state["pose"], np.float64) if bool(np.asarray(state["has_pose"]).ravel()[0]) else None
-        if not bool(np.asarray(state["solved"]).ravel()[0]):
+        self._pose = np.array(state["pose"], np.float64) if bool(first("has_pose")) else None
+        if not bool(first("solved")):
             return
-        flag = lambda k: bool(np.asarray(state[k]).ravel()[0])  # noqa: E731
         counts = np.asarray(state["counts"]).ravel()
         self.result = ContactResult(
             np.array(state["force"], np.float64), np.array(state["displacement"], np.float64),
             np.array(state["gap"], np.float64), int(counts[0]), int(counts[1]),
-            nodes=np.array(state["nodes"], np.float64) if flag("has_nodes") else None,
-            residual=float(np.asarray(state["residual"]).ravel()[0]),
+            nodes=np.array(state["nodes"], np.float64) if first("has_nodes") else None,
+            residual=float(first("residual")),
             state=np.array(state["contact_state"], np.int64),
-            anchors=np.array(state["anchors"], np.float64) if flag("has_result_pose") else None,
-            pose=np.array(state["result_pose"], np.float64) if flag("has_result_pose") else None)
+            anchors=np.array(state["anchors"], np.float64) if first("has_result_pose") else None,
+            pose=np.array(state["result_pose"], np.float64) if first("has_result_pose") else None)
 
     def state(self) -> dict:
         """A copy of what the next solve starts from (restore with :meth:`load_state`)."""
