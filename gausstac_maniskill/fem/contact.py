@@ -10,7 +10,7 @@ the collider (Signorini's conditions, linearised at the present surface):
 
 with φ the collider's signed distance at each point, n its outward normal there and λ the
 normal force. Frictionless, it is solved exactly (:func:`solve_lcp`); with Coulomb friction
-(an :class:`Indenter`) by Tresca iterations (:func:`solve_frictional`). A finite-strain body
+(an :class:`Indenter`) by semismooth Newton (:func:`solve_frictional`). A finite-strain body
 repeats that inside fixed-point iterations on K (:meth:`QuasiStaticBody.solve`). K is factored
 once; W's column for a point is computed by three solves the first time the point comes near
 a collider, and kept, so a press or a slide costs solves only for the points it reaches.
@@ -129,38 +129,149 @@ def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.n
     holds on the collider). Conditions: f_n = n·f ≥ 0, g ≥ 0, f_n g = 0; |f_t| ≤ μ f_n; a point
     that holds (|f_t| < μ f_n) does not slip; one that slips is pulled back along its slip.
 
-    Solved as a sequence of Tresca problems (the friction bound μ f_n of the last iterate held
-    fixed, Panagiotopoulos's iteration): each is the convex problem min ½fᵀWf + bᵀf over
-    {f_n ≥ 0, |f_t| ≤ bound}, whose optimality conditions are the ones above, solved by
-    accelerated projected gradients (Nesterov/FISTA with adaptive restart) to ``tol`` [m] in
-    the points' displacements, until no bound moves by more than :data:`BOUND_TOL` of the
-    largest. Raises :class:`SimulationError` if the bound does not settle.
+    Solved by a semismooth Newton method on Alart and Curnier's equations (:func:`_newton`),
+    to ``tol`` [m] in each point's displacement. Where Newton does not converge in
+    :data:`NEWTON_ITERATIONS`, by a sequence of Tresca problems instead (the friction bound
+    μ f_n of the last iterate held fixed, Panagiotopoulos's iteration; :func:`_solve_tresca`):
+    each is the convex problem min ½fᵀWf + bᵀf over {f_n ≥ 0, |f_t| ≤ bound}, solved by
+    accelerated projected gradients, until no bound moves by more than :data:`BOUND_TOL` of the
+    largest (first-order: slow on a large, stiff patch; at most ``max_iterations`` problems of
+    ``inner`` steps, else :class:`SimulationError`).
 
     The iteration starts from ``f0`` [m, 3] (forces in the frame of ``n``'s points, e.g. the
-    last outer iteration's) or, without one, from the frictionless solution. Points without a
-    normal force are left out of the dense problem while they stay open (a point with no force
-    needs only g ≥ 0, its bound μ f_n being 0); one that would penetrate joins. Exact: the
-    last Tresca problem is solved to ``tol`` with every point that would penetrate in it.
+    last outer iteration's) or, without one, from the frictionless solution.
 
     Returns (f [m, 3], state [m] int: 0 open, 1 stuck, 2 slipping).
     """
+    frame, M, b = _local_problem(W, n, gap0, slip0)
     m = len(gap0)
-    T = tangent_bases(n)
-    frame = np.concatenate([n[:, None, :], T], axis=1)  # [m, 3, 3]: rows n, t1, t2
-    # W in each point's (n, t1, t2) frame: frame_p W_pq frame_qᵀ, one side at a time
-    half = np.einsum("pai,piQ->paQ", frame, W.reshape(m, 3, 3 * m)).reshape(3 * m, m, 3)
-    M = np.einsum("Pqj,qbj->Pqb", half, frame).reshape(3 * m, 3 * m)
-    M = 0.5 * (M + M.T)
-    b = np.concatenate([gap0[:, None], slip0], axis=1).ravel()
     if f0 is None:
         f = np.zeros((m, 3))
         f[:, 0] = solve_lcp(M[0::3, 0::3], gap0)  # frictionless start
     else:
         f = np.einsum("pai,pi->pa", frame, np.asarray(f0, float).reshape(m, 3))
-    f, bound = _solve_tresca(M, b, f, mu, tol, max_iterations, inner)
-    ft = np.linalg.norm(f[:, 1:], axis=1)  # on the bound its last Tresca problem held: slipping
-    state = np.where(f[:, 0] <= 0, 0, np.where(ft >= bound * (1 - 1e-6), 2, 1))
+    solved = _newton(M, b, f, mu, tol, NEWTON_ITERATIONS) if m else None
+    if solved is not None:
+        f, state = solved
+    else:
+        f, bound = _solve_tresca(M, b, f, mu, tol, max_iterations, inner)
+        ft = np.linalg.norm(f[:, 1:], axis=1)  # on the bound its last Tresca problem held: slipping
+        state = np.where(f[:, 0] <= 0, 0, np.where(ft >= bound * (1 - 1e-6), 2, 1))
     return np.einsum("pai,pa->pi", frame, f), state
+
+
+def _local_problem(W, n, gap0, slip0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The contact problem in each point's (n, t1, t2) frame: (frame [m, 3, 3] (rows n, t1,
+    t2), M [3m, 3m] = frame_p W_pq frame_qᵀ (symmetrised), b [3m] = (gap0, slip0) per point)."""
+    m = len(gap0)
+    frame = np.concatenate([n[:, None, :], tangent_bases(n)], axis=1)
+    half = np.matmul(frame, W.reshape(m, 3, 3 * m))  # [m, 3, 3m]: the rows turned, one point at a time
+    M = np.matmul(half.reshape(3 * m, m, 3).transpose(1, 0, 2), frame.transpose(0, 2, 1))  # then the columns
+    M = M.transpose(1, 0, 2).reshape(3 * m, 3 * m)
+    M = 0.5 * (M + M.T)
+    return frame, M, np.concatenate([gap0[:, None], slip0], axis=1).ravel()
+
+
+#: Newton iterations before the frictional solve turns to Tresca iterations (a plate over the
+#: whole index pad takes 10–12 from the last step's forces).
+NEWTON_ITERATIONS = 40
+
+
+def _coulomb_projection(M, b, f, mu, r):
+    """Alart and Curnier's map at ``f`` [m, 3] (rows n, t1, t2): z = f − r (M f + b) (``r``
+    [m], per point) and its projection P(z): P_n = max(0, z_n), P_t = z_t clipped to the disc
+    of radius μ P_n. Returns (P, z, closed (z_n > 0), slipping (closed, |z_t| > μ z_n),
+    |z_t|) [m]."""
+    z = f - r[:, None] * (M @ f.ravel() + b).reshape(-1, 3)
+    closed = z[:, 0] > 0
+    bound = mu * np.maximum(z[:, 0], 0.0)
+    zt = np.sqrt(z[:, 1] * z[:, 1] + z[:, 2] * z[:, 2])
+    slipping = closed & (zt > bound)
+    P = np.zeros_like(z)
+    P[:, 0] = np.maximum(z[:, 0], 0.0)
+    P[closed, 1:] = z[closed, 1:]
+    P[slipping, 1:] *= (bound[slipping] / zt[slipping])[:, None]
+    return P, z, closed, slipping, zt
+
+
+def _newton(M, b, f, mu, tol, iterations) -> tuple[np.ndarray, np.ndarray] | None:
+    """Coulomb friction on the points of ``M`` [3m, 3m] (rows n, t1, t2 per point), ``b``
+    [3m], from ``f`` [m, 3]: a semismooth Newton method on the equations
+
+        F(f) = f − P(f − r (M f + b)) = 0
+
+    (Alart & Curnier 1991, Comput. Methods Appl. Mech. Eng. 92:353; :func:`_coulomb_projection`;
+    r_p = 1 / M_pp,nn, the point's own normal compliance), whose roots are exactly the contact
+    conditions of :func:`solve_frictional` (F_n = 0 is λ_n g = 0 with both ≥ 0, F_t = 0 is
+    stick or slip against the slip on the cone). P is piecewise smooth, so Newton takes one
+    element of its generalized Jacobian per point: 0 for an open point (its force is set to 0),
+    the identity for a stuck one, and for a slipping one the derivative of z_t ↦ μ z_n z_t/|z_t|.
+    The linear system is then on the closed points only, [3k, 3k], factored in float32 (an
+    inexact Newton step; the residual is float64). Each step is cut by halves until
+    Σ |F_p / r_p|² decreases.
+
+    Converged when every point's |F_p| / r_p < ``tol`` [m] at an iterate and at its projection
+    P (each point's gap and stuck slip are then within ``tol``). Returns (P: f_n ≥ 0 and |f_t| ≤
+    μ f_n exactly [m, 3], state [m]: 0 open, 1 stuck, 2 slipping), or None where
+    it does not converge in ``iterations`` or a step cannot decrease the residual (then
+    :func:`_solve_tresca` takes over)."""
+    import warnings
+
+    from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
+
+    r = 1.0 / np.diag(M)[0::3]
+
+    def largest(f, P):  # the largest point residual |F_p| / r_p [m]
+        return float(np.sqrt(np.max(np.sum(((f - P) / r[:, None]) ** 2, axis=1))))
+
+    P, z, closed, slipping, zt = _coulomb_projection(M, b, f, mu, r)
+    merit = float(np.sum(((f - P) / r[:, None]) ** 2))
+    for _ in range(iterations + 1):
+        if largest(f, P) < tol:  # converged: the answer is P, so P must pass too
+            f, (P, z, closed, slipping, zt) = P, _coulomb_projection(M, b, P, mu, r)
+            merit = float(np.sum(((f - P) / r[:, None]) ** 2))
+            if largest(f, P) < tol:
+                return f, np.where(closed, np.where(slipping, 2, 1), 0)
+        c = np.flatnonzero(closed)
+        o = np.flatnonzero(~closed & np.any(f != 0.0, axis=1))  # open points that carry a force
+        k = len(c)
+        s = np.flatnonzero(slipping[c])  # slipping points, among the closed ones
+        zh = z[c[s], 1:] / zt[c[s], None]
+        D = np.zeros((len(s), 3, 3))  # dP/dz of a slipping point (a stuck one's is the identity)
+        D[:, 0, 0] = 1.0
+        D[:, 1:, 1:] = (mu * z[c[s], 0] / zt[c[s]])[:, None, None] * (np.eye(2) - zh[:, :, None] * zh[:, None, :])
+        D[:, 1:, 0] = mu * zh
+        rows = _xyz_rows(c)
+        A = M[np.ix_(rows, np.concatenate([rows, _xyz_rows(o)]))] * np.repeat(r[c], 3)[:, None]  # r M
+        Av = A.reshape(k, 3, -1)
+        Av[s] = np.matmul(D, Av[s])  # D r M
+        J = A[:, :3 * k]  # dF/df = I − D (I − r M) on the closed points
+        Jv = J.reshape(k, 3, k, 3)
+        Jv[s, :, s, :] += np.eye(3) - D
+        delta = np.where(closed[:, None], 0.0, -f)  # an open point's force goes to 0
+        rhs = (P - f)[c].ravel() + A[:, 3 * k:] @ f[o].ravel()
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", LinAlgWarning)  # a singular step: the check below
+            try:
+                delta[c] = lu_solve(lu_factor(J.astype(np.float32), check_finite=False),
+                                    rhs.astype(np.float32), check_finite=False).reshape(k, 3)
+            except (ValueError, np.linalg.LinAlgError):
+                return None
+        if not np.isfinite(delta).all():
+            return None
+        alpha = 1.0
+        for _ in range(12):  # cut the step until the residual decreases
+            trial = f + alpha * delta
+            out = _coulomb_projection(M, b, trial, mu, r)
+            trial_merit = float(np.sum(((trial - out[0]) / r[:, None]) ** 2))
+            if trial_merit < merit:
+                break
+            alpha *= 0.5
+        else:
+            return None
+        f, merit = trial, trial_merit
+        P, z, closed, slipping, zt = out
+    return None
 
 
 def _solve_tresca(M, b, f, mu, tol, max_iterations, inner) -> tuple[np.ndarray, np.ndarray]:

@@ -140,9 +140,14 @@ def _coulomb_violations(W, n, gap0, slip0, mu, f, state):
                 stuck_slip=np.linalg.norm(slip[state == 1], axis=1).max(initial=0.0), cos=cos.max(initial=-1.0))
 
 
-def test_frictional_solver_meets_every_coulomb_condition():
-    from gausstac_maniskill.fem import solve_frictional
+@pytest.mark.parametrize("method", ["newton", "tresca"])
+def test_frictional_solver_meets_every_coulomb_condition(method, monkeypatch):
+    """Both solvers: semismooth Newton (the default) and the Tresca iterations it falls back on."""
+    from gausstac_maniskill.fem import contact, solve_frictional
     from gausstac_maniskill.fem.contact import BOUND_TOL
+
+    if method == "tresca":
+        monkeypatch.setattr(contact, "NEWTON_ITERATIONS", 0)
 
     rng = np.random.default_rng(1)
     m = 12
@@ -156,8 +161,10 @@ def test_frictional_solver_meets_every_coulomb_condition():
         f, state = solve_frictional(W, n, gap0, slip0, mu, tol=1e-10)
         v = _coulomb_violations(W, n, gap0, slip0, mu, f, state)
         assert v["penetration"] < 1e-9 and v["open_gap"] < 1e-9 and v["pull"] == 0.0
-        # the cone holds to the bound's settling tolerance (BOUND_TOL of the largest bound)
-        assert v["cone"] <= BOUND_TOL * mu * np.abs(f).max() and v["stuck_slip"] < 1e-8
+        # the cone holds exactly for Newton (its forces are projected on it), to the bound's
+        # settling tolerance (BOUND_TOL of the largest bound) for the Tresca iterations
+        cone = 1e-12 if method == "newton" else BOUND_TOL
+        assert v["cone"] <= cone * mu * np.abs(f).max() and v["stuck_slip"] < 1e-8
         assert v["cos"] < -0.999  # a slipping point is pulled back along its slip
         assert (state == 2).any() and (state == 1).any()
         # a warm start with no point loaded (the last step's points all came open) finds the same contact
@@ -196,3 +203,28 @@ def test_friction_stiffens_a_confined_layer_and_a_slide_drags_at_mu():
     assert (slid.state[np.abs(slid.force).sum(1) > 0] == 2).all()
     assert ft == pytest.approx(0.3 * fn, rel=1e-3)
     assert slid.total_force[0] > 0  # the plate drags the layer along +x
+
+
+def test_newton_agrees_with_tresca_iterations_on_a_pressed_layer(monkeypatch):
+    """The plate pressed into a bonded layer with μ = 0.5 (stuck centre, slipping rim): the
+    semismooth Newton solve converges without falling back, also from the last step's forces,
+    and its forces and states are the Tresca iterations' (two independent algorithms for the
+    same conditions) to their tolerances (1e-7 m in the points' motion)."""
+    from gausstac_maniskill.fem import contact
+
+    h = 4e-3
+    results = {}
+    calls = []
+    tresca = contact._solve_tresca
+    monkeypatch.setattr(contact, "_solve_tresca", lambda *a, **k: calls.append(1) or tresca(*a, **k))
+    for method, iterations in (("newton", contact.NEWTON_ITERATIONS), ("tresca", 0)):
+        monkeypatch.setattr(contact, "NEWTON_ITERATIONS", iterations)
+        results[method] = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.48).solve(_plate_indenter(h - 0.2e-3, 0.5))
+        assert len(calls) == (0 if method == "newton" else 1)
+    new, ref = results["newton"], results["tresca"]
+    assert {1, 2} <= set(new.state.tolist()) and (new.state == ref.state).all()
+    np.testing.assert_allclose(new.total_force, ref.total_force, rtol=0, atol=1e-3 * np.abs(ref.total_force).max())
+    np.testing.assert_allclose(new.force, ref.force, rtol=0, atol=1e-2 * np.abs(ref.force).max())
+    monkeypatch.setattr(contact, "NEWTON_ITERATIONS", 40)
+    deeper = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.48).solve(_plate_indenter(h - 0.4e-3, 0.5), warm=new)
+    assert len(calls) == 1 and deeper.total_force[2] < 1.5 * new.total_force[2]
