@@ -215,10 +215,6 @@ def _newton(M, b, f, mu, tol, iterations) -> tuple[np.ndarray, np.ndarray] | Non
     μ f_n exactly [m, 3], state [m]: 0 open, 1 stuck, 2 slipping), or None where
     it does not converge in ``iterations`` or a step cannot decrease the residual (then
     :func:`_solve_tresca` takes over)."""
-    import warnings
-
-    from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
-
     r = 1.0 / np.diag(M)[0::3]
 
     def largest(f, P):  # the largest point residual |F_p| / r_p [m]
@@ -226,39 +222,19 @@ def _newton(M, b, f, mu, tol, iterations) -> tuple[np.ndarray, np.ndarray] | Non
 
     P, z, closed, slipping, zt = _coulomb_projection(M, b, f, mu, r)
     merit = float(np.sum(((f - P) / r[:, None]) ** 2))
-    for _ in range(iterations + 1):
+    for step in range(iterations + 1):
         if largest(f, P) < tol:  # converged: the answer is P, so P must pass too
             f, (P, z, closed, slipping, zt) = P, _coulomb_projection(M, b, P, mu, r)
             merit = float(np.sum(((f - P) / r[:, None]) ** 2))
             if largest(f, P) < tol:
                 return f, np.where(closed, np.where(slipping, 2, 1), 0)
-        c = np.flatnonzero(closed)
-        o = np.flatnonzero(~closed & np.any(f != 0.0, axis=1))  # open points that carry a force
-        k = len(c)
-        s = np.flatnonzero(slipping[c])  # slipping points, among the closed ones
-        zh = z[c[s], 1:] / zt[c[s], None]
-        D = np.zeros((len(s), 3, 3))  # dP/dz of a slipping point (a stuck one's is the identity)
-        D[:, 0, 0] = 1.0
-        D[:, 1:, 1:] = (mu * z[c[s], 0] / zt[c[s]])[:, None, None] * (np.eye(2) - zh[:, :, None] * zh[:, None, :])
-        D[:, 1:, 0] = mu * zh
-        rows = _xyz_rows(c)
-        A = M[np.ix_(rows, np.concatenate([rows, _xyz_rows(o)]))] * np.repeat(r[c], 3)[:, None]  # r M
-        Av = A.reshape(k, 3, -1)
-        Av[s] = np.matmul(D, Av[s])  # D r M
-        J = A[:, :3 * k]  # dF/df = I − D (I − r M) on the closed points
-        Jv = J.reshape(k, 3, k, 3)
-        Jv[s, :, s, :] += np.eye(3) - D
-        delta = np.where(closed[:, None], 0.0, -f)  # an open point's force goes to 0
-        rhs = (P - f)[c].ravel() + A[:, 3 * k:] @ f[o].ravel()
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", LinAlgWarning)  # a singular step: the check below
-            try:
-                delta[c] = lu_solve(lu_factor(J.astype(np.float32), check_finite=False),
-                                    rhs.astype(np.float32), check_finite=False).reshape(k, 3)
-            except (ValueError, np.linalg.LinAlgError):
-                return None
-        if not np.isfinite(delta).all():
+        if step == iterations:
             return None
+        delta = np.where(closed[:, None], 0.0, -f)  # an open point's force goes to 0
+        if closed.any():  # the closed points' step: one linear system
+            delta = _newton_step(M, f, P, z, closed, slipping, zt, mu, r, delta)
+            if delta is None:
+                return None
         alpha = 1.0
         for _ in range(12):  # cut the step until the residual decreases
             trial = f + alpha * delta
@@ -272,6 +248,41 @@ def _newton(M, b, f, mu, tol, iterations) -> tuple[np.ndarray, np.ndarray] | Non
         f, merit = trial, trial_merit
         P, z, closed, slipping, zt = out
     return None
+
+
+def _newton_step(M, f, P, z, closed, slipping, zt, mu, r, delta):
+    """The Newton step of :func:`_newton` on its closed points (``delta`` [m, 3] holds the open
+    points' already): solves dF/df Δ = −F there. Returns ``delta``, or None where the step is
+    singular."""
+    import warnings
+
+    from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
+
+    c = np.flatnonzero(closed)
+    o = np.flatnonzero(~closed & np.any(f != 0.0, axis=1))  # open points that carry a force
+    k = len(c)
+    s = np.flatnonzero(slipping[c])  # slipping points, among the closed ones
+    zh = z[c[s], 1:] / zt[c[s], None]
+    D = np.zeros((len(s), 3, 3))  # dP/dz of a slipping point (a stuck one's is the identity)
+    D[:, 0, 0] = 1.0
+    D[:, 1:, 1:] = (mu * z[c[s], 0] / zt[c[s]])[:, None, None] * (np.eye(2) - zh[:, :, None] * zh[:, None, :])
+    D[:, 1:, 0] = mu * zh
+    rows = _xyz_rows(c)
+    A = M[np.ix_(rows, np.concatenate([rows, _xyz_rows(o)]))] * np.repeat(r[c], 3)[:, None]  # r M
+    Av = A.reshape(k, 3, -1)
+    Av[s] = np.matmul(D, Av[s])  # D r M
+    J = A[:, :3 * k]  # dF/df = I − D (I − r M) on the closed points
+    Jv = J.reshape(k, 3, k, 3)
+    Jv[s, :, s, :] += np.eye(3) - D
+    rhs = (P - f)[c].ravel() + A[:, 3 * k:] @ f[o].ravel()  # −F_c − (dF_c/df_o) Δ_o, Δ_o = −f_o
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", LinAlgWarning)  # a singular step: the check below
+        try:
+            delta[c] = lu_solve(lu_factor(J.astype(np.float32), check_finite=False),
+                                rhs.astype(np.float32), check_finite=False).reshape(k, 3)
+        except (ValueError, np.linalg.LinAlgError):
+            return None
+    return delta if np.isfinite(delta).all() else None
 
 
 def _solve_tresca(M, b, f, mu, tol, max_iterations, inner) -> tuple[np.ndarray, np.ndarray]:

@@ -171,8 +171,10 @@ def test_frictional_solver_meets_every_coulomb_condition(method, monkeypatch):
         f_warm, state_warm = solve_frictional(W, n, gap0, slip0, mu, tol=1e-10, f0=np.zeros((m, 3)))
         np.testing.assert_allclose(f_warm, f, atol=1e-6 * np.abs(f).max())
         assert (state_warm == state).all()
-    f, state = solve_frictional(W, n, np.abs(gap0) + 1e-6, slip0, 0.5, tol=1e-10, f0=np.zeros((m, 3)))
-    assert not f.any() and not state.any()  # nothing touches
+    for f0 in (np.zeros((m, 3)), f):  # nothing touches, from rest or from the last contact (its forces
+        # all come open at once: GaussTac-Touch-v1 under random actions crashed there once)
+        f_open, state = solve_frictional(W, n, np.abs(gap0) + 1e-6, slip0, 0.5, tol=1e-10, f0=f0)
+        assert not f_open.any() and not state.any()
 
 
 def _plate_indenter(z, mu, x=0.0):
