@@ -253,7 +253,8 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
             step(z, SLIDE * (k + 1) / protocol.slide)
         phases.append(hold("slide", d, z, SLIDE))
         sim.load_state_dict(pressed)
-    return dict(dx=dx, indenter=indenter, mass_scaling=sim.settings.mass_scaling, particles=pad.num_particles,
+    return dict(dx=dx, indenter=indenter, pad_solver=pad_solver, spacing=pad.spacing,
+                mass_scaling=sim.settings.mass_scaling, particles=pad.num_particles,
                 soft=int((~pad.kinematic).sum()), patch_radius=sim.settings.patch_radius, cfl=sim.settings.cfl,
                 active=float(np.mean(active)),
                 substeps=float(np.mean(subs)), step_ms=1e3 * float(np.mean(walls)), build_s=build_s,
@@ -313,12 +314,20 @@ def _pct(x) -> str:
 def format_tables(cases: list[dict], ana: dict, default_dx: float) -> str:
     """Markdown tables: runs, per-phase measurements, Richardson, verdict."""
     mm = lambda v: f"{v * 1e3:g}"  # noqa: E731
-    out = ["Runs (MPM wall time per 50 ms control step, after the JIT step)", "",
-           "| indenter | dx [mm] | particles (soft) | substeps / step | MPM wall / step [ms] | build [s] |",
-           "|---|---|---|---|---|---|"]
-    for c in cases:
-        out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
-                   f"{c['particles']} ({c['soft']}) | {c['substeps']:.0f} | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
+    if all(c.get("pad_solver") == "fem" for c in cases):
+        out = ["Runs (wall time of the equilibrium solve per 50 ms control step, after the first step)", "",
+               "| indenter | dx [mm] | elements [mm] | particles (elements) | solve wall / step [ms] | build [s] |",
+               "|---|---|---|---|---|---|"]
+        for c in cases:
+            out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
+                       f"{mm(c['spacing'])} | {c['particles']} ({c['soft']}) | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
+    else:
+        out = ["Runs (MPM wall time per 50 ms control step, after the JIT step)", "",
+               "| indenter | dx [mm] | particles (soft) | substeps / step | MPM wall / step [ms] | build [s] |",
+               "|---|---|---|---|---|---|"]
+        for c in cases:
+            out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
+                       f"{c['particles']} ({c['soft']}) | {c['substeps']:.0f} | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
     out += ["", "Per phase (hold-step means; Fn, Ft: reaction on the indenter in the sensor frame; Fn spread = "
             "(max−min)/mean over the hold; area: taxels with force > 1 mN | particles in contact, projected; "
             "L2: relative to the finest dx)", "",
@@ -423,7 +432,8 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
             bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}, patch {pr}, cfl {cfl}")
             c = run_case(dx, indenter, [depth], protocol=protocol, bar=bar, mass_scaling=ms, pad_surface=pad_surface,
                          patch_radius=pr, cfl=cfl, pad_solver=pad_solver, fem_model=fem_model)
-            runs.append(dict(dx=dx, mass_scaling=ms, patch_radius=pr, cfl=c.get("cfl", cfl), active=c["active"],
+            runs.append(dict(dx=dx, pad_solver=pad_solver, spacing=c["spacing"], mass_scaling=ms, patch_radius=pr,
+                             cfl=c.get("cfl", cfl), active=c["active"],
                              particles=c["particles"],
                              substeps=c["substeps"],
                              step_ms=c["step_ms"], held_ms=c["phases"][0]["wall_end"],
@@ -449,15 +459,27 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
 
 
 def format_curve(curve: dict, indenter: str, depth: float) -> str:
-    """Markdown table of :func:`speed_curve`, cheapest first."""
+    """Markdown table of :func:`speed_curve`, cheapest first (the MPM's columns, or the pad at
+    equilibrium's: no pseudo-mass, Courant number, patch or substeps)."""
     out = [f"Speed against error: index pad, {indenter} pressed {depth * 1e3:g} mm, held normal force vs "
-           f"reference {curve['reference']:.4f} N ({curve['reference_from']})", "",
-           "| dx [mm] | cells in the 4 mm layer | pad mass scaling | Courant number | patch radius [mm] | particles | "
-           "simulated (held) | substeps / step | "
-           "MPM wall / 50 ms step [ms] | second half of the hold: substeps, ms / step | Fn [N] | "
-           "Fn spread over hold | error | Fn from pad stress [N] | stress / contact | pressure map × area / contact |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           f"reference {curve['reference']:.4f} N ({curve['reference_from']})", ""]
+    fem = all(r.get("pad_solver") == "fem" for r in curve["runs"])
+    if fem:
+        out += ["| dx [mm] | elements [mm] | elements in the 4 mm layer | particles | solve wall / 50 ms step [ms] | "
+                "second half of the hold: ms / step | Fn [N] | error | pressure map × area / contact |",
+                "|---|---|---|---|---|---|---|---|---|"]
+    else:
+        out += ["| dx [mm] | cells in the 4 mm layer | pad mass scaling | Courant number | patch radius [mm] | particles | "
+                "simulated (held) | substeps / step | "
+                "MPM wall / 50 ms step [ms] | second half of the hold: substeps, ms / step | Fn [N] | "
+                "Fn spread over hold | error | Fn from pad stress [N] | stress / contact | pressure map × area / contact |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(curve["runs"], key=lambda r: r["step_ms"]):
+        if fem:  # (the stress reading equals the contact force by construction here: not shown)
+            out.append(f"| {r['dx'] * 1e3:g} | {r['spacing'] * 1e3:g} | {4e-3 / r['spacing']:.0f} | {r['particles']} | "
+                       f"{r['step_ms']:.0f} | {r['held_ms']:.0f} | {r['Fn']:.4f} | {_pct(r['err'])} | "
+                       f"{_pct(r['F_pressure'] / r['Fn'] - 1)} |")
+            continue
         patch = "off" if r["patch_radius"] is None else f"{r['patch_radius'] * 1e3:g}"
         out.append(f"| {r['dx'] * 1e3:g} | {4e-3 / r['dx']:.1f} | {r['mass_scaling']:g} | {r['cfl']:g} | {patch} | "
                    f"{r['particles']} | "

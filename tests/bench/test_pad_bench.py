@@ -69,6 +69,7 @@ def _fake_case(fn):
     """run_case stand-in: Fn = fn(dx, mass_scaling); guards speed_curve's bookkeeping, not physics."""
     def run_case(dx, indenter, depths, protocol=None, bar=None, mass_scaling=None, **_):
         return dict(particles=int(1e-6 / dx ** 3), active=0.5e-6 / dx ** 3, cfl=0.4, substeps=10.0, step_ms=1e-3 / dx,
+                    spacing=0.5 * dx,
                     phases=[dict(Fn=0.5 * fn(dx, mass_scaling), Fn_end=fn(dx, mass_scaling), F_spread=0.0,
                                  F_stress=0.5 * fn(dx, mass_scaling), F_stress_end=0.95 * fn(dx, mass_scaling),
                                  F_pressure=0.5 * fn(dx, mass_scaling), F_pressure_end=0.9 * fn(dx, mass_scaling),
@@ -89,6 +90,9 @@ def test_speed_curve_reference_and_errors(monkeypatch):
     assert "| 6 |" in bench.format_curve(curve, "sphere", 1e-3)
     table = bench.format_curve(curve, "sphere", 1e-3)
     assert table.count("\n| ") == 1 + len(pts) and "-5.0%" in table  # header + one row per point
+    # the pad at equilibrium: its own columns (elements), none of the MPM's (pseudo-mass, substeps)
+    fem = bench.format_curve(bench.speed_curve(pts[:3], progress=False, pad_solver="fem"), "sphere", 1e-3)
+    assert "| 1 | 0.5 | 8 |" in fem and "mass scaling" not in fem and "substeps" not in fem
     # no usable order (not monotone): the finest run is the reference
     monkeypatch.setattr(bench, "run_case", _fake_case(lambda dx, ms: {2e-3: 1.0, 1e-3: 1.3, 0.5e-3: 1.2}[dx]))
     curve = bench.speed_curve(pts[:3], progress=False)
