@@ -77,7 +77,8 @@ class GaussTacSim:
             in contact with rigid and soft objects. ``"fem"``: each awake pad is solved at
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
             one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
-            the nearest rigid object only; soft objects are refused. The splat camera draws
+            the rigid objects within reach (each surface point meets the nearest); soft objects
+            are refused. The splat camera draws
             these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)
             every env solves its own, with one body per pad.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
@@ -111,7 +112,6 @@ class GaussTacSim:
                               "(the equilibrium pads are touched on the link mesh)")
         self.pad_solver = pad_solver
         self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
-        self._warned: set[str] = set()
         self._binning: dict[str, TaxelBinning] = {}
         self._zero_maps: dict[str, dict] = {}  # equilibrium pad -> its maps at rest (zeros), by shape
         self.pad_solve_time = 0.0  # wall time [s] of the last step's equilibrium solves (pad_solver="fem")
@@ -214,8 +214,8 @@ class GaussTacSim:
         f, tau = self.world.collider_wrench(self._objects[name])
         origin = self.world.colliders[self._objects[name]].pose[:3, 3]
         for pad, fp in self._fem.items():
-            if fp.holder == name:
-                x, fc = fp.contact_points(self._link_pose[fp.pad.spec.link])
+            if name in fp.holders:
+                x, fc = fp.contact_points(self._link_pose[fp.pad.spec.link], name)
                 f, tau = f - fc.sum(0), tau - np.cross(x - origin, fc).sum(0)
         return f, tau
 
@@ -236,9 +236,10 @@ class GaussTacSim:
             if fp.pad.spec.link != link or not fp.touching:
                 continue
             T = self._link_pose[link]
-            x, fc = fp.contact_points(T)
-            _add_contact(out, fp.holder,
-                         np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0), [fp.indentation()]]))
+            for obj in fp.holders:
+                x, fc = fp.contact_points(T, obj)
+                _add_contact(out, obj, np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0),
+                                                       [fp.indentation(obj)]]))
         return out
 
     def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:
@@ -308,9 +309,10 @@ class GaussTacSim:
             fp.body  # noqa: B018 (built on first access)
 
     def _solve_pads(self) -> None:
-        """Each awake equilibrium pad against the rigid object nearest its surface points (those
-        within one element of it); a pad with none within reach is at rest. With two objects
-        within reach, only the nearer is solved, and a warning says so (once per pad)."""
+        """Each awake equilibrium pad against the rigid objects within reach of its surface
+        points (one element): each point meets the nearest of them
+        (:class:`~gausstac_maniskill.fem.contact.Indenters`). A pad with none within reach is
+        at rest."""
         from .mpm.colliders import signed_distance
 
         t0 = time.perf_counter()
@@ -321,19 +323,12 @@ class GaussTacSim:
             body = fp.body
             local = body.points if fp.result is None else body.points + fp.result.displacement
             pts = local @ T[:3, :3].T + T[:3, 3]
-            near = sorted((float(signed_distance(self.world.colliders[i], pts)[0].min()), obj)
-                          for obj, i in self._objects.items())
-            near = [(phi, obj) for phi, obj in near if phi < body.body.size]
-            if not near:
+            near = {obj: self.world.colliders[i] for obj, i in sorted(self._objects.items())
+                    if float(signed_distance(self.world.colliders[i], pts)[0].min()) < body.body.size}
+            if near:
+                fp.solve(near, T)
+            else:
                 fp.release()
-                continue
-            if len(near) > 1 and name not in self._warned:
-                self._warned.add(name)
-                warnings.warn(f"pad {name!r} (pad_solver='fem') is within reach of {[o for _, o in near]}; "
-                              f"only the nearest, {near[0][1]!r}, is solved (one object per pad and step)",
-                              stacklevel=3)
-            obj = near[0][1]
-            fp.solve(self.world.colliders[self._objects[obj]], T, key=obj)
         self.pad_solve_time = time.perf_counter() - t0
 
     def _update_sleep(self) -> None:

@@ -7,14 +7,14 @@ shape never changes, so its stiffness matrix is assembled and factored once:
 
 * :mod:`.hex` — trilinear hexahedra on the pad's particle lattice (one voxel per particle),
   selective reduced integration against volumetric locking, assembly and interpolation.
-* :mod:`.contact` — contact of the body's surface points with a rigid collider (frictionless:
-  a linear complementarity problem; with Coulomb friction: Tresca iterations of a convex
-  problem) on the points near it, with the body's compliance at those points computed once
-  per point and kept.
+* :mod:`.contact` — contact of the body's surface points with rigid colliders (frictionless:
+  a linear complementarity problem; with Coulomb friction: semismooth Newton on Alart and
+  Curnier's equations) on the points near them, with the body's compliance at those points
+  computed once and kept.
 """
-from .contact import ContactResult, Indenter, QuasiStaticBody, solve_frictional, solve_lcp
+from .contact import ContactResult, Indenter, Indenters, QuasiStaticBody, solve_frictional, solve_lcp
 from .hex import VoxelBody, element_stiffness, stiffness, voxel_body
 from .pad import collider_indenter, layer_body, pad_body
 
 __all__ = ["VoxelBody", "element_stiffness", "stiffness", "voxel_body", "QuasiStaticBody", "ContactResult",
-           "solve_lcp", "solve_frictional", "Indenter", "pad_body", "layer_body", "collider_indenter"]
+           "solve_lcp", "solve_frictional", "Indenter", "Indenters", "pad_body", "layer_body", "collider_indenter"]

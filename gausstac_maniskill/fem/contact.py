@@ -26,7 +26,8 @@ import numpy as np
 from ..errors import ConfigError, SimulationError
 from .hex import VoxelBody, dissection_order, neo_hookean_forces, stiffness, trilinear
 
-__all__ = ["QuasiStaticBody", "ContactResult", "solve_lcp", "solve_frictional", "tangent_bases"]
+__all__ = ["QuasiStaticBody", "ContactResult", "Indenter", "Indenters", "solve_lcp", "solve_frictional",
+           "tangent_bases"]
 
 _BLAS = None
 
@@ -118,7 +119,7 @@ def _project(f: np.ndarray, bound: np.ndarray) -> np.ndarray:
     return out
 
 
-def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.ndarray, mu: float,
+def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.ndarray, mu,
                      tol: float, max_iterations: int = 50, inner: int = 4000,
                      f0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Signorini contact with Coulomb friction on m points of an elastic body, quasi-static.
@@ -126,8 +127,9 @@ def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.n
     Unknowns: the force f_p [3] on each point. Its displacement is W f (``W`` [m, 3, m, 3], the
     compliance among the points); its gap g = gap0 + n·(W f) and its slip s = slip0 + Tᵀ(W f)
     (T: :func:`tangent_bases` of ``n``; ``slip0`` [m, 2] its tangential offset from where it
-    holds on the collider). Conditions: f_n = n·f ≥ 0, g ≥ 0, f_n g = 0; |f_t| ≤ μ f_n; a point
-    that holds (|f_t| < μ f_n) does not slip; one that slips is pulled back along its slip.
+    holds on the collider; ``mu``: μ, one value or [m]). Conditions: f_n = n·f ≥ 0, g ≥ 0,
+    f_n g = 0; |f_t| ≤ μ f_n; a point that holds (|f_t| < μ f_n) does not slip; one that slips
+    is pulled back along its slip.
 
     Solved by a semismooth Newton method on Alart and Curnier's equations (:func:`_newton`),
     to ``tol`` [m] in each point's displacement. Where Newton does not converge in
@@ -145,6 +147,7 @@ def solve_frictional(W: np.ndarray, n: np.ndarray, gap0: np.ndarray, slip0: np.n
     """
     frame, M, b = _local_problem(W, n, gap0, slip0)
     m = len(gap0)
+    mu = np.broadcast_to(np.asarray(mu, float), (m,))
     if f0 is None:
         f = np.zeros((m, 3))
         f[:, 0] = solve_lcp(M[0::3, 0::3], gap0)  # frictionless start
@@ -265,8 +268,9 @@ def _newton_step(M, f, P, z, closed, slipping, zt, mu, r, delta):
     zh = z[c[s], 1:] / zt[c[s], None]
     D = np.zeros((len(s), 3, 3))  # dP/dz of a slipping point (a stuck one's is the identity)
     D[:, 0, 0] = 1.0
-    D[:, 1:, 1:] = (mu * z[c[s], 0] / zt[c[s]])[:, None, None] * (np.eye(2) - zh[:, :, None] * zh[:, None, :])
-    D[:, 1:, 0] = mu * zh
+    mu_s = mu[c[s]]
+    D[:, 1:, 1:] = (mu_s * z[c[s], 0] / zt[c[s]])[:, None, None] * (np.eye(2) - zh[:, :, None] * zh[:, None, :])
+    D[:, 1:, 0] = mu_s[:, None] * zh
     rows = _xyz_rows(c)
     A = M[np.ix_(rows, np.concatenate([rows, _xyz_rows(o)]))] * np.repeat(r[c], 3)[:, None]  # r M
     Av = A.reshape(k, 3, -1)
@@ -389,6 +393,96 @@ class Indenter:
         return phi, n @ self.pose[:3, :3].T
 
 
+class Indenters:
+    """Several rigid colliders touching one body at once (a fingertip on an object that rests
+    on a table). The contact conditions are read on their union: each surface point meets the
+    one it is nearest to (smallest signed distance). Its friction hold is kept on its *owner*:
+    the nearest where the solve starts (:meth:`assign`), the nearest at the end for the next
+    solve (:meth:`reassign`; a hold moves to the new owner's frame where it changed).
+
+    Args:
+        indenters: ``{key: Indenter}``; the keys name the colliders (kept in results, so that
+            a point's hold carries over from one solve to the next only on the same collider).
+
+    Attributes:
+        keys: the colliders' keys, in order; ``pose`` [C, 4, 4] their frames in the body's;
+        ``mu`` [C] their friction coefficients; ``friction`` the largest; ``owner`` [S] int
+        each point's collider (index into ``keys``), set by :meth:`assign`.
+    """
+
+    def __init__(self, indenters):
+        if isinstance(indenters, Indenter):
+            indenters = {None: indenters}
+        if not len(indenters):
+            raise ConfigError("Indenters: no collider")
+        self.keys = tuple(indenters)
+        self.items = [indenters[k] for k in self.keys]
+        self.pose = np.stack([i.pose for i in self.items])
+        self.mu = np.array([float(i.friction) for i in self.items])
+        self.friction = float(self.mu.max())
+        self.owner = None
+
+    def nearest(self, x: np.ndarray) -> np.ndarray:
+        """[S] int: the collider nearest each of the points ``x`` [S, 3] (body frame)."""
+        if len(self.items) == 1:
+            return np.zeros(len(x), np.int64)
+        return np.argmin(np.stack([i(x)[0] for i in self.items]), axis=0)
+
+    def assign(self, x: np.ndarray) -> None:
+        """Each of the points ``x`` [S, 3] (body frame) to the collider nearest it."""
+        self.owner = self.nearest(x)
+
+    def reassign(self, x: np.ndarray, local: np.ndarray | None = None) -> np.ndarray | None:
+        """Each of the points ``x`` [S, 3] to the collider nearest it now; ``local`` [S, 3]
+        (points given in their old owner's frame, e.g. holds) is returned in the new owner's."""
+        body = None if local is None else self.to_body(local)
+        self.owner = self.nearest(x)
+        return None if local is None else self.to_local(body)
+
+    def _groups(self):
+        for c in range(len(self.items)):
+            sel = np.flatnonzero(self.owner == c)
+            if len(sel):
+                yield c, sel
+
+    def to_local(self, x: np.ndarray, pose: np.ndarray | None = None) -> np.ndarray:
+        """Each point of ``x`` [S, 3] in its owner's frame (at ``pose`` [C, 4, 4], default: now)."""
+        pose = self.pose if pose is None else pose
+        if len(self.items) == 1:
+            return Indenter(self.items[0].local_sdf, pose[0]).to_local(x)
+        P = pose[self.owner]
+        return np.einsum("si,sij->sj", x - P[:, :3, 3], P[:, :3, :3])
+
+    def to_body(self, q: np.ndarray) -> np.ndarray:
+        """Each point ``q`` [S, 3] given in its owner's frame, in the body frame."""
+        if len(self.items) == 1:
+            return self.items[0].to_body(q)
+        P = self.pose[self.owner]
+        return np.einsum("sij,sj->si", P[:, :3, :3], q) + P[:, :3, 3]
+
+    def local_sdf(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """φ [S] and outward normal [S, 3] of each point ``q`` [S, 3] on its owner, in its frame."""
+        if len(self.items) == 1:
+            return self.items[0].local_sdf(q)
+        phi, n = np.zeros(len(q)), np.zeros((len(q), 3))
+        for c, sel in self._groups():
+            phi[sel], n[sel] = self.items[c].local_sdf(q[sel])
+        return phi, n
+
+    def __call__(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """φ [S] and outward normal [S, 3] (body frame) of the points ``x`` [S, 3] on the
+        colliders' union: each on the one nearest it (whatever its owner)."""
+        if len(self.items) == 1:
+            return self.items[0](x)
+        phis, normals = zip(*(i(x) for i in self.items))
+        k, rows = np.argmin(np.stack(phis), axis=0), np.arange(len(x))
+        return np.stack(phis)[k, rows], np.stack(normals)[k, rows]
+
+    def point_friction(self) -> np.ndarray:
+        """[S] each point's friction coefficient (its owner's)."""
+        return self.mu[self.owner]
+
+
 @dataclass
 class ContactResult:
     """Equilibrium under one collider (body frame, SI units).
@@ -404,9 +498,12 @@ class ContactResult:
         residual: |f_int − f_contact| / |f_contact| at the end (0 for linear bodies).
         state: [S] int, 0 open, 1 stuck, 2 slipping (friction; 1 wherever a frictionless
             point carries force).
-        anchors: [S, 3] where each stuck or slipping point holds on the collider, in the
+        anchors: [S, 3] where each stuck or slipping point holds on its collider, in the
             collider's frame [m] (NaN where open; frictional contact only).
-        pose: the collider's pose [4, 4] in the body frame (frictional contact only).
+        pose: [C, 4, 4] the colliders' poses in the body frame (frictional contact only).
+        owner: [S] int, each point's collider (index into ``pose`` and ``keys``; frictional
+            contact only).
+        keys: the colliders' keys (:class:`Indenters`; ``(None,)`` for one :class:`Indenter`).
     """
 
     force: np.ndarray
@@ -419,6 +516,8 @@ class ContactResult:
     state: np.ndarray | None = None
     anchors: np.ndarray | None = None
     pose: np.ndarray | None = None
+    owner: np.ndarray | None = None
+    keys: tuple = (None,)
 
     @property
     def total_force(self) -> np.ndarray:
@@ -589,10 +688,10 @@ class QuasiStaticBody:
         return np.append(u, 0.0)[self._row].reshape(-1, 3)
 
     # ------------------------------------------------------------------ contact
-    def solve(self, sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | Indenter, geometry: str = "rest",
-              margin: float | None = None, tol: float | None = None, max_iterations: int = 60,
-              warm: ContactResult | None = None) -> ContactResult:
-        """Equilibrium of the body pressed by one rigid collider.
+    def solve(self, sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | Indenter | Indenters,
+              geometry: str = "rest", margin: float | None = None, tol: float | None = None,
+              max_iterations: int = 60, warm: ContactResult | None = None) -> ContactResult:
+        """Equilibrium of the body pressed by rigid colliders.
 
         Args:
             sdf: ``sdf(x)`` for body-frame points x [S, 3] (every surface point, in order)
@@ -602,7 +701,9 @@ class QuasiStaticBody:
                 from one solve to the next (pass the last result as ``warm``); a point that
                 comes into contact holds where it lands: the foot on the collider's surface of
                 where it was at the last solve, carried by the collider's motion since
-                (``warm.pose``), or of where it rests if there is none.
+                (``warm.pose``), or of where it rests if there is none. :class:`Indenters`:
+                several colliders at once, each point meeting the one nearest it where the
+                solve starts (its hold carries over only on the same collider).
             geometry: where the contact conditions are read. ``"rest"`` (default): φ and n
                 at the rest surface, the gap linear in the displacement, g = φ(X) + n(X)·u:
                 small-displacement contact, consistent with the linear body and with the
@@ -627,6 +728,11 @@ class QuasiStaticBody:
             raise ConfigError(f"{self.name}: geometry={geometry!r} must be 'rest' or 'deformed'")
         margin = self.body.size if margin is None else float(margin)
         tol = 1e-4 * self.body.size if tol is None else float(tol)
+        if isinstance(sdf, (Indenter, Indenters)):
+            sdf = Indenters(sdf) if isinstance(sdf, Indenter) else sdf
+            sdf.assign(self.points if warm is None else self.points + warm.displacement)
+        elif getattr(sdf, "friction", 0.0) > 0:
+            raise ConfigError(f"{self.name}: friction needs an Indenter (its frame holds the stuck points)")
         friction = _Friction(self, sdf, warm, tol) if getattr(sdf, "friction", 0.0) > 0 else None
         with _one_blas_thread():
             if self.model == "neo_hookean":
@@ -637,6 +743,8 @@ class QuasiStaticBody:
             friction.finish(res)
         else:
             res.state = (np.abs(res.force).sum(1) > 0).astype(np.int64)
+            if isinstance(sdf, Indenters):
+                res.owner, res.keys = sdf.nearest(self.points + res.displacement), sdf.keys
         return res
 
     def _contact_forces(self, idx, n, gap0, offset, friction) -> np.ndarray:
@@ -652,7 +760,7 @@ class QuasiStaticBody:
             common, here, there = np.intersect1d(idx, last_idx, assume_unique=True, return_indices=True)
             f0[here] = last_force[there]
         f, friction.state = solve_frictional(W, n, gap0, np.einsum("pai,pi->pa", tangent_bases(n), offset),
-                                             friction.mu, friction.tol, f0=f0)
+                                             friction.mu[idx], friction.tol, f0=f0)
         friction.idx, friction.last = idx, (idx, f)
         return f
 
@@ -746,25 +854,31 @@ class QuasiStaticBody:
 
 
 class _Friction:
-    """The holds of one frictional solve: where each surface point holds on the collider
+    """The holds of one frictional solve: where each surface point holds on its collider
     (body frame), and, once solved, the points' states and their new holds."""
 
-    def __init__(self, body: QuasiStaticBody, indenter: Indenter, warm: ContactResult | None, tol: float):
-        if not isinstance(indenter, Indenter):
-            raise ConfigError(f"{body.name}: friction needs an Indenter (its frame holds the stuck points)")
-        self.indenter, self.mu, self.tol = indenter, float(indenter.friction), tol
+    def __init__(self, body: QuasiStaticBody, colliders: Indenters, warm: ContactResult | None, tol: float):
+        self.colliders, self.tol = colliders, tol
+        self.mu = colliders.point_friction()  # [S]
         held = warm is not None and warm.pose is not None
-        if held:  # where each point was, carried by the collider's motion since
-            local = Indenter(indenter.local_sdf, warm.pose).to_local(body.points + warm.displacement)
+        if held:  # where each point was, carried by its collider's motion since (none for a collider new to it)
+            then = colliders.pose.copy()
+            for c, key in enumerate(colliders.keys):
+                if key in warm.keys:
+                    then[c] = warm.pose[warm.keys.index(key)]
+            local = colliders.to_local(body.points + warm.displacement, then)
         else:
-            local = indenter.to_local(body.points)
-        phi, n = indenter.local_sdf(local)
+            local = colliders.to_local(body.points)
+        phi, n = colliders.local_sdf(local)
         local = local - phi[:, None] * n  # a point that comes into contact holds where it lands: its foot on the surface
-        if held:
-            local[warm.state == 1] = warm.anchors[warm.state == 1]
+        if held:  # a stuck point keeps its hold, on the same collider
+            was = np.array([k for k in warm.keys], dtype=object)[warm.owner]
+            now = np.array(colliders.keys, dtype=object)[colliders.owner]
+            keep = (warm.state == 1) & (was == now)
+            local[keep] = warm.anchors[keep]
         self.rest = body.points
         self.local = local
-        self.hold = indenter.to_body(local)
+        self.hold = colliders.to_body(local)
         self.idx = np.zeros(0, np.int64)  # the points of this solve's last contact problem, and their states
         self.state = np.zeros(0, np.int64)
         # (points, forces [m, 3]) the next contact problem starts from (solve_frictional's f0): the
@@ -782,6 +896,9 @@ class _Friction:
         state[self.idx] = self.state
         anchors = np.full((S, 3), np.nan)
         stuck, sliding = state == 1, state == 2
+        if len(self.colliders.items) > 1:  # each point's owner for the next solve: the nearest now
+            self.local = self.colliders.reassign(self.rest + res.displacement, self.local)
         anchors[stuck] = self.local[stuck]
-        anchors[sliding] = self.indenter.to_local(self.rest[sliding] + res.displacement[sliding])
-        res.state, res.anchors, res.pose = state, anchors, self.indenter.pose.copy()
+        anchors[sliding] = self.colliders.to_local(self.rest + res.displacement)[sliding]
+        res.state, res.anchors, res.pose = state, anchors, self.colliders.pose.copy()
+        res.owner, res.keys = self.colliders.owner.copy(), self.colliders.keys

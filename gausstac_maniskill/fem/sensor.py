@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from .compliance import estimated_bytes
-from .contact import ContactResult
+from .contact import ContactResult, Indenters
 from .hex import centre_state, voxel_body
 from .pad import collider_indenter, pad_body, pad_lattice
 
@@ -93,10 +93,9 @@ class EquilibriumPad:
         self._body = None
         self._source: EquilibriumPad | None = None  # the pad whose body this one uses (share_body)
         self.result: ContactResult | None = None  # the last solve; None: at rest, nothing touches
-        self.holder = None  # key of the collider ``result`` holds on
         self.solve_time = 0.0  # wall time [s] of the last solve (and of building the body, the first time)
         self._cache, self._cache_of = {}, object()  # what _derived() computed, and from which result
-        self._pose = None  # the collider's frame in the link frame at the last solve [4, 4]
+        self._pose: dict | None = None  # {key: the collider's frame in the link frame [4, 4]} at the last solve
         #: outer iterations of a solve before it gives up (the finite-strain fixed point takes up to ~200)
         self.max_iterations = 60 if model == "linear" else 400
         #: [m] points this close to the collider enter a solve's first iteration; the others join
@@ -141,44 +140,58 @@ class EquilibriumPad:
         return self.soft[self.body.point_elements]
 
     # ------------------------------------------------------------------ solving
-    def solve(self, collider, link_pose: np.ndarray, key=None) -> ContactResult:
-        """Equilibrium with ``collider`` (an MPM :class:`~gausstac_maniskill.mpm.colliders.Collider`
-        at its world pose, its friction coefficient) and the link at world pose ``link_pose``
-        [4, 4]. ``key`` names the collider: the last solution warms the next one (and keeps the
-        friction holds) only while it is the same collider."""
+    def solve(self, colliders, link_pose: np.ndarray) -> ContactResult:
+        """Equilibrium with ``colliders`` (``{key: MPM Collider}``, each at its world pose, with
+        its friction coefficient; the key names it) and the link at world pose ``link_pose``
+        [4, 4]. Each surface point meets the collider nearest it (:class:`~.contact.Indenters`);
+        the last solution warms the next one, and a point's friction hold carries over while it
+        stays on the same collider."""
         t0 = time.perf_counter()
-        indenter = collider_indenter(collider, link_pose)
-        warm = self.result if self.result is not None and key == self.holder else None
-        if warm is not None and self._relative_motion(indenter.pose) <= self.hold_tolerance:
-            # the collider has not moved relative to the link: the equilibrium (and with friction
+        indenters = {key: collider_indenter(c, link_pose) for key, c in colliders.items()}
+        pose = {key: ind.pose for key, ind in indenters.items()}
+        warm = self.result
+        if warm is not None and self._relative_motion(pose) <= self.hold_tolerance:
+            # no collider has moved relative to the link: the equilibrium (and with friction
             # every hold: a zero increment slips nowhere) is the last one, to the solver's tolerance
             self.solve_time = time.perf_counter() - t0
             return self.result
-        self.result = self.body.solve(indenter, geometry=self.geometry, warm=warm, max_iterations=self.max_iterations,
-                                      margin=self.margin)
-        self.holder, self._pose = key, indenter.pose
+        self.result = self.body.solve(Indenters(indenters), geometry=self.geometry, warm=warm,
+                                      max_iterations=self.max_iterations, margin=self.margin)
+        self._pose = pose
         self.solve_time = time.perf_counter() - t0
         return self.result
 
     @property
+    def holders(self) -> tuple:
+        """The keys of the colliders the last solution's loaded points touch (sorted)."""
+        r = self.result
+        if r is None or r.owner is None:
+            return ()
+        return tuple(sorted({r.keys[c] for c in np.unique(r.owner[np.abs(r.force).sum(1) > 0])}, key=str))
+
+    @property
     def hold_tolerance(self) -> float:
         """[m] the contact solve's tolerance (:meth:`QuasiStaticBody.solve`'s default, 1e-4 of an
-        element): a collider that moved less than this relative to the link, at every surface
-        point of the pad, leaves the last equilibrium standing."""
+        element): colliders that moved less than this relative to the link, at every surface
+        point of the pad, leave the last equilibrium standing."""
         return 1e-4 * self.pad.spacing
 
-    def _relative_motion(self, pose: np.ndarray) -> float:
-        """[m] how far the collider's motion since the last solve (``pose``: its frame in the link
-        frame now) moves the pad's surface points, at most (inf without a last solve)."""
-        if self._pose is None:
+    def _relative_motion(self, pose: dict) -> float:
+        """[m] how far the colliders' motion since the last solve (``pose``: {key: its frame in
+        the link frame now}) moves the pad's surface points, at most (inf without a last solve
+        or with other colliders)."""
+        if self._pose is None or set(self._pose) != set(pose):
             return float("inf")
-        D = pose @ np.linalg.inv(self._pose)
         p = self.body.points
-        return float(np.abs(p @ (D[:3, :3] - np.eye(3)).T + D[:3, 3]).max())
+        out = 0.0
+        for key, now in pose.items():
+            D = now @ np.linalg.inv(self._pose[key])
+            out = max(out, float(np.abs(p @ (D[:3, :3] - np.eye(3)).T + D[:3, 3]).max()))
+        return out
 
     def release(self) -> None:
         """Nothing touches the pad: the unloaded equilibrium is the rest shape, exactly."""
-        self.result, self.holder, self._pose, self.solve_time = None, None, None, 0.0
+        self.result, self._pose, self.solve_time = None, None, 0.0
 
     @functools.cached_property
     def shape(self) -> tuple[int, int]:
@@ -188,18 +201,21 @@ class EquilibriumPad:
         return int(self.pad.surface[self.soft].sum()), len(nodes)
 
     def flat_state(self, holders: Sequence[str]) -> dict[str, np.ndarray]:
-        """:meth:`state` as a flat dict of fixed-shape arrays (S, V from :attr:`shape`), so that
-        the states of identical scenes stack; the holder is stored as its index in ``holders``
-        (the names a holder may have), −1 for none."""
+        """:meth:`state` as a flat dict of fixed-shape arrays (S, V from :attr:`shape`, H =
+        len(``holders``), the names a collider may have), so that the states of identical scenes
+        stack. Colliders are stored by their index in ``holders``."""
         S, V = self.shape
+        H = len(holders)
+        index = {h: i for i, h in enumerate(holders)}
         r = self.result
         out = {"solved": np.array([r is not None]), "force": np.zeros((S, 3)), "displacement": np.zeros((S, 3)),
                "gap": np.zeros(S), "contact_state": np.zeros(S, np.int64), "anchors": np.full((S, 3), np.nan),
-               "result_pose": np.eye(4), "has_result_pose": np.array([False]), "nodes": np.zeros((V, 3)),
+               "result_pose": np.tile(np.eye(4), (H, 1, 1)), "has_result_pose": np.zeros(H, bool),
+               "owner": np.full(S, -1, np.int64), "nodes": np.zeros((V, 3)),
                "has_nodes": np.array([False]), "counts": np.zeros(2, np.int64), "residual": np.zeros(1),
-               "holder": np.array([-1 if self.holder is None else list(holders).index(self.holder)]),
-               "pose": np.eye(4) if self._pose is None else self._pose.copy(),
-               "has_pose": np.array([self._pose is not None])}
+               "pose": np.tile(np.eye(4), (H, 1, 1)), "has_pose": np.zeros(H, bool)}
+        for key, T in (self._pose or {}).items():
+            out["pose"][index[key]], out["has_pose"][index[key]] = T, True
         if r is not None:
             out.update(force=r.force.copy(), displacement=r.displacement.copy(), gap=r.gap.copy(),
                        counts=np.array([r.iterations, r.candidates], np.int64), residual=np.array([r.residual]))
@@ -207,8 +223,11 @@ class EquilibriumPad:
                 out["contact_state"] = r.state.copy()
             if r.anchors is not None:
                 out["anchors"] = r.anchors.copy()
-            if r.pose is not None:
-                out["result_pose"], out["has_result_pose"] = r.pose.copy(), np.array([True])
+            if r.owner is not None:
+                slots = np.array([index[k] for k in r.keys])
+                out["owner"] = slots[r.owner]
+                if r.pose is not None:
+                    out["result_pose"][slots], out["has_result_pose"][slots] = r.pose, True
             if r.nodes is not None:
                 out["nodes"], out["has_nodes"] = r.nodes.copy(), np.array([True])
         return out
@@ -220,34 +239,47 @@ class EquilibriumPad:
             raise ConfigError(f"EquilibriumPad({self.pad.name!r}).load_flat_state: the state holds "
                               f"{np.shape(state['force'])[0]} surface points and {np.shape(state['nodes'])[0]} "
                               f"nodes, this pad has {S} and {V} (another pad or resolution)")
+
         def first(key):  # the one value of a [1] entry
             return np.asarray(state[key]).ravel()[0]
 
         self.release()
-        h = int(first("holder"))
-        self.holder = None if h < 0 else list(holders)[h]
-        self._pose = np.array(state["pose"], np.float64) if bool(first("has_pose")) else None
+        has_pose = np.asarray(state["has_pose"], bool)
+        if has_pose.any():
+            self._pose = {holders[h]: np.array(state["pose"][h], np.float64) for h in np.flatnonzero(has_pose)}
         if not bool(first("solved")):
             return
         counts = np.asarray(state["counts"]).ravel()
+        owner = np.asarray(state["owner"], np.int64)
+        slots = np.flatnonzero(np.asarray(state["has_result_pose"], bool))
+        frictional = len(slots) > 0
+        keys, pose = (None,), None
+        if frictional:  # the solve's colliders: those with a pose
+            position = np.full(len(holders), -1, np.int64)
+            position[slots] = np.arange(len(slots))
+            keys, owner, pose = tuple(holders[h] for h in slots), position[owner], np.array(state["result_pose"][slots])
+        elif (owner >= 0).any():
+            keys = tuple(holders)
+        else:
+            owner = None
         self.result = ContactResult(
             np.array(state["force"], np.float64), np.array(state["displacement"], np.float64),
             np.array(state["gap"], np.float64), int(counts[0]), int(counts[1]),
             nodes=np.array(state["nodes"], np.float64) if first("has_nodes") else None,
             residual=float(first("residual")),
             state=np.array(state["contact_state"], np.int64),
-            anchors=np.array(state["anchors"], np.float64) if first("has_result_pose") else None,
-            pose=np.array(state["result_pose"], np.float64) if first("has_result_pose") else None)
+            anchors=np.array(state["anchors"], np.float64) if frictional else None,
+            pose=pose, owner=owner, keys=keys)
 
     def state(self) -> dict:
         """A copy of what the next solve starts from (restore with :meth:`load_state`)."""
-        return copy.deepcopy({"result": self.result, "holder": self.holder, "pose": self._pose})
+        return copy.deepcopy({"result": self.result, "pose": self._pose})
 
     def load_state(self, state: dict) -> None:
         """Restore a :meth:`state` of this pad."""
         self.release()
         s = copy.deepcopy(state)
-        self.result, self.holder, self._pose = s["result"], s["holder"], s["pose"]
+        self.result, self._pose = s["result"], s["pose"]
 
     @property
     def touching(self) -> bool:
@@ -308,22 +340,32 @@ class EquilibriumPad:
         local, F, sigma, force = self._local_particles()
         return (local @ R.T + t, R @ F, R @ sigma @ R.T, force @ R.T)
 
-    def contact_points(self, link_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The loaded contact points of the last solve, world frame: their displaced positions
-        [m, 3] m and the forces [m, 3] N the collider exerts on the pad there. The pad has no
-        mass: it passes them to its link, and the collider receives the opposite forces."""
+    def _loaded(self, key=None) -> np.ndarray:
+        """The surface points the last solve loaded (on collider ``key`` only, if given)."""
+        res = self.result
+        loaded = np.abs(res.force).sum(1) > 0
+        if key is not None and res.owner is not None:
+            loaded &= np.array(res.keys, dtype=object)[res.owner] == key
+        return np.flatnonzero(loaded)
+
+    def contact_points(self, link_pose: np.ndarray, key=None) -> tuple[np.ndarray, np.ndarray]:
+        """The loaded contact points of the last solve (those on collider ``key`` only, if
+        given), world frame: their displaced positions [m, 3] m and the forces [m, 3] N the
+        collider exerts on the pad there. The pad has no mass: it passes them to its link, and
+        the collider receives the opposite forces."""
         if self.result is None:
             return np.zeros((0, 3)), np.zeros((0, 3))
         T, res = np.asarray(link_pose, float), self.result
-        idx = np.flatnonzero(np.abs(res.force).sum(1) > 0)
+        idx = self._loaded(key)
         return (self.body.points[idx] + res.displacement[idx]) @ T[:3, :3].T + T[:3, 3], res.force[idx] @ T[:3, :3].T
 
-    def indentation(self) -> float:
-        """Largest displacement [m] of a loaded contact point (0 when nothing touches)."""
+    def indentation(self, key=None) -> float:
+        """Largest displacement [m] of a loaded contact point (on collider ``key`` only, if
+        given; 0 when nothing touches)."""
         if self.result is None:
             return 0.0
-        loaded = np.abs(self.result.force).sum(1) > 0
-        return float(np.linalg.norm(self.result.displacement[loaded], axis=1).max()) if loaded.any() else 0.0
+        idx = self._loaded(key)
+        return float(np.linalg.norm(self.result.displacement[idx], axis=1).max()) if len(idx) else 0.0
 
     def stress_force(self) -> np.ndarray:
         """Total contact force [3] N on the pad read from its stress, link frame: the sum of the

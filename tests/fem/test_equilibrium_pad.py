@@ -90,7 +90,8 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     # the flat form (what ManiSkill's get_state_dict and RecordEpisode store), into a fresh scene
     sim.load_state_dict(saved)
     flat = sim.flat_state()
-    assert flat["fem0_solved"][0] and flat["fem0_has_result_pose"][0] and flat["fem0_holder"][0] == 0
+    assert flat["fem0_solved"][0] and flat["fem0_has_result_pose"][0] and flat["fem0_has_pose"][0]
+    assert (flat["fem0_owner"] == 0).all()  # every point on the one object
     other, _, press_other = _scene(friction=0.5)
     other.load_flat_state(flat)
     np.testing.assert_array_equal(press_other(-1e-3, 1e-3)[0], F_slid)
@@ -103,6 +104,66 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     assert {k: np.shape(v) for k, v in flat_again.items()} == {k: np.shape(v) for k, v in flat.items()}
     with pytest.raises(ConfigError, match="fem0_"):
         other.load_flat_state({k: v for k, v in flat.items() if not k.startswith("fem0_")})
+
+
+def _box_scene(halves: bool, friction: float):
+    """The index pad pressed by a 24 × 24 mm box face, whole or as two boxes side by side
+    split off the particle lattice (their union is the whole box's volume)."""
+    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.mpm.colliders import Box
+    from gausstac_maniskill.transforms import make_pose
+
+    with pytest.warns(Warning, match="spans only"):
+        sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
+                          pad_solver="fem")
+    W = bp.LINK_POSE @ sim.pads[bp.INDEX].sensor_frame
+    a, h, split = 12e-3, 3e-3, 0.37e-3
+
+    def poses(z, x=0.0):
+        P = bp.indenter_pose("plate", W, z, x)  # local z toward the pad; the face at local z = 0
+        if not halves:
+            return {"whole": P @ make_pose([0.0, 0.0, -h], np.eye(3))}
+        return {"left": P @ make_pose([split - a / 2, 0.0, -h], np.eye(3)),
+                "right": P @ make_pose([split + a / 2, 0.0, -h], np.eye(3))}
+
+    for key, pose in poses(bp.GAP).items():
+        sim.add_rigid_object(key, Box(half_extents=(a / 2 if halves else a, a, h), pose=pose, friction=friction))
+
+    def press(z, x=0.0):
+        sim.step({bp.INDEX: bp.LINK_POSE}, 0.05, poses(z, x))
+        return {k: W[:3, :3].T @ sim.object_wrench(k)[0] for k in poses(z)}
+
+    return sim, press
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.5])
+def test_fem_pad_pressed_by_two_objects_reads_as_their_union(friction):
+    """A pad within reach of two objects meets both (each surface point the nearer): two boxes
+    side by side press and drag it as the one box they make up (the same contact problem on
+    the union), and each object receives its own points' forces. Then the flat state of a
+    two-object contact restores bit-exactly (each point's hold kept on its own object)."""
+    from gausstac_maniskill.bench import pad as bp
+
+    steps = [(bp.GAP, 0.0), (-0.25e-3, 0.0), (-0.5e-3, 0.0), (-0.5e-3, 0.25e-3)]
+    whole, parts = _box_scene(False, friction), _box_scene(True, friction)
+    for z, x in steps:
+        F_whole, F_parts = whole[1](z, x)["whole"], parts[1](z, x)
+        np.testing.assert_allclose(F_parts["left"] + F_parts["right"], F_whole, rtol=0,
+                                   atol=1e-5 * np.abs(F_whole).max() + 1e-12)
+    sim = parts[0]
+    assert F_parts["left"][2] > 0.1 * F_whole[2] and F_parts["right"][2] > 0.1 * F_whole[2]  # both press
+    f_link, _ = sim.link_wrench(bp.INDEX)  # the link gets what the two objects push
+    np.testing.assert_allclose(f_link, -(sim.object_wrench("left")[0] + sim.object_wrench("right")[0]), atol=1e-9)
+    assert sorted(sim.link_contacts(bp.INDEX)) == ["left", "right"]
+    saved = sim.flat_state()
+    assert saved["fem0_has_pose"].tolist() == [True, True] and set(saved["fem0_owner"].tolist()) == {0, 1}
+    slid = parts[1](-0.5e-3, 0.5e-3)
+    other = _box_scene(True, friction)
+    other[0].load_flat_state(saved)
+    again = other[1](-0.5e-3, 0.5e-3)
+    for k in slid:
+        np.testing.assert_array_equal(again[k], slid[k])
 
 
 def test_fem_pad_held_step_keeps_the_equilibrium():
