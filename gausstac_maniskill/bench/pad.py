@@ -314,20 +314,17 @@ def _pct(x) -> str:
 def format_tables(cases: list[dict], ana: dict, default_dx: float) -> str:
     """Markdown tables: runs, per-phase measurements, Richardson, verdict."""
     mm = lambda v: f"{v * 1e3:g}"  # noqa: E731
-    if all(c.get("pad_solver") == "fem" for c in cases):
-        out = ["Runs (wall time of the equilibrium solve per 50 ms control step, after the first step)", "",
-               "| indenter | dx [mm] | elements [mm] | particles (elements) | solve wall / step [ms] | build [s] |",
-               "|---|---|---|---|---|---|"]
-        for c in cases:
-            out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
-                       f"{mm(c['spacing'])} | {c['particles']} ({c['soft']}) | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
-    else:
-        out = ["Runs (MPM wall time per 50 ms control step, after the JIT step)", "",
-               "| indenter | dx [mm] | particles (soft) | substeps / step | MPM wall / step [ms] | build [s] |",
-               "|---|---|---|---|---|---|"]
-        for c in cases:
-            out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
-                       f"{c['particles']} ({c['soft']}) | {c['substeps']:.0f} | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
+    fem = all(c.get("pad_solver") == "fem" for c in cases)  # its own columns: elements, no substeps
+    out = [f"Runs ({'wall time of the equilibrium solve' if fem else 'MPM wall time'} per 50 ms control step, "
+           f"after the {'first' if fem else 'JIT'} step)", "",
+           "| indenter | dx [mm] | " + ("elements [mm] | particles (elements) | solve" if fem else
+                                       "particles (soft) | substeps / step | MPM") + " wall / step [ms] | build [s] |",
+           "|---|---|---|---|---|---|"]
+    for c in cases:
+        middle = f"{mm(c['spacing'])} | {c['particles']} ({c['soft']})" if fem else \
+            f"{c['particles']} ({c['soft']}) | {c['substeps']:.0f}"
+        out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
+                   f"{middle} | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
     out += ["", "Per phase (hold-step means; Fn, Ft: reaction on the indenter in the sensor frame; Fn spread = "
             "(max−min)/mean over the hold; area: taxels with force > 1 mN | particles in contact, projected; "
             "L2: relative to the finest dx)", "",
