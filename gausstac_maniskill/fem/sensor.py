@@ -235,10 +235,17 @@ class EquilibriumPad:
     def load_flat_state(self, state: Mapping[str, np.ndarray], holders: Sequence[str]) -> None:
         """Restore a :meth:`flat_state` of this pad (bit-exact)."""
         S, V = self.shape
+        missing = sorted({"force", "nodes", "owner", "pose", "has_pose", "result_pose", "has_result_pose"} - set(state))
+        if missing:
+            raise ConfigError(f"EquilibriumPad({self.pad.name!r}).load_flat_state: the state lacks {missing} "
+                              "(saved by another version of gausstac_maniskill?)")
         if np.shape(state["force"]) != (S, 3) or np.shape(state["nodes"]) != (V, 3):
             raise ConfigError(f"EquilibriumPad({self.pad.name!r}).load_flat_state: the state holds "
                               f"{np.shape(state['force'])[0]} surface points and {np.shape(state['nodes'])[0]} "
                               f"nodes, this pad has {S} and {V} (another pad or resolution)")
+        if np.shape(state["pose"]) != (len(holders), 4, 4):
+            raise ConfigError(f"EquilibriumPad({self.pad.name!r}).load_flat_state: the state holds the poses of "
+                              f"{np.shape(state['pose'])[0]} objects, this scene has {len(holders)} ({list(holders)})")
 
         def first(key):  # the one value of a [1] entry
             return np.asarray(state[key]).ravel()[0]

@@ -104,6 +104,8 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     assert {k: np.shape(v) for k, v in flat_again.items()} == {k: np.shape(v) for k, v in flat.items()}
     with pytest.raises(ConfigError, match="fem0_"):
         other.load_flat_state({k: v for k, v in flat.items() if not k.startswith("fem0_")})
+    with pytest.raises(ConfigError, match="lacks.*owner"):  # a state saved before pads met several objects
+        other.load_flat_state({k: v for k, v in flat.items() if k != "fem0_owner"})
 
 
 def _box_scene(halves: bool, friction: float):
