@@ -18,12 +18,13 @@ import copy
 import functools
 import hashlib
 import time
+import warnings
 from collections import OrderedDict
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, SimulationWarning
 from .compliance import estimated_bytes
 from .contact import ContactResult, Indenters
 from .hex import centre_state, voxel_body
@@ -41,6 +42,9 @@ PRECOMPUTE_BYTES = 256 * 2 ** 20
 #: (~0.5 GB at the default resolution) and compliance (143 MB) while kept: the four pads of a
 #: hand at the default resolution, about 3 GB. :func:`forget_bodies` lets them go.
 BODY_CACHE = 4
+#: Surface motion, as a fraction of the layer's thickness, beyond which a linear pad says its
+#: forces are not physical (the tasks' experts stay under 25 %; random actions reach 160 %).
+LINEAR_LIMIT = 0.5
 _BODIES: OrderedDict = OrderedDict()
 
 
@@ -96,6 +100,7 @@ class EquilibriumPad:
         self.solve_time = 0.0  # wall time [s] of the last solve (and of building the body, the first time)
         self._cache, self._cache_of = {}, object()  # what _derived() computed, and from which result
         self._pose: dict | None = None  # {key: the collider's frame in the link frame [4, 4]} at the last solve
+        self._strained = False  # the last solve moved the surface beyond LINEAR_LIMIT (warned)
         #: outer iterations of a solve before it gives up (the finite-strain fixed point takes up to ~200)
         self.max_iterations = 60 if model == "linear" else 400
         #: [m] points this close to the collider enter a solve's first iteration; the others join
@@ -158,8 +163,26 @@ class EquilibriumPad:
         self.result = self.body.solve(Indenters(indenters), geometry=self.geometry, warm=warm,
                                       max_iterations=self.max_iterations, margin=self.margin)
         self._pose = pose
+        if self.model == "linear":
+            self._check_strain()
         self.solve_time = time.perf_counter() - t0
         return self.result
+
+    def _check_strain(self) -> None:
+        """Say so (a :class:`~gausstac_maniskill.errors.SimulationWarning`, once each time it
+        happens) when the surface moves farther than :data:`LINEAR_LIMIT` of the layer's
+        thickness: the linear model's forces are then far from the silicone's."""
+        h = self.pad.spec.thickness
+        moved = float(np.sqrt((self.result.displacement ** 2).sum(1)).max())
+        over = moved > LINEAR_LIMIT * h
+        if over and not self._strained:
+            warnings.warn(SimulationWarning(
+                f"pad {self.pad.name!r} (pad_solver='fem', fem_model='linear'): its surface moved {moved * 1e3:.2f} mm, "
+                f"{moved / h:.0%} of its {h * 1e3:g} mm layer, beyond the linear model's small-strain range (at 25 % "
+                f"its force is already 7–16 % below finite strain). Its contact forces and maps are not physical "
+                f"until it comes back under {LINEAR_LIMIT:.0%}; fem_model='neo_hookean' solves finite strain."),
+                stacklevel=4)
+        self._strained = over
 
     @property
     def holders(self) -> tuple:
@@ -191,7 +214,7 @@ class EquilibriumPad:
 
     def release(self) -> None:
         """Nothing touches the pad: the unloaded equilibrium is the rest shape, exactly."""
-        self.result, self._pose, self.solve_time = None, None, 0.0
+        self.result, self._pose, self.solve_time, self._strained = None, None, 0.0, False
 
     @functools.cached_property
     def shape(self) -> tuple[int, int]:

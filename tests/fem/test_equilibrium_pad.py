@@ -168,6 +168,25 @@ def test_fem_pad_pressed_by_two_objects_reads_as_their_union(friction):
         np.testing.assert_array_equal(again[k], slid[k])
 
 
+def test_fem_pad_linear_model_says_when_pressed_beyond_its_range():
+    """A press of 75 % of the layer is outside the linear model's small-strain range: a
+    SimulationWarning says so, once while it lasts, and not again after the pad came back."""
+    import warnings as w
+
+    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.errors import SimulationWarning
+
+    sim, W, press = _scene(indenter="plate")
+    with w.catch_warnings(record=True) as caught:
+        w.simplefilter("always")
+        for z in (bp.GAP, -1e-3, -3e-3, -3.2e-3, -1e-3):
+            press(z)
+        said = [c for c in caught if issubclass(c.category, SimulationWarning)]
+        assert len(said) == 1 and "not physical" in str(said[0].message) and "of its 4 mm layer" in str(said[0].message)
+        press(-3e-3)  # beyond it again: said again
+        assert len([c for c in caught if issubclass(c.category, SimulationWarning)]) == 2
+
+
 def test_fem_pad_held_step_keeps_the_equilibrium():
     """Guards the held-step shortcut: an unchanged relative pose keeps the last solution (no
     solve); a motion beyond the solver's tolerance solves again."""
