@@ -60,7 +60,7 @@ class BatchedCosim:
         pads: pad descriptions, the same in every env.
         link_names: the L links whose poses :meth:`step` receives (every pad link among them).
         link_poses: [B, L, 4, 4] initial world poses [m] of those links; B is the env count.
-        urdf, settings, sleep_margin, pad_surface, pad_solver, fem_model: as
+        urdf, settings, sleep_margin, pad_surface, pad_solver, fem_model, fem_precompute: as
             :class:`~gausstac_maniskill.cosim.GaussTacSim`. With ``pad_solver="fem"`` every env
             solves its pads at equilibrium after the world's step, one env after another on the
             host, with one body (factor and compliance) per pad shared by all envs.
@@ -69,7 +69,7 @@ class BatchedCosim:
     def __init__(self, pads: Sequence[PadSpec], link_names: Sequence[str], link_poses, *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
                  sleep_margin: float = 5e-3, pad_surface: str = "mesh", pad_solver: str = "mpm",
-                 fem_model: str = "linear"):
+                 fem_model: str = "linear", fem_precompute: bool | None = None):
         self.link_names = list(link_names)
         P = _as_batch(link_poses, "BatchedCosim link_poses")
         if P.ndim != 4 or P.shape[1] != len(self.link_names):
@@ -78,7 +78,7 @@ class BatchedCosim:
         self.world = MPMWorld(settings or default_hand_settings())
         self.scenes = [GaussTacSim(pads, self._env_poses(P, b), urdf=urdf, world=self.world, env=b,
                                    sleep_margin=sleep_margin, pad_surface=pad_surface, pad_solver=pad_solver,
-                                   fem_model=fem_model)
+                                   fem_model=fem_model, fem_precompute=fem_precompute)
                        for b in range(P.shape[0])]
         for scene in self.scenes[1:]:  # one body per pad (its factor and compliance) for every env
             for name, fp in scene._fem.items():

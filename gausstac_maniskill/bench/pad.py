@@ -151,12 +151,14 @@ def _contact_area(sim, pad) -> float:
 
 def make_sim(dx: float, indenter: str, thickness: float | None = None, friction: float = FRICTION,
              mass_scaling: float | None = None, pad_surface: str = "mesh", patch_radius=False,
-             cfl: float | None = None, pad_solver: str = "mpm", fem_model: str = "linear"):
+             cfl: float | None = None, pad_solver: str = "mpm", fem_model: str = "linear",
+             fem_precompute: bool | None = None):
     """The benchmark's scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
     :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
     factor ``mass_scaling``, ``patch_radius`` [m] or None (False: the default's) and Courant
     number ``cfl``;
-    ``pad_surface``, ``pad_solver`` and ``fem_model`` as in :class:`GaussTacSim`) and ``indenter``
+    ``pad_surface``, ``pad_solver``, ``fem_model`` and ``fem_precompute`` as in :class:`GaussTacSim`) and
+    ``indenter``
     ("plate" | "sphere") 0.2 mm clear of its apex. Returns (sim, W): W the sensor frame's
     world pose (4x4)."""
     from ..cosim import GaussTacSim, default_hand_settings
@@ -167,7 +169,8 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
     if cfl is not None:
         extra["cfl"] = float(cfl)
     sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra),
-                      pad_surface=pad_surface, pad_solver=pad_solver, fem_model=fem_model)
+                      pad_surface=pad_surface, pad_solver=pad_solver, fem_model=fem_model,
+                      fem_precompute=fem_precompute)
     W = LINK_POSE @ sim.pads[INDEX].sensor_frame
     sim.prepare_pads()  # the equilibrium pad's factor and compliance: set-up, not a step's cost
     sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
@@ -177,12 +180,12 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
 def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
              friction: float = FRICTION, bar=None, mass_scaling: float | None = None,
              pad_surface: str = "mesh", patch_radius=False, cfl: float | None = None, pad_solver: str = "mpm",
-             fem_model: str = "linear") -> dict:
+             fem_model: str = "linear", fem_precompute: bool | None = None) -> dict:
     """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
     (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
     (default: :func:`default_hand_settings`'); ``patch_radius`` [m] the active patch (None: off,
     False: the default's); ``cfl`` the Courant number (default: the settings'); ``pad_solver``
-    ``"fem"`` solves the pad at equilibrium instead (with ``fem_model``): its ``step_ms`` is
+    ``"fem"`` solves the pad at equilibrium instead (with ``fem_model``, ``fem_precompute``): its ``step_ms`` is
     the equilibrium solve's wall time plus the MPM world's (which then holds no particles).
 
     Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
@@ -194,7 +197,7 @@ def run_case(dx: float, indenter: str, depths, thickness: float | None = None, p
     """
     t0 = time.perf_counter()
     sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling, pad_surface, patch_radius, cfl,
-                      pad_solver, fem_model)
+                      pad_solver, fem_model, fem_precompute)
     pad = sim.pads[INDEX]
     spec = pad.spec
     build_s = time.perf_counter() - t0
@@ -385,9 +388,10 @@ def plot_maps(cases: list[dict], out_dir: str) -> list[str]:
 
 
 def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=None, protocol=FULL,
-        friction=FRICTION, progress=True, pad_solver: str = "mpm", fem_model: str = "linear") -> list[dict]:
+        friction=FRICTION, progress=True, pad_solver: str = "mpm", fem_model: str = "linear",
+        fem_precompute: bool | None = None) -> list[dict]:
     """All (dx, indenter) cases, coarsest first, with one tqdm bar over every control step
-    (``pad_solver``, ``fem_model``: :func:`run_case`)."""
+    (``pad_solver``, ``fem_model``, ``fem_precompute``: :func:`run_case`)."""
     from tqdm import tqdm
 
     per_case = 1 + len(depths) * (protocol.press + protocol.slide + 2 * protocol.hold)
@@ -397,13 +401,13 @@ def run(dxs, indenters=("plate", "sphere"), depths=(0.5e-3, 1.0e-3), thickness=N
             for ind in indenters:
                 bar.set_description(f"{ind} dx={dx * 1e3:g} mm")
                 cases.append(run_case(dx, ind, depths, thickness, protocol, friction, bar, pad_solver=pad_solver,
-                                      fem_model=fem_model))
+                                      fem_model=fem_model, fem_precompute=fem_precompute))
     return cases
 
 
 def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress: bool = True,
                 pad_surface: str = "mesh", hold: int = CURVE.hold, pad_solver: str = "mpm",
-                fem_model: str = "linear") -> dict:
+                fem_model: str = "linear", fem_precompute: bool | None = None) -> dict:
     """Speed against force error on the product pad (``bench pad --curve``).
 
     ``points``: (dx [m], mass_scaling, patch_radius [m] or None[, Courant number]) tuples; each
@@ -415,7 +419,7 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
     estimate :meth:`GaussTacSim.pad_pressure_force`), for the consistency of the readings.
     The reference is the Richardson extrapolation of Fn over the three finest grids at the
     default mass scaling when it gives an order in (0.5, 4), else the finest run; errors
-    are Fn / reference − 1. ``pad_solver``, ``fem_model``: :func:`run_case`'s (the pad solved at
+    are Fn / reference − 1. ``pad_solver``, ``fem_model``, ``fem_precompute``: :func:`run_case`'s (the pad solved at
     equilibrium has no mass scaling, patch or Courant number: give it dx points only).
     Returns ``{"runs": [...], "reference": float, "reference_from": str}``.
     """
@@ -428,7 +432,8 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
                                       key=lambda t: (-t[0], t[1], t[2] or 0.0, t[3] or 0.0)):
             bar.set_description(f"dx={dx * 1e3:g} mm, mass x{ms:g}, patch {pr}, cfl {cfl}")
             c = run_case(dx, indenter, [depth], protocol=protocol, bar=bar, mass_scaling=ms, pad_surface=pad_surface,
-                         patch_radius=pr, cfl=cfl, pad_solver=pad_solver, fem_model=fem_model)
+                         patch_radius=pr, cfl=cfl, pad_solver=pad_solver, fem_model=fem_model,
+                         fem_precompute=fem_precompute)
             runs.append(dict(dx=dx, pad_solver=pad_solver, spacing=c["spacing"], mass_scaling=ms, patch_radius=pr,
                              cfl=c.get("cfl", cfl), active=c["active"],
                              particles=c["particles"],
@@ -488,6 +493,9 @@ def format_curve(curve: dict, indenter: str, depth: float) -> str:
     return "\n".join(out)
 
 
+_PRECOMPUTE = {"auto": None, "on": True, "off": False}  # --fem-precompute
+
+
 def _solver(args) -> str:
     """The pad solver of the command line, as the tables' headers name it."""
     return f"{args.pad_solver} ({args.fem_model})" if args.pad_solver == "fem" else args.pad_solver
@@ -523,6 +531,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="the pad's solver (GaussTacSim's pad_solver; with --curve, --dx points only)")
     ap.add_argument("--fem-model", default="linear", choices=["linear", "neo_hookean"],
                     help="the fem pad's material model (with --pad-solver fem)")
+    ap.add_argument("--fem-precompute", default="auto", choices=["auto", "on", "off"],
+                    help="the fem pad's compliance among all its surface points up front (on), point by point (off), "
+                         "or when it takes at most 256 MiB (auto: dx >= 1 mm)")
     ap.add_argument("--pad-surface", default="mesh", choices=["particles", "mesh"],
                     help="where the indenter touches the pad (GaussTacSim's pad_surface; curve only)")
     args = ap.parse_args(argv)
@@ -536,7 +547,8 @@ def main(argv: list[str] | None = None) -> int:
             points += [(dx, default_ms, None, c) for c in args.cfl for dx in dxs]
         t0 = time.perf_counter()
         curve = speed_curve(points, args.indenters[0], args.depths[-1], pad_surface=args.pad_surface,
-                            hold=args.hold, pad_solver=args.pad_solver, fem_model=args.fem_model)
+                            hold=args.hold, pad_solver=args.pad_solver, fem_model=args.fem_model,
+                            fem_precompute=_PRECOMPUTE[args.fem_precompute])
         text = (f"on {arch} ({os.cpu_count()} cores), pad_surface={args.pad_surface}, pad solver {_solver(args)}, "
                 f"total {time.perf_counter() - t0:.0f} s\n\n"
                 + format_curve(curve, args.indenters[0], args.depths[-1]))
@@ -551,7 +563,7 @@ def main(argv: list[str] | None = None) -> int:
     os.makedirs(args.out, exist_ok=True)
     t0 = time.perf_counter()
     cases = run(dxs, args.indenters, args.depths, args.thickness, protocol, args.friction,
-                pad_solver=args.pad_solver, fem_model=args.fem_model)
+                pad_solver=args.pad_solver, fem_model=args.fem_model, fem_precompute=_PRECOMPUTE[args.fem_precompute])
     ana = analyse(cases, default_dx)
     spec = index_spec(args.thickness)
     head = (f"Index pad convergence on {arch} ({os.cpu_count()} cores): thickness {spec.thickness * 1e3:g} mm, "

@@ -187,6 +187,24 @@ def test_fem_pad_linear_model_says_when_pressed_beyond_its_range():
         assert len([c for c in caught if issubclass(c.category, SimulationWarning)]) == 2
 
 
+def test_fem_precompute_reaches_the_pads():
+    """Guard: GaussTacSim(fem_precompute=...) decides whether a pad's compliance is computed
+    in full when its body is built (the default does at this coarse grid) or point by point."""
+    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.fem.sensor import forget_bodies
+
+    for choice, full in ((False, False), (None, True)):
+        forget_bodies()  # (bodies are kept per process: build each one anew)
+        with pytest.warns(Warning, match="spans only"):
+            sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
+                              pad_solver="fem", fem_precompute=choice)
+        sim.prepare_pads()
+        body = sim._fem[bp.INDEX].body
+        assert (body.columns_solved == body.num_points) is full
+    forget_bodies()
+
+
 def test_fem_pad_held_step_keeps_the_equilibrium():
     """Guards the held-step shortcut: an unchanged relative pose keeps the last solution (no
     solve); a motion beyond the solver's tolerance solves again."""
