@@ -324,7 +324,7 @@ def format_tables(cases: list[dict], ana: dict, default_dx: float) -> str:
                                        "particles (soft) | substeps / step | MPM") + " wall / step [ms] | build [s] |",
            "|---|---|---|---|---|---|"]
     for c in cases:
-        middle = f"{mm(c['spacing'])} | {c['particles']} ({c['soft']})" if fem else \
+        middle = f"{c['spacing'] * 1e3:.4g} | {c['particles']} ({c['soft']})" if fem else \
             f"{c['particles']} ({c['soft']}) | {c['substeps']:.0f}"
         out.append(f"| {c['indenter']} | {mm(c['dx'])}{' (default)' if _match(default_dx, [c['dx']]) else ''} | "
                    f"{middle} | {c['step_ms']:.0f} | {c['build_s']:.1f} |")
@@ -478,7 +478,7 @@ def format_curve(curve: dict, indenter: str, depth: float) -> str:
                 "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(curve["runs"], key=lambda r: r["step_ms"]):
         if fem:  # (the stress reading equals the contact force by construction here: not shown)
-            out.append(f"| {r['dx'] * 1e3:g} | {r['spacing'] * 1e3:g} | {4e-3 / r['spacing']:.0f} | {r['particles']} | "
+            out.append(f"| {r['dx'] * 1e3:g} | {r['spacing'] * 1e3:.4g} | {4e-3 / r['spacing']:.0f} | {r['particles']} | "
                        f"{r['step_ms']:.0f} | {r['held_ms']:.0f} | {r['Fn']:.4f} | {_pct(r['err'])} | "
                        f"{_pct(r['F_pressure'] / r['Fn'] - 1)} |")
             continue
