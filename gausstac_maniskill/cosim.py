@@ -18,7 +18,6 @@ grid spacing 1 mm (pad particles every 0.5 mm). Units: SI.
 from __future__ import annotations
 
 import time
-import warnings
 from typing import Callable, Mapping, Sequence
 
 import numpy as np

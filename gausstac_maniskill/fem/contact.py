@@ -220,16 +220,16 @@ def _newton(M, b, f, mu, tol, iterations) -> tuple[np.ndarray, np.ndarray] | Non
     :func:`_solve_tresca` takes over)."""
     r = 1.0 / np.diag(M)[0::3]
 
-    def largest(f, P):  # the largest point residual |F_p| / r_p [m]
-        return float(np.sqrt(np.max(np.sum(((f - P) / r[:, None]) ** 2, axis=1))))
+    def residual(f, P):  # each point's |F_p / r_p|² [m²]
+        return np.sum(((f - P) / r[:, None]) ** 2, axis=1)
 
     P, z, closed, slipping, zt = _coulomb_projection(M, b, f, mu, r)
-    merit = float(np.sum(((f - P) / r[:, None]) ** 2))
+    res = residual(f, P)
     for step in range(iterations + 1):
-        if largest(f, P) < tol:  # converged: the answer is P, so P must pass too
+        if res.max() < tol * tol:  # converged: the answer is P, so P must pass too
             f, (P, z, closed, slipping, zt) = P, _coulomb_projection(M, b, P, mu, r)
-            merit = float(np.sum(((f - P) / r[:, None]) ** 2))
-            if largest(f, P) < tol:
+            res = residual(f, P)
+            if res.max() < tol * tol:
                 return f, np.where(closed, np.where(slipping, 2, 1), 0)
         if step == iterations:
             return None
@@ -242,13 +242,13 @@ def _newton(M, b, f, mu, tol, iterations) -> tuple[np.ndarray, np.ndarray] | Non
         for _ in range(12):  # cut the step until the residual decreases
             trial = f + alpha * delta
             out = _coulomb_projection(M, b, trial, mu, r)
-            trial_merit = float(np.sum(((trial - out[0]) / r[:, None]) ** 2))
-            if trial_merit < merit:
+            trial_res = residual(trial, out[0])
+            if trial_res.sum() < res.sum():
                 break
             alpha *= 0.5
         else:
             return None
-        f, merit = trial, trial_merit
+        f, res = trial, trial_res
         P, z, closed, slipping, zt = out
     return None
 
@@ -422,22 +422,28 @@ class Indenters:
         self.friction = float(self.mu.max())
         self.owner = None
 
+    def _union(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(nearest collider [S] int, φ [S], normal [S, 3] body frame) of the points ``x`` [S, 3]."""
+        phis, normals = zip(*(i(x) for i in self.items))
+        k, rows = np.argmin(np.stack(phis), axis=0), np.arange(len(x))
+        return k, np.stack(phis)[k, rows], np.stack(normals)[k, rows]
+
     def nearest(self, x: np.ndarray) -> np.ndarray:
         """[S] int: the collider nearest each of the points ``x`` [S, 3] (body frame)."""
         if len(self.items) == 1:
             return np.zeros(len(x), np.int64)
-        return np.argmin(np.stack([i(x)[0] for i in self.items]), axis=0)
+        return self._union(x)[0]
 
     def assign(self, x: np.ndarray) -> None:
         """Each of the points ``x`` [S, 3] (body frame) to the collider nearest it."""
         self.owner = self.nearest(x)
 
-    def reassign(self, x: np.ndarray, local: np.ndarray | None = None) -> np.ndarray | None:
-        """Each of the points ``x`` [S, 3] to the collider nearest it now; ``local`` [S, 3]
-        (points given in their old owner's frame, e.g. holds) is returned in the new owner's."""
-        body = None if local is None else self.to_body(local)
+    def reassign(self, x: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """Each of the points ``x`` [S, 3] to the collider nearest it now; returns ``local``
+        [S, 3] (points given in their old owner's frame, e.g. holds) in the new owner's."""
+        body = self.to_body(local)
         self.owner = self.nearest(x)
-        return None if local is None else self.to_local(body)
+        return self.to_local(body)
 
     def _groups(self):
         for c in range(len(self.items)):
@@ -474,9 +480,7 @@ class Indenters:
         colliders' union: each on the one nearest it (whatever its owner)."""
         if len(self.items) == 1:
             return self.items[0](x)
-        phis, normals = zip(*(i(x) for i in self.items))
-        k, rows = np.argmin(np.stack(phis), axis=0), np.arange(len(x))
-        return np.stack(phis)[k, rows], np.stack(normals)[k, rows]
+        return self._union(x)[1:]
 
     def point_friction(self) -> np.ndarray:
         """[S] each point's friction coefficient (its owner's)."""
@@ -485,7 +489,7 @@ class Indenters:
 
 @dataclass
 class ContactResult:
-    """Equilibrium under one collider (body frame, SI units).
+    """Equilibrium under rigid colliders (body frame, SI units).
 
     Attributes:
         force: [S, 3] force [N] the collider exerts on the body at each surface point.
@@ -501,8 +505,8 @@ class ContactResult:
         anchors: [S, 3] where each stuck or slipping point holds on its collider, in the
             collider's frame [m] (NaN where open; frictional contact only).
         pose: [C, 4, 4] the colliders' poses in the body frame (frictional contact only).
-        owner: [S] int, each point's collider (index into ``pose`` and ``keys``; frictional
-            contact only).
+        owner: [S] int, each point's collider (index into ``keys``, and ``pose``; solves with
+            an :class:`Indenter` or :class:`Indenters` only).
         keys: the colliders' keys (:class:`Indenters`; ``(None,)`` for one :class:`Indenter`).
     """
 
@@ -702,8 +706,8 @@ class QuasiStaticBody:
                 comes into contact holds where it lands: the foot on the collider's surface of
                 where it was at the last solve, carried by the collider's motion since
                 (``warm.pose``), or of where it rests if there is none. :class:`Indenters`:
-                several colliders at once, each point meeting the one nearest it where the
-                solve starts (its hold carries over only on the same collider).
+                several colliders at once, read on their union (each point against the
+                nearest); a point's hold carries over only on the same collider.
             geometry: where the contact conditions are read. ``"rest"`` (default): φ and n
                 at the rest surface, the gap linear in the displacement, g = φ(X) + n(X)·u:
                 small-displacement contact, consistent with the linear body and with the
@@ -872,9 +876,8 @@ class _Friction:
         phi, n = colliders.local_sdf(local)
         local = local - phi[:, None] * n  # a point that comes into contact holds where it lands: its foot on the surface
         if held:  # a stuck point keeps its hold, on the same collider
-            was = np.array([k for k in warm.keys], dtype=object)[warm.owner]
-            now = np.array(colliders.keys, dtype=object)[colliders.owner]
-            keep = (warm.state == 1) & (was == now)
+            now = np.array([colliders.keys.index(k) if k in colliders.keys else -1 for k in warm.keys])
+            keep = (warm.state == 1) & (now[warm.owner] == colliders.owner)
             local[keep] = warm.anchors[keep]
         self.rest = body.points
         self.local = local

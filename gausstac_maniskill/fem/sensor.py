@@ -375,7 +375,7 @@ class EquilibriumPad:
         res = self.result
         loaded = np.abs(res.force).sum(1) > 0
         if key is not None and res.owner is not None:
-            loaded &= np.array(res.keys, dtype=object)[res.owner] == key
+            loaded &= res.owner == (res.keys.index(key) if key in res.keys else -1)
         return np.flatnonzero(loaded)
 
     def contact_points(self, link_pose: np.ndarray, key=None) -> tuple[np.ndarray, np.ndarray]:
