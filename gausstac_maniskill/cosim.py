@@ -498,9 +498,11 @@ class GaussTacSim:
         return self._maps
 
     def _fem_maps(self, name: str) -> dict[str, torch.Tensor]:
-        """The maps of equilibrium pad ``name``: :func:`~.tactile.extract.tactile_maps` of its
-        particles' state (:meth:`EquilibriumPad.particle_state`), on the Taichi arch's device;
-        exact zeros while nothing touches it (its equilibrium is then its rest shape)."""
+        """The maps of equilibrium pad ``name``, on the Taichi arch's device: for a linear pad
+        with its full compliance, one matrix times its contact forces
+        (:meth:`EquilibriumPad.tactile_maps`); else :func:`~.tactile.extract.tactile_maps` of
+        its particles' state (:meth:`EquilibriumPad.particle_state`: one solve of the body).
+        Exact zeros while nothing touches it (its equilibrium is then its rest shape)."""
         from . import backend
 
         fp, pad = self._fem[name], self.pads[name]
@@ -509,8 +511,10 @@ class GaussTacSim:
         T = self._link_pose[pad.spec.link]
         if fp.result is None and name in self._zero_maps:
             return {k: v.clone() for k, v in self._zero_maps[name].items()}
-        x, _, sigma, f = fp.particle_state(T)
-        maps = tactile_maps(pad, self._binning[name], x, T, f, sigma)
+        maps = fp.tactile_maps(self._binning[name])
+        if maps is None:
+            x, _, sigma, f = fp.particle_state(T)
+            maps = tactile_maps(pad, self._binning[name], x, T, f, sigma)
         device = backend.torch_device()
         maps = {k: v.to(device) for k, v in maps.items()}
         if fp.result is None:  # at rest: zeros (their shapes and dtypes kept for the next time)

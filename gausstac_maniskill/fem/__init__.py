@@ -11,6 +11,10 @@ shape never changes, so its stiffness matrix is assembled and factored once:
   a linear complementarity problem; with Coulomb friction: semismooth Newton on Alart and
   Curnier's equations) on the points near them, with the body's compliance at those points
   computed once and kept.
+* :mod:`.compliance` — that compliance among all surface points, and any linear readout's
+  response to point forces, solved once (in worker processes) and kept on disk.
+* :mod:`.maps` — a linear pad's tactile maps as one matrix times its contact forces.
+* :mod:`.pad`, :mod:`.sensor` — the product's pads as such bodies, read as the MPM's pads are.
 """
 from .contact import ContactResult, Indenter, Indenters, QuasiStaticBody, solve_frictional, solve_lcp
 from .hex import VoxelBody, element_stiffness, stiffness, voxel_body

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "compliance_key", "surface_compliance", "estimated_bytes"]
+__all__ = ["cache_dir", "compliance_key", "surface_compliance", "readout_responses", "estimated_bytes"]
 
 #: Bump when the stored layout or the way W is computed changes: old files are then ignored.
 FORMAT = 1
@@ -71,23 +71,64 @@ def surface_compliance(body, workers: int | None = None, progress: bool = True, 
         cache: read and write the disk cache (when :func:`cache_dir` is not off).
     """
     S = body.num_points
-    folder = cache_dir() if cache else None
-    path = None if folder is None else folder / f"compliance-{compliance_key(body)}.npy"
-    if path is not None and path.exists():
-        try:
-            scaled = np.load(path, allow_pickle=False)
-            if scaled.shape != (3 * S, 3 * S) or scaled.dtype != np.float32 or not np.isfinite(scaled).all():
-                raise ValueError(f"holds {scaled.dtype} {scaled.shape}, expected float32 {(3 * S, 3 * S)} finite")
-            scaled /= np.float32(body.E)
-            return scaled
-        except (OSError, ValueError) as err:
-            warnings.warn(f"{body.name}: the cached compliance {path} cannot be used ({err}); computing it again",
-                          stacklevel=2)
-    scaled = _compute(body, workers, progress)
-    if path is not None:
-        _store(scaled, path, body.name)
+
+    def compute():
+        out = _responses(body, body.point_loads(np.arange(S)), body.E, workers, progress,
+                         f"{body.name}: compliance at {S} surface points (once; cached)")
+        flat = out.reshape(3 * S, 3 * S)  # rows (d, j), columns (s, i)
+        flat += flat.T  # W is symmetric (Maxwell-Betti); the solves agree with that to rounding
+        flat *= np.float32(0.5)
+        return flat
+
+    scaled = _cached(body, f"compliance-{compliance_key(body)}", (3 * S, 3 * S), compute, cache)
     scaled /= np.float32(body.E)
     return scaled
+
+
+def readout_responses(body, A, workers: int | None = None, progress: bool = True, cache: bool = True,
+                      what: str = "readouts") -> np.ndarray:
+    """[R, 3S] float32: the response of R readouts r = A u, linear in ``body``'s nodal
+    displacements u (``A`` [R, 3V] sparse, node-major degrees of freedom), to a unit force [N]
+    at each surface point along each axis (columns ordered (point, axis), as W's): r = M f for
+    point forces f [3S]. M = A K⁻¹ Nᵀ = (N K⁻¹ Aᵀ)ᵀ (K symmetric): R solves, not 3S. Cached on
+    disk as :func:`surface_compliance`, keyed by the body and the bytes of A (which hold any
+    material constant A depends on); ``what`` names them on the progress bar."""
+    import scipy.sparse as sp
+
+    A = sp.csr_matrix(A, dtype=np.float64)
+    A.sort_indices()
+    h = hashlib.sha256()
+    for a in (A.indptr, A.indices, A.data):
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    S, R = body.num_points, A.shape[0]
+
+    def compute():
+        out = _responses(body, body.dofs_to_free(A), 1.0, workers, progress,
+                         f"{body.name}: response of {R} {what} (once; cached)")
+        return out.reshape(R, 3 * S)
+
+    return _cached(body, f"readout-{compliance_key(body)}-{h.hexdigest()[:16]}", (R, 3 * S), compute, cache)
+
+
+def _cached(body, stem: str, shape: tuple, compute, cache: bool) -> np.ndarray:
+    """The float32 array ``shape`` kept under :func:`cache_dir` as ``stem``.npy, or ``compute()``
+    (then kept there). A file that cannot be used is computed again, with a warning naming it."""
+    folder = cache_dir() if cache else None
+    path = None if folder is None else folder / f"{stem}.npy"
+    if path is not None and path.exists():
+        try:
+            out = np.load(path, allow_pickle=False)
+            if out.shape != shape or out.dtype != np.float32 or not np.isfinite(out).all():
+                raise ValueError(f"holds {out.dtype} {out.shape}, expected float32 {shape} finite")
+            return out
+        except (OSError, ValueError) as err:
+            warnings.warn(f"{body.name}: the cached {path} cannot be used ({err}); computing it again",
+                          stacklevel=3)
+    out = compute()
+    if path is not None:
+        _store(out, path, body.name)
+    return out
 
 
 def _store(scaled: np.ndarray, path: Path, name: str) -> None:
@@ -100,8 +141,8 @@ def _store(scaled: np.ndarray, path: Path, name: str) -> None:
             np.save(fh, scaled, allow_pickle=False)
         os.replace(tmp, path)
     except OSError as err:
-        warnings.warn(f"{name}: could not keep the compliance in {path} ({err}); it will be computed again next time",
-                      stacklevel=3)
+        warnings.warn(f"{name}: could not keep {path} ({err}); it will be computed again next time",
+                      stacklevel=4)
         tmp.unlink(missing_ok=True)
 
 
@@ -112,46 +153,41 @@ def _cpus() -> int:
         return os.cpu_count() or 1
 
 
-def _compute(body, workers: int | None, progress: bool) -> np.ndarray:
-    """E·W [3S, 3S] float32, symmetrised, from 3S solves (in ``workers`` processes)."""
+def _responses(body, loads, scale: float, workers: int | None, progress: bool, desc: str) -> np.ndarray:
+    """[C, S, 3] float32: ``scale`` × the surface points' displacements under each of the C
+    load vectors ``loads`` [num_free, C] (sparse), in ``workers`` processes, with a progress bar."""
     from tqdm.auto import tqdm
 
-    S = body.num_points
-    chunks = [np.arange(a, min(a + CHUNK, S)) for a in range(0, S, CHUNK)]
+    C = loads.shape[1]
+    chunks = [np.arange(a, min(a + 3 * CHUNK, C)) for a in range(0, C, 3 * CHUNK)]
     if workers is None:
-        workers = 1 if S * body.num_free < PARALLEL_WORK else _cpus()
+        workers = 1 if C * body.num_free < 3 * PARALLEL_WORK else _cpus()
     workers = max(1, min(int(workers), len(chunks)))
-    bar = tqdm(total=S, desc=f"{body.name}: compliance at {S} surface points (once; cached)", unit="point",
-               disable=not progress, leave=False)
+    bar = tqdm(total=C, desc=desc, unit="solve", disable=not progress, leave=False)
     with bar:
-        out = None
         if workers > 1:
             try:
-                out = _compute_in_processes(body, workers, bar)
+                return _in_processes(body, loads, scale, workers, bar)
             except (OSError, RuntimeError) as err:  # a worker could not start or died: one process does it all
-                warnings.warn(f"{body.name}: computing the compliance in {workers} worker processes failed ({err}); "
-                              "computing it in this process instead", stacklevel=3)
+                warnings.warn(f"{body.name}: solving in {workers} worker processes failed ({err}); "
+                              "solving in this process instead", stacklevel=4)
                 bar.reset()
-        if out is None:
-            out = np.empty((S, 3, S, 3), np.float32)
-            for chunk in chunks:
-                out[chunk] = _columns(body, chunk)
-                bar.update(len(chunk))
-    flat = out.reshape(3 * S, 3 * S)
-    flat += flat.T  # W is symmetric (Maxwell-Betti); the solves agree with that to rounding
-    flat *= np.float32(0.5)
-    return flat
+        out = np.empty((C, body.num_points, 3), np.float32)
+        for cols in chunks:
+            out[cols] = _solve(body, loads, cols, scale)
+            bar.update(len(cols))
+    return out
 
 
-def _columns(body, points: np.ndarray) -> np.ndarray:
-    """E·W rows of ``points`` [k] as [k, 3 (j), S, 3 (i)] float32."""
-    return (body.solve_columns(points).transpose(0, 3, 1, 2) * body.E).astype(np.float32)
+def _solve(body, loads, cols: np.ndarray, scale: float) -> np.ndarray:
+    """[len(cols), S, 3] float32: ``scale`` × the surface response to load columns ``cols``."""
+    return (body.surface_response(loads[:, cols]) * scale).astype(np.float32)
 
 
-def _compute_in_processes(body, workers: int, bar) -> np.ndarray:
-    """The rows of E·W [S, 3, S, 3] solved by ``workers`` fresh Python processes
+def _in_processes(body, loads, scale: float, workers: int, bar) -> np.ndarray:
+    """:func:`_responses` by ``workers`` fresh Python processes
     (``python -m gausstac_maniskill.fem.compliance``), each factoring the body itself and
-    writing its share of the rows into one memory-mapped file. Fresh interpreters, not
+    writing its share of the columns into one memory-mapped file. Fresh interpreters, not
     multiprocessing: a fork would copy Taichi's and BLAS's threads in an unknown state, and
     multiprocessing's spawn re-runs the user's script in each worker unless it is guarded by
     ``if __name__ == "__main__"``."""
@@ -161,26 +197,26 @@ def _compute_in_processes(body, workers: int, bar) -> np.ndarray:
     import sys
     import tempfile
 
-    S = body.num_points
+    C = loads.shape[1]
     with tempfile.TemporaryDirectory(prefix="gausstac-compliance-") as tmp:
-        desc, rows = os.path.join(tmp, "body.pkl"), os.path.join(tmp, "rows.npy")
+        desc, out = os.path.join(tmp, "body.pkl"), os.path.join(tmp, "out.npy")
         with open(desc, "wb") as fh:
-            pickle.dump(body, fh)
-        np.lib.format.open_memmap(rows, mode="w+", dtype=np.float32, shape=(S, 3, S, 3)).flush()
+            pickle.dump((body, loads, scale), fh)
+        np.lib.format.open_memmap(out, mode="w+", dtype=np.float32, shape=(C, body.num_points, 3)).flush()
         # the workers import this package as this process found it (an uninstalled checkout on sys.path too)
         env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         # stderr to files, not pipes: a worker that writes much there would block on a full pipe
         # that this process reads only at the end
         logs = [open(os.path.join(tmp, f"worker{w}.err"), "w+") for w in range(workers)]
-        procs = [subprocess.Popen([sys.executable, "-m", __name__, desc, rows, str(w), str(workers), str(CHUNK)], env=env,
-                                  stdout=subprocess.PIPE, stderr=log, text=True)
+        procs = [subprocess.Popen([sys.executable, "-m", __name__, desc, out, str(w), str(workers), str(3 * CHUNK)],
+                                  env=env, stdout=subprocess.PIPE, stderr=log, text=True)
                  for w, log in enumerate(logs)]
         sel = selectors.DefaultSelector()
         for p in procs:
             sel.register(p.stdout, selectors.EVENT_READ)
         open_pipes = len(procs)
-        while open_pipes:  # each worker prints the number of points of each chunk it finishes
+        while open_pipes:  # each worker prints the number of columns of each chunk it finishes
             for key, _ in sel.select():
                 line = key.fileobj.readline()
                 if not line:
@@ -201,22 +237,22 @@ def _compute_in_processes(body, workers: int, bar) -> np.ndarray:
             rc, err = failed[0]
             raise RuntimeError(f"a worker exited with status {rc}: "
                                f"{err.strip().splitlines()[-1] if err.strip() else 'no message'}")
-        return np.array(np.load(rows, mmap_mode="r"))
+        return np.array(np.load(out, mmap_mode="r"))
 
 
-def _worker(desc: str, rows: str, index: int, count: int, chunk: int) -> None:
-    """One worker of :func:`_compute_in_processes`: the chunks (of ``chunk`` points) ``index``,
+def _worker(desc: str, out_path: str, index: int, count: int, chunk: int) -> None:
+    """One worker of :func:`_in_processes`: the chunks (of ``chunk`` columns) ``index``,
     ``index + count``, …"""
     import pickle
 
     with open(desc, "rb") as fh:
-        body = pickle.load(fh)  # assembles and factors the body
-    out = np.load(rows, mmap_mode="r+")
-    S = body.num_points
-    for a in range(index * chunk, S, count * chunk):
-        points = np.arange(a, min(a + chunk, S))
-        out[points] = _columns(body, points)
-        print(len(points), flush=True)
+        body, loads, scale = pickle.load(fh)  # assembles the body (it factors on its first solve)
+    out = np.load(out_path, mmap_mode="r+")
+    C = loads.shape[1]
+    for a in range(index * chunk, C, count * chunk):
+        cols = np.arange(a, min(a + chunk, C))
+        out[cols] = _solve(body, loads, cols, scale)
+        print(len(cols), flush=True)
     out.flush()
 
 

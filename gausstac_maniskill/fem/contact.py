@@ -12,8 +12,9 @@ with φ the collider's signed distance at each point, n its outward normal there
 normal force. Frictionless, it is solved exactly (:func:`solve_lcp`); with Coulomb friction
 (an :class:`Indenter`) by semismooth Newton (:func:`solve_frictional`). A finite-strain body
 repeats that inside fixed-point iterations on K (:meth:`QuasiStaticBody.solve`). K is factored
-once; W's column for a point is computed by three solves the first time the point comes near
-a collider, and kept, so a press or a slide costs solves only for the points it reaches.
+once, when a solve first needs it; W's column for a point is computed by three solves the first
+time the point comes near a collider, and kept, so a press or a slide costs solves only for the
+points it reaches (or all of W at once, :mod:`.compliance`).
 """
 from __future__ import annotations
 
@@ -548,8 +549,6 @@ class QuasiStaticBody:
 
     def __init__(self, body: VoxelBody, E: float, nu: float, fixed, points, point_elements, name: str = "body",
                  model: str = "linear"):
-        import scipy.sparse.linalg as sla
-
         if model not in ("linear", "neo_hookean"):
             raise ConfigError(f"{name}: model={model!r} must be 'linear' or 'neo_hookean'")
         self._args = (body, E, nu, fixed, points, point_elements, name, model)  # to rebuild it (pickling)
@@ -571,15 +570,15 @@ class QuasiStaticBody:
         # row of each degree of freedom in a solution vector padded with a zero row for the fixed ones
         self._row = np.full(body.num_dofs, len(free), np.int64)
         self._row[free] = np.arange(len(free))
-        # K is symmetric positive definite: no pivoting, so the nested-dissection order stands
-        self._lu = sla.splu(K[free][:, free].tocsc(), permc_spec="NATURAL",
-                            options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
+        self._factor = None  # K's sparse LU, computed on first use (:attr:`_lu`)
         self.points = np.asarray(points, float).reshape(-1, 3)
         self.point_elements = np.asarray(point_elements, np.int64)
         nodes, self._weights = trilinear(body, self.points, self.point_elements)
         self._point_rows = self._row[nodes[:, :, None] * 3 + np.arange(3)]  # [S, 8, 3]
         self._columns: dict[int, np.ndarray] = {}  # point -> its compliance column [S, 3, 3], as solved
         self._compliance: np.ndarray | None = None  # [3S, 3S] all of W, once computed (precompute_compliance)
+        #: what other modules compute once from this body and keep with it (e.g. :class:`~.maps.PadMaps`)
+        self.derived: dict = {}
 
     def __reduce__(self):
         """Pickled as its description; unpickling assembles and factors it again (the factor
@@ -587,8 +586,32 @@ class QuasiStaticBody:
         return (type(self), self._args)
 
     @property
+    def _lu(self):
+        """K's sparse LU on the free degrees of freedom (SuperLU), factored the first time a
+        solve needs it: about 0.5 GB and 3 s for the index pad at 0.5 mm elements. A linear pad
+        whose compliance and map responses come from the disk cache never factors."""
+        if self._factor is None:
+            import scipy.sparse.linalg as sla
+
+            free = self._free
+            # K is symmetric positive definite: no pivoting, so the nested-dissection order stands
+            self._factor = sla.splu(self._K[free][:, free].tocsc(), permc_spec="NATURAL",
+                                    options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
+        return self._factor
+
+    @property
+    def factored(self) -> bool:
+        """Whether K's factor has been computed in this process."""
+        return self._factor is not None
+
+    @property
     def num_points(self) -> int:
         return len(self.points)
+
+    @property
+    def has_compliance(self) -> bool:
+        """Whether the compliance among all surface points is at hand (:meth:`precompute_compliance`)."""
+        return self._compliance is not None
 
     @property
     def columns_solved(self) -> int:
@@ -622,17 +645,46 @@ class QuasiStaticBody:
         padded = np.vstack([u, np.zeros((1, u.shape[1]))])
         return np.einsum("sa,saik->sik", self._weights, padded[self._point_rows])
 
+    def point_loads(self, points) -> "scipy.sparse.csc_matrix":
+        """[num_free, 3k] nodal load vectors (sparse) of a unit force [N] at each of surface
+        ``points`` [k] along each axis, columns ordered (point, axis)."""
+        import scipy.sparse as sp
+
+        points = np.asarray(points, np.int64)
+        k = len(points)
+        rows = np.broadcast_to(self._point_rows[points][:, :, :, None], (k, 8, 3, 3))  # [d, a, i (row axis), j]
+        cols = np.broadcast_to((3 * np.arange(k))[:, None, None, None] + np.arange(3)[None, None, None, :], (k, 8, 3, 3))
+        vals = np.broadcast_to(self._weights[points][:, :, None, None] * np.eye(3)[None, None], (k, 8, 3, 3))
+        keep = (vals != 0.0) & (rows < self.num_free)
+        return sp.csc_matrix((vals[keep], (rows[keep], cols[keep])), shape=(self.num_free, 3 * k))
+
+    def surface_response(self, loads) -> np.ndarray:
+        """[C, S, 3] displacement [m] of every surface point under each of C nodal load vectors
+        ``loads`` [num_free, C] (dense or sparse; N): one multi-right-hand-side solve."""
+        loads = loads.toarray() if hasattr(loads, "toarray") else np.asarray(loads, float)
+        return self._at_points(self._lu.solve(loads)).transpose(2, 0, 1)
+
+    def dofs_to_free(self, A) -> "scipy.sparse.csc_matrix":
+        """[num_free, R]: the transpose of a readout ``A`` [R, 3V] (sparse; node-major degrees
+        of freedom) restricted to the free ones, as load vectors (:meth:`surface_response`). By
+        Maxwell–Betti (K symmetric) their responses are the readouts' responses to point forces."""
+        import scipy.sparse as sp
+
+        A = sp.csr_matrix(A)
+        if A.shape[1] != self.body.num_dofs:
+            raise ConfigError(f"{self.name}: a readout of shape {A.shape} does not act on {self.body.num_dofs} dofs")
+        keep = self._row < self.num_free
+        P = sp.csr_matrix((np.ones(int(keep.sum())), (self._row[keep], np.flatnonzero(keep))),
+                          shape=(self.num_free, self.body.num_dofs))
+        return (P @ A.T).tocsc()
+
     def solve_columns(self, points) -> np.ndarray:
         """[k, S, 3, 3] compliance columns of surface ``points`` [k]: entry [d, s, i, j] is the
         displacement [m] of surface point s along axis i under a unit force [N] at ``points[d]``
         along axis j (three solves per point)."""
         points = np.asarray(points, np.int64)
-        k = len(points)
-        unit = np.zeros((3 * k, k, 3))
-        for c in range(k):
-            unit[3 * c:3 * c + 3, c, :] = np.eye(3)
-        disp = self._at_points(self._lu.solve(self._load(points, unit)))  # [S, 3 (i), 3k (d, j)]
-        return disp.reshape(self.num_points, 3, k, 3).transpose(2, 0, 1, 3)
+        disp = self.surface_response(self.point_loads(points))  # [3k (d, j), S, 3 (i)]
+        return disp.reshape(len(points), 3, self.num_points, 3).transpose(0, 2, 3, 1)
 
     def _ensure_columns(self, points) -> None:
         if self._compliance is not None:

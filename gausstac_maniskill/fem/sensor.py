@@ -38,9 +38,10 @@ __all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES", "forget_bodies"]
 PRECOMPUTE_BYTES = 256 * 2 ** 20
 #: Bodies kept in this process (the most recently used), by pad geometry, material and model: a
 #: scene rebuilt at every reset (a task's) finds its pads' factors and compliances again instead
-#: of assembling them anew (3 s per pad at the default resolution). Each holds its factor
-#: (~0.5 GB at the default resolution) and compliance (143 MB) while kept: the four pads of a
-#: hand at the default resolution, about 3 GB. :func:`forget_bodies` lets them go.
+#: of assembling them anew (1 s per pad at the default resolution). Each holds its compliance
+#: (143 MB at the default resolution), its maps' responses (25 MB) and, once something needs a
+#: solve of the whole body (the camera drawing the pad deformed, the finite-strain model, a
+#: compliance not yet on disk), its factor (~0.5 GB). :func:`forget_bodies` lets them go.
 BODY_CACHE = 4
 #: Surface motion, as a fraction of the layer's thickness, beyond which a linear pad says its
 #: forces are not physical (the tasks' experts stay under 25 %; random actions reach 160 %).
@@ -338,6 +339,26 @@ class EquilibriumPad:
                 d["nodes"] = (self.body.nodal_displacement(idx, res.force[idx]) if len(idx)
                               else np.zeros((len(self.body.body.nodes), 3)))
         return d["nodes"]
+
+    def tactile_maps(self, binning) -> dict | None:
+        """The tactile maps of the last solution under ``binning`` (a
+        :class:`~gausstac_maniskill.tactile.extract.TaxelBinning` of this pad), as
+        :func:`~gausstac_maniskill.tactile.extract.tactile_maps` gives them, read as one matrix
+        times the contact forces (:class:`~.maps.PadMaps`: no solve of the body); None where
+        that does not apply (finite strain, or a body without its full compliance): read
+        :meth:`particle_state` then."""
+        if self.result is None or self.model != "linear" or not self.body.has_compliance:
+            return None
+        from .maps import PadMaps
+
+        h = hashlib.sha256()
+        for a in (binning.taxel, binning.weight, self.pad.sensor_frame, self.point_particles):
+            h.update(np.ascontiguousarray(a).tobytes())
+        key = ("maps", h.hexdigest())
+        derived = self.body.derived
+        if key not in derived:
+            derived[key] = PadMaps(self.pad, self.body, binning, self.point_particles)
+        return derived[key].maps(self.result.force)
 
     def _local_particles(self):
         """The particles' positions, F, Cauchy stresses and contact forces in the link frame

@@ -45,7 +45,7 @@ import torch
 
 from .pad import Pad
 
-__all__ = ["TaxelBinning", "tactile_maps", "MAP_KEYS"]
+__all__ = ["TaxelBinning", "tactile_maps", "map_tensors", "MAP_KEYS"]
 
 #: The maps a pad gives, in this order (:func:`tactile_maps`, the device read, the sensor).
 MAP_KEYS = ("depth", "shear", "force", "pressure")
@@ -139,8 +139,14 @@ def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_po
         soft = inside & ~pad.kinematic
         cnt = binning.accumulate(soft)
         pressure = binning.accumulate(soft, -snn) / np.where(cnt > 1e-9, cnt, 1.0)
+    return map_tensors(depth, sx, sy, force, pressure, H, W)
+
+
+def map_tensors(depth, shear_x, shear_y, force, pressure, rows: int, cols: int) -> dict[str, torch.Tensor]:
+    """:func:`tactile_maps`' dict of float32 tensors from its maps as flat [rows·cols] arrays
+    (taxel index row·cols + col)."""
     as_t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
-    return {"depth": as_t(depth.reshape(H, W)),
-            "shear": as_t(np.stack([sx, sy], -1).reshape(H, W, 2)),
-            "force": as_t(force.reshape(H, W)),
-            "pressure": as_t(pressure.reshape(H, W))}
+    return {"depth": as_t(np.reshape(depth, (rows, cols))),
+            "shear": as_t(np.stack([shear_x, shear_y], -1).reshape(rows, cols, 2)),
+            "force": as_t(np.reshape(force, (rows, cols))),
+            "pressure": as_t(np.reshape(pressure, (rows, cols)))}
