@@ -187,12 +187,19 @@ class GaussTacEnv(BaseEnv):
             below :data:`PAD_REACTION_MIN_FREQ`. ``False`` (default): the hand is driven
             kinematically as far as the pads are concerned (the rigid cores still stop a
             finger), and the pads crush against their cores when a finger presses hard.
-        pad_solver: ``"mpm"`` (default: the pads are explicit MPM particles) or ``"fem"``: each
-            env's pads solved at equilibrium after every MPM step
+        pad_solver: ``"auto"`` (default): ``"fem"`` in a task whose objects are all rigid,
+            ``"mpm"`` in one with a soft object (the sponge tasks); :attr:`pad_solver_used`
+            says which. ``"fem"``: each env's pads solved at equilibrium after every MPM step
             (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`; no pseudo-mass, no time
-            step, rigid objects only: a task with a soft object raises a ``ConfigError``).
-            At the default ``mpm_dx`` a pad's first contact on a machine computes its
-            compliance (40 s on 2 cores, then cached; BENCHMARKS.md, issue 10).
+            step, rigid objects only: a task with a soft object raises a ``ConfigError``);
+            its normal forces within 4.3 % of its finest grid on the product pad at the default
+            ``mpm_dx`` (the sphere's sliding friction force +5.7 %),
+            about 10× faster than the MPM pads (BENCHMARKS.md, issue 10). Its linear model
+            warns where a pad is pressed beyond half its layer. At the default ``mpm_dx`` a pad
+            shape's first contact on a machine computes its compliance and its maps' response
+            (about 55 s on 2 cores, with progress bars; then kept under
+            ``~/.cache/gausstac_maniskill``). ``"mpm"``: the pads are explicit MPM particles
+            (finite strain; soft objects too).
         fem_model: the ``"fem"`` pads' material, ``"linear"`` (default) or ``"neo_hookean"``.
     """
 
@@ -204,14 +211,14 @@ class GaussTacEnv(BaseEnv):
                  splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
                  pad_reaction: bool = False, splat_lod: bool = True, splat_cull: bool = True,
-                 pad_solver: str = "mpm", fem_model: str = "linear", **kwargs):
+                 pad_solver: str = "auto", fem_model: str = "linear", **kwargs):
         backend.ensure_init()
         _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
         self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
-        if pad_solver not in ("mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
-            raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'mpm' or 'fem' "
+        if pad_solver not in ("auto", "mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
+            raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'auto', 'mpm' or 'fem' "
                               "and fem_model 'linear' or 'neo_hookean'")
         self.pad_solver, self.fem_model = pad_solver, fem_model
         self.mpm_sleep_margin = float(mpm_sleep_margin)
@@ -499,9 +506,11 @@ class GaussTacEnv(BaseEnv):
             # the pads' reaction moves SAPIEN bodies: their pseudo-mass stays what the coupling
             # was built and measured with (a held pad's larger one jolted a pinched cube)
             settings = dataclasses.replace(settings, hold_scaling=1.0)
+        #: the pads' solver in this scene: ``pad_solver``, with "auto" resolved
+        self.pad_solver_used = self.pad_solver if self.pad_solver != "auto" else "mpm" if self._soft else "fem"
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
                                    urdf=agent.pad_urdf(), settings=settings,
-                                   sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver,
+                                   sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver_used,
                                    fem_model=self.fem_model)
         self.cosims = self._batch.scenes
         for name, obj in self._rigid.items():

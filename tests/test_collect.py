@@ -275,7 +275,7 @@ def test_ray_collection_equals_a_single_process_one(tmp_path):
     a, b = _h5_items(via_ray["path"]), _h5_items(single["path"])
     assert sorted(a) == sorted(b) and any(k.startswith("traj_1/") for k in a)
     for name in a:
-        assert np.array_equal(a[name], b[name]), name
+        assert np.array_equal(a[name], b[name], equal_nan=a[name].dtype.kind == "f"), name  # NaN: no friction hold
 
 
 def test_ray_without_ray_installed_or_unreachable_is_a_clear_error(tmp_path, monkeypatch):

@@ -15,9 +15,11 @@ from gausstac_maniskill.tactile.pad import CORE_DEPTH
 pytestmark = pytest.mark.sapien
 
 
-@pytest.fixture(scope="module")
-def press_env():
-    env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=2e-3)
+@pytest.fixture(scope="module", params=["auto", "mpm"])
+def press_env(request):
+    """PressCube with its default pads (auto: solved at equilibrium, the cube being rigid) and with the MPM's."""
+    env = gym.make("GaussTac-PressCube-v1", sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=2e-3,
+                   pad_solver=request.param)
     yield env
     env.close()
 
@@ -51,9 +53,13 @@ def test_hand_closed_hard_on_the_fixed_cube_stops_at_the_cores(press_env):
             maps = u.tactile()[spec.name]
             assert np.isfinite(f) and f >= 0.0, (spec.name, f)
             assert all(torch.isfinite(m).all() for m in maps.values())
-            # a taxel is the contact force along the sensor's z: at the rim of the curved pad a
-            # dragged contact's friction may point slightly outwards (-0.012 N of 68 N seen)
-            assert maps["force"].min().item() >= -1e-3 * f, (spec.name, maps["force"].min().item(), f)
+            # a taxel is the contact force along the sensor's z: where the cube slides across a
+            # pad, friction may drag its surface slightly outwards (MPM: -0.012 N of 68 N seen;
+            # equilibrium pads: -0.11 N of 35 N on the middle pad, slipping points pushed sideways
+            # by the cube's face at 1.4 N and dragged out by 0.5 N, their linear model far out of
+            # range at 86 % of the layer, and warned)
+            bound = 1e-3 if u.pad_solver_used == "mpm" else 5e-3
+            assert maps["force"].min().item() >= -bound * f, (spec.name, maps["force"].min().item(), f)
             peak[spec.name] = max(peak[spec.name], f)
             assert core_depth_in_cube(u, spec.link, cores[spec.link]) < 1e-3, spec.name  # PhysX's slop only
     assert peak["index"] > 5.0  # the index pad was pressed hard onto the cube ...
