@@ -32,7 +32,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench pad --pad-solver fem --indenters sphere plate --dx 2e-3 1e-3 6.6667e-4 --out out/bench_pad_fem
 	$(PY) -m gausstac_maniskill.bench pad --curve --pad-solver fem --indenters sphere --dx 2e-3 1.5e-3 1e-3 7.5e-4 6.6667e-4 --out out/bench_pad_fem_sphere
 	$(PY) -m gausstac_maniskill.bench pad --curve --pad-solver fem --indenters plate --dx 2e-3 1.5e-3 1e-3 7.5e-4 --out out/bench_pad_fem_plate
-	$(PY) -m gausstac_maniskill.bench envs --tasks GaussTac-PressCube-v1 --dx 1e-3 --pad-solvers mpm fem --no-fsr --out out/bench_envs_fem
+	$(PY) -m gausstac_maniskill.bench envs --tasks GaussTac-PressCube-v1 --sweep-tasks GaussTac-PressCube-v1 GaussTac-SlideCube-v1 GaussTac-GraspLiftCube-v1 --dx 1e-3 --pad-solvers auto mpm --no-fsr --out out/bench_envs_fem
 	$(PY) -m gausstac_maniskill.bench kernels
 	$(PY) -m gausstac_maniskill.bench compile
 	$(PY) -m gausstac_maniskill.bench soft

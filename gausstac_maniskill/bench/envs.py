@@ -3,17 +3,19 @@ tactile / render, reset time, and the task outcome, against SAPIEN's own camera 
 ManiSkill's FSR-tactile Allegro task.
 
 ``python -m gausstac_maniskill.bench envs [--steps N] [--settle N] [--dx 2e-3 1.5e-3] [--tasks ID ...]
-[--pad-solvers mpm fem] [--no-fsr] [--out DIR]``
+[--pad-solvers auto mpm fem] [--sweep-tasks ID ...] [--no-fsr] [--out DIR]``
 
 Rows:
 
 * every GaussTac task with the splat camera (``obs_mode="rgb"``, 128×128, ``pd_joint_pos``),
   driven by its scripted expert through a whole episode: until it succeeds and ``--settle``
   more steps, or the task's time limit (``--steps N``: at most N timed steps). The mean
-  step is therefore one of the episode as a user records it, approach included. PressCube
-  also runs at finer MPM grids (``--dx``), where the "outcome" column is the force error at
-  the end (speed vs accuracy), with each of ``--pad-solvers`` (``fem``: the pads solved at
-  equilibrium, ``GaussTacEnv(pad_solver="fem")``; its time is in the MPM column);
+  step is therefore one of the episode as a user records it, approach included. These rows
+  use the MPM pads at dx = 2 mm. PressCube (or the ``--sweep-tasks``) also runs at finer MPM
+  grids (``--dx``), where the "outcome" column is the force error at the end (speed vs
+  accuracy), with each of ``--pad-solvers`` (``fem``: the pads solved at equilibrium,
+  ``GaussTacEnv(pad_solver="fem")``, its time in the MPM column; ``auto``: the tasks'
+  default, fem for rigid objects and the MPM's with a soft one);
 * the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
   CPU machine: rigid meshes only, no pad deformation), made in the same process and stepped
   in turn with the splat run, so that both see the same machine load (the "camera side by
@@ -184,8 +186,11 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out/bench", help="folder for envs.json")
     ap.add_argument("--tasks", nargs="+", default=TASKS, choices=TASKS, metavar="ENV_ID",
                     help=f"GaussTac tasks to run (default: all of {', '.join(TASKS)})")
-    ap.add_argument("--pad-solvers", nargs="+", default=["mpm"], choices=["mpm", "fem"],
-                    help="the pads' solvers of the PressCube resolution sweep (GaussTacEnv's pad_solver)")
+    ap.add_argument("--pad-solvers", nargs="+", default=["mpm"], choices=["auto", "mpm", "fem"],
+                    help="the pads' solvers of the resolution sweep (GaussTacEnv's pad_solver; auto: the tasks' "
+                         "default, fem for rigid objects)")
+    ap.add_argument("--sweep-tasks", nargs="+", default=["GaussTac-PressCube-v1"], choices=TASKS, metavar="ENV_ID",
+                    help="tasks of the resolution sweep (default: PressCube)")
     ap.add_argument("--no-fsr", action="store_true", help="skip ManiSkill's FSR-tactile Allegro row")
     args = ap.parse_args(argv)
     from .. import backend
@@ -197,12 +202,12 @@ def main(argv=None) -> int:
         splat, sapien = run_side_by_side(env_id, args.steps, settle=args.settle)
         runs.append((env_id, "splat", 2e-3, splat))
         runs.append((env_id, "sapien", 2e-3, sapien))
-    for solver in args.pad_solvers:
-        for dx in args.dx:
-            if dx != 2e-3 or solver != "mpm" or "GaussTac-PressCube-v1" not in args.tasks:
-                run = run_gausstac("GaussTac-PressCube-v1", args.steps, "splat", dx, settle=args.settle,
-                                   pad_solver=solver)
-                runs.append((f"GaussTac-PressCube-v1 ({solver} pads)", "splat", dx, run))
+    for env_id in args.sweep_tasks:
+        for solver in args.pad_solvers:
+            for dx in args.dx:
+                if dx != 2e-3 or solver != "mpm" or env_id not in args.tasks:  # (that one ran above)
+                    run = run_gausstac(env_id, args.steps, "splat", dx, settle=args.settle, pad_solver=solver)
+                    runs.append((f"{env_id} ({solver} pads)", "splat", dx, run))
     if not args.no_fsr:
         runs.append(("RotateSingleObjectInHandLevel0-v1 (allegro_hand_right_touch)", "sapien", None,
                      run_fsr(args.steps or 15)))

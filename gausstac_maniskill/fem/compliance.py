@@ -27,9 +27,12 @@ __all__ = ["cache_dir", "compliance_key", "surface_compliance", "readout_respons
 
 #: Bump when the stored layout or the way W is computed changes: old files are then ignored.
 FORMAT = 1
-#: Work (surface points × unknowns) under which the columns are solved in this process: below
-#: it, starting worker processes (about 2 s each, factor included) costs more than it saves.
-PARALLEL_WORK = 2e7
+#: Work (solves × unknowns / 3, i.e. surface points × unknowns for the compliance) under which
+#: the solves run in this process: below it, starting worker processes (about 2 s each, factor
+#: included) costs more than it saves. Work above it goes to workers when this process has not
+#: factored the body (the workers factor it instead: this process then never holds the factor),
+#: and above three times it in any case.
+PARALLEL_WORK = 1e7
 #: Points per task handed to a worker (one multi-right-hand-side solve of 3 × this many columns).
 CHUNK = 32
 
@@ -66,7 +69,7 @@ def surface_compliance(body, workers: int | None = None, progress: bool = True, 
 
     Args:
         workers: processes solving the columns (default: the CPUs this process may use, at
-            most one per 32 points; 1 for a body under :data:`PARALLEL_WORK`).
+            most one per 32 points; 1 under :data:`PARALLEL_WORK`).
         progress: a progress bar while computing.
         cache: read and write the disk cache (when :func:`cache_dir` is not off).
     """
@@ -161,7 +164,8 @@ def _responses(body, loads, scale: float, workers: int | None, progress: bool, d
     C = loads.shape[1]
     chunks = [np.arange(a, min(a + 3 * CHUNK, C)) for a in range(0, C, 3 * CHUNK)]
     if workers is None:
-        workers = 1 if C * body.num_free < 3 * PARALLEL_WORK else _cpus()
+        work = C * body.num_free / 3
+        workers = _cpus() if work >= 3 * PARALLEL_WORK or (work >= PARALLEL_WORK and not body.factored) else 1
     workers = max(1, min(int(workers), len(chunks)))
     bar = tqdm(total=C, desc=desc, unit="solve", disable=not progress, leave=False)
     with bar:
