@@ -351,10 +351,12 @@ class EquilibriumPad:
             return None
         from .maps import PadMaps
 
-        h = hashlib.sha256()
-        for a in (binning.taxel, binning.weight, self.pad.sensor_frame, self.point_particles):
-            h.update(np.ascontiguousarray(a).tobytes())
-        key = ("maps", h.hexdigest())
+        if getattr(self, "_maps_key", (None,))[0] is not binning:  # the digest once per binning
+            h = hashlib.sha256()
+            for a in (binning.taxel, binning.weight, self.pad.sensor_frame, self.point_particles):
+                h.update(np.ascontiguousarray(a).tobytes())
+            self._maps_key = (binning, ("maps", h.hexdigest()))
+        key = self._maps_key[1]
         derived = self.body.derived
         if key not in derived:
             derived[key] = PadMaps(self.pad, self.body, binning, self.point_particles)
