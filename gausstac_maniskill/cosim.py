@@ -81,8 +81,9 @@ class GaussTacSim:
             these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)
             every env solves its own, with one body per pad.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
-            at once): 3 s at the default resolution, plus 40 s on 2 cores for its compliance
-            the first time on a machine (kept under ``~/.cache/gausstac_maniskill``).
+            at once): 1 s at the default resolution, plus 40 s on 2 cores for its compliance
+            and 10 s for its maps' response the first time on a machine (kept under
+            ``~/.cache/gausstac_maniskill``).
         fem_model: the ``"fem"`` pads' material model, ``"linear"`` (fast; small strain) or
             ``"neo_hookean"`` (finite strain; seconds per step at the default resolution).
         fem_precompute: the ``"fem"`` pads' compliance among all their surface points computed
@@ -305,12 +306,13 @@ class GaussTacSim:
         self._posed = None
 
     def prepare_pads(self) -> None:
-        """Build the equilibrium pads' bodies now (``pad_solver="fem"``): assemble and factor
-        each pad's stiffness and compute or load its surface compliance
+        """Build the equilibrium pads' bodies now (``pad_solver="fem"``): assemble each pad's
+        stiffness and compute or load its surface compliance
         (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`), which otherwise happens in
         the first step that brings an object within ``sleep_margin`` of the pad. At the
-        default resolution: 3 s per pad, plus 40 s (2 cores) for its compliance the first time
-        on a machine (then read from the disk cache). Does nothing for MPM pads."""
+        default resolution: 1 s per pad shape, plus 40 s (2 cores) for its compliance the
+        first time on a machine (then read from the disk cache; the maps' response, another
+        10 s the first time, follows at the first touch). Does nothing for MPM pads."""
         for fp in self._fem.values():
             fp.body  # noqa: B018 (built on first access)
 
