@@ -742,7 +742,9 @@ class GaussTacSim:
                 prefix = f"fem{i}_"
                 if prefix + "force" not in state:
                     raise ConfigError(f"load_flat_state: the state has no {prefix}* entries for pad {name!r}, "
-                                      "which this scene solves at equilibrium (pad_solver='fem')")
+                                      "which this scene solves at equilibrium (pad_solver='fem'); a state saved with "
+                                      "the MPM pads (the tasks' default before 2026-11-27) loads into a scene made "
+                                      "with pad_solver='mpm'")
                 self._fem[name].load_flat_state({k[len(prefix):]: v for k, v in state.items()
                                                  if k.startswith(prefix)}, sorted(self._objects))
 
