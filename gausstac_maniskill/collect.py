@@ -150,6 +150,7 @@ def _record(cfg: CollectConfig, worker: int, share: int, tries: int, h5_path: Pa
     from .experts import make_expert
 
     env = gym.make(cfg.env_id, **cfg.make_kwargs())
+    _pin_pad_solver(env)
     env = RecordEpisode(env, output_dir=str(h5_path.parent), trajectory_name=h5_path.stem,
                         save_video=cfg.save_video, save_on_reset=False, record_reward=True,
                         video_fps=int(getattr(env.unwrapped, "control_freq", 20)),
@@ -185,6 +186,19 @@ def _record(cfg: CollectConfig, worker: int, share: int, tries: int, h5_path: Pa
             report(("episode", worker, index, seed, success, keep, steps, time.perf_counter() - t0))
     finally:
         env.close()
+
+
+def _pin_pad_solver(env) -> None:
+    """Write the pads' solver the task resolved (``pad_solver="auto"``: ``"fem"`` or ``"mpm"``)
+    into the env's spec, whose kwargs ``RecordEpisode`` stores as the json's ``env_kwargs``: the
+    file names the solver behind its tactile maps, and a replay rebuilds the same pads whatever
+    the tasks' default is by then."""
+    import dataclasses
+
+    u = env.unwrapped
+    used = getattr(u, "pad_solver_used", None)
+    if used is not None and u.spec is not None:
+        u.spec = dataclasses.replace(u.spec, kwargs={**u.spec.kwargs, "pad_solver": used})
 
 
 def _limit_threads(n: int) -> None:

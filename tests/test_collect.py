@@ -55,6 +55,7 @@ def test_collect_writes_h5_and_json_with_tactile_rgb_and_mpm_state(recorded):
     meta = _load_json(path)
     assert meta["env_info"]["env_id"] == TASK
     assert meta["env_info"]["env_kwargs"]["mpm_dx"] == 2e-3
+    assert meta["env_info"]["env_kwargs"]["pad_solver"] == "fem"  # the default, resolved: the cube is rigid
     assert [e["episode_id"] for e in meta["episodes"]] == [0, 1]
     assert [e["episode_seed"] for e in meta["episodes"]] == [3, 4]
     with h5py.File(path, "r") as f:
