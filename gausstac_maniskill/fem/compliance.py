@@ -94,8 +94,8 @@ def readout_responses(body, A, workers: int | None = None, progress: bool = True
     displacements u (``A`` [R, 3V] sparse, node-major degrees of freedom), to a unit force [N]
     at each surface point along each axis (columns ordered (point, axis), as W's): r = M f for
     point forces f [3S]. M = A K⁻¹ Nᵀ = (N K⁻¹ Aᵀ)ᵀ (K symmetric): R solves, not 3S. Cached on
-    disk as :func:`surface_compliance`, keyed by the body and the bytes of A (which hold any
-    material constant A depends on); ``what`` names them on the progress bar."""
+    disk as :func:`surface_compliance`, keyed by the body, its Young's modulus and the bytes of A;
+    ``what`` names them on the progress bar."""
     import scipy.sparse as sp
 
     A = sp.csr_matrix(A, dtype=np.float64)
@@ -104,6 +104,7 @@ def readout_responses(body, A, workers: int | None = None, progress: bool = True
     for a in (A.indptr, A.indices, A.data):
         h.update(str((a.dtype.str, a.shape)).encode())
         h.update(np.ascontiguousarray(a).tobytes())
+    h.update(repr(float(body.E)).encode())  # M ∝ 1/E where A does not depend on E (compliance_key leaves E out)
     S, R = body.num_points, A.shape[0]
 
     def compute():

@@ -100,3 +100,26 @@ def test_failed_workers_fall_back_to_this_process(monkeypatch):
         body.precompute_compliance(workers=2, progress=False, cache=False)
     ref.precompute_compliance(workers=1, progress=False, cache=False)
     np.testing.assert_array_equal(body._compliance, ref._compliance)
+
+
+def test_readout_response_is_the_compliance_row_and_keyed_on_E(tmp_path, monkeypatch):
+    """A readout's response to point forces, solved by its adjoint (one solve per readout),
+    equals the compliance's row it reads when the readout is a surface point's displacement
+    (Maxwell-Betti: two routes to one matrix); it is kept on disk per Young's modulus (M ∝ 1/E
+    here, where the readout does not depend on E)."""
+    import scipy.sparse as sp
+
+    from gausstac_maniskill.fem.hex import trilinear
+
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    body = _layer()
+    d = 7  # the readout: surface point d's displacement along z
+    nodes, w = trilinear(body.body, body.points[d:d + 1], body.point_elements[d:d + 1])
+    A = sp.csr_matrix((w[0], (np.zeros(8, int), 3 * nodes[0] + 2)), shape=(1, body.body.num_dofs))
+    M = compliance.readout_responses(body, A, progress=False)
+    W = _lazy_matrix(_layer())  # rows (d, j), columns (s, i); symmetric
+    np.testing.assert_allclose(M[0], W[3 * d + 2], rtol=1e-5, atol=1e-6 * np.abs(W).max())
+
+    stiffer = _layer(E=0.6e6)
+    np.testing.assert_allclose(compliance.readout_responses(stiffer, A, progress=False), 0.5 * M, rtol=1e-6)
+    assert len([f for f in os.listdir(tmp_path) if f.startswith("readout-")]) == 2
