@@ -68,7 +68,7 @@ class BatchedCosim:
 
     def __init__(self, pads: Sequence[PadSpec], link_names: Sequence[str], link_poses, *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
-                 sleep_margin: float = 5e-3, pad_surface: str = "mesh", pad_solver: str = "mpm",
+                 sleep_margin: float = 5e-3, pad_surface: str = "mesh", pad_solver: str = "auto",
                  fem_model: str = "linear", fem_precompute: bool | None = None):
         self.link_names = list(link_names)
         P = _as_batch(link_poses, "BatchedCosim link_poses")

@@ -72,7 +72,9 @@ class GaussTacSim:
             instead of a world of its own (:class:`~gausstac_maniskill.batch.BatchedCosim`
             does this); its links and groups are named ``env{env}/<name>`` there. A scene in
             a shared world does not step it (the batch does): use the batch's ``step``.
-        pad_solver: ``"mpm"`` (default): the pads are MPM particles relaxed with a pseudo-mass,
+        pad_solver: ``"auto"`` (default): ``"fem"``, until a soft object is added (before the
+            pads touched anything): then ``"mpm"``; :attr:`pad_solver` says which.
+            ``"mpm"``: the pads are MPM particles relaxed with a pseudo-mass,
             in contact with rigid and soft objects. ``"fem"``: each awake pad is solved at
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
             one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
@@ -97,7 +99,7 @@ class GaussTacSim:
     def __init__(self, pads: Sequence[PadSpec], link_poses: Mapping[str, np.ndarray], *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
                  sleep_margin: float = 5e-3, pad_surface: str = "mesh", world: MPMWorld | None = None,
-                 env: int = 0, pad_solver: str = "mpm", fem_model: str = "linear",
+                 env: int = 0, pad_solver: str = "auto", fem_model: str = "linear",
                  fem_precompute: bool | None = None):
         self.urdf = urdf or default_hand_urdf()
         if world is None:
@@ -112,11 +114,16 @@ class GaussTacSim:
         self.sleep_margin = float(sleep_margin)
         if pad_surface not in ("particles", "mesh"):
             raise ConfigError(f"GaussTacSim(pad_surface={pad_surface!r}) must be 'particles' or 'mesh'")
-        if pad_solver not in ("mpm", "fem"):
-            raise ConfigError(f"GaussTacSim(pad_solver={pad_solver!r}) must be 'mpm' or 'fem'")
+        if pad_solver not in ("auto", "mpm", "fem"):
+            raise ConfigError(f"GaussTacSim(pad_solver={pad_solver!r}) must be 'auto', 'mpm' or 'fem'")
         if pad_solver == "fem" and pad_surface != "mesh":
             raise ConfigError("GaussTacSim(pad_solver='fem') needs pad_surface='mesh' "
                               "(the equilibrium pads are touched on the link mesh)")
+        #: "auto": the pads turn to the MPM's if a soft object is added before they touch anything
+        self._auto = pad_solver == "auto"
+        if self._auto:
+            pad_solver = "fem" if pad_surface == "mesh" else "mpm"
+        #: the pads' solver now, ``"fem"`` or ``"mpm"`` (``pad_solver="auto"`` resolved)
         self.pad_solver = pad_solver
         self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
         self._binning: dict[str, TaxelBinning] = {}
@@ -197,15 +204,27 @@ class GaussTacSim:
         (``settings.soft_friction``), and their contact force maps read that contact."""
         if name in self._objects or name in self._soft or name in self.pads:
             raise ConfigError(f"object {name!r} already exists")
+        if self._fem and self._auto and not any(fp.result is not None for fp in self._fem.values()):
+            self._to_mpm_pads()
         if self._fem:
+            why = " and have touched something already" if self._auto else ""
             raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium (pad_solver='fem') touch rigid "
-                              "objects only; use pad_solver='mpm' for soft objects")
+                              f"objects only{why}; use pad_solver='mpm' for soft objects (or add them first)")
         kwargs.setdefault("field", 1)
         if isinstance(kwargs.get("link"), str):
             kwargs["link"] = self._w(kwargs["link"])
         self.world.add_group(self._w(name), positions, material, env=self.env, **kwargs)
         self._soft[name] = name
         self._update_sleep()
+
+    def _to_mpm_pads(self) -> None:
+        """``pad_solver="auto"`` meets a soft object: the pads, untouched so far, become MPM
+        particles (the world held them asleep at rest; they wake when an object nears)."""
+        for name in self._fem:
+            self._awake[name] = False  # as the world holds its group
+        self._fem.clear()
+        self.pad_solver = "mpm"
+        self._maps = {}
 
     def set_object_pose(self, name: str, pose) -> None:
         """Target pose (4x4) of a rigid object at the end of the next step."""

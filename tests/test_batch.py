@@ -62,7 +62,7 @@ def _balls(envs):
 
 def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
     names, poses, settings, envs = setup
-    batch = BatchedCosim(allegro_pad_specs(), names, torch.as_tensor(poses), settings=settings)
+    batch = BatchedCosim(allegro_pad_specs(), names, torch.as_tensor(poses), settings=settings, pad_solver="mpm")
     batch.add_rigid_object("ball", _balls(envs))
     substeps = []
     for k in range(STEPS):
@@ -71,7 +71,7 @@ def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
         substeps.append(batch.world.last_step.substeps)
     assert maps[INDEX]["force"].shape[0] == 3 and maps[INDEX]["shear"].shape[-1] == 2
     for b, (centre, mu) in enumerate(envs):
-        alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[b])), settings=settings)
+        alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[b])), settings=settings, pad_solver="mpm")
         alone.add_rigid_object("ball", Sphere(radius=R, pose=centre(-1), friction=mu))
         for k in range(STEPS):
             alone.begin_step(dict(zip(names, poses[b])), {"ball": centre(k)})
@@ -117,8 +117,8 @@ def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
 def test_bad_batch_input_is_named(setup):
     names, poses, settings, _ = setup
     with pytest.raises(ConfigError, match=r"link_poses must have shape \[B, 4, 4, 4\]"):
-        BatchedCosim(allegro_pad_specs(), names, poses[:, :2], settings=settings)
-    batch = BatchedCosim(allegro_pad_specs(), names, poses[:1], settings=settings)
+        BatchedCosim(allegro_pad_specs(), names, poses[:, :2], settings=settings, pad_solver="mpm")
+    batch = BatchedCosim(allegro_pad_specs(), names, poses[:1], settings=settings, pad_solver="mpm")
     bad = poses[:1].copy()
     bad[0, 0, 0, 3] = np.nan
     with pytest.raises(ConfigError, match="link_poses contains NaN"):
@@ -132,7 +132,7 @@ def test_env_state_moves_between_the_batch_and_the_scene_alone(setup):
     the whole batch restored from its envs' states replays bit for bit (on the CPU; on CUDA
     the scatter's atomic adds land in no fixed order, so to float32 rounding)."""
     names, poses, settings, envs = setup
-    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings)
+    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings, pad_solver="mpm")
     batch.add_rigid_object("ball", _balls(envs))
 
     def step(k):
@@ -157,7 +157,7 @@ def test_env_state_moves_between_the_batch_and_the_scene_alone(setup):
                 assert torch.equal(after[pad][key], again[pad][key]), (pad, key)
     # env 1's state in the scene alone: it steps on like env 1 of the batch
     centre, mu = envs[1]
-    alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[1])), settings=settings)
+    alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[1])), settings=settings, pad_solver="mpm")
     alone.add_rigid_object("ball", Sphere(radius=R, pose=centre(-1), friction=mu))
     alone.load_flat_state(saved[1])
     alone.begin_step(dict(zip(names, poses[1])), {"ball": centre(3)})
@@ -185,7 +185,7 @@ def test_batch_renders_every_env_in_one_call(setup, monkeypatch):
     from gausstac_maniskill.splat import rasterizer
 
     names, poses, settings, envs = setup
-    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings)
+    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings, pad_solver="mpm")
     batch.add_rigid_object("ball", _balls(envs))
     hand = load_ply(ASSET_DIR / "gaussians.ply")
     links = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]

@@ -20,7 +20,7 @@ def hand_poses():
 
 
 def make_sim(hand_poses):
-    return GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=1.5e-3))
+    return GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=1.5e-3), pad_solver="mpm")
 
 
 def apex_frame(sim, poses):
@@ -80,7 +80,7 @@ def test_stress_reading_matches_the_contact_force(hand_poses):
     estimate is 10-15 % low on this curved pad, so it would fail here. The hand pose turns
     the link, so the binding and sensor frames are exercised too."""
     spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
-    sim = GaussTacSim([spec], {INDEX: hand_poses[INDEX]}, settings=default_hand_settings(dx=1e-3))
+    sim = GaussTacSim([spec], {INDEX: hand_poses[INDEX]}, settings=default_hand_settings(dx=1e-3), pad_solver="mpm")
     centre = add_ball(sim, hand_poses, friction=0.0)
     for k in range(6):
         sim.step({INDEX: hand_poses[INDEX]}, 0.05, {"ball": centre(0.8e-3 * min(1.0, (k + 1) / 3))})
@@ -141,7 +141,7 @@ def test_scene_renders_hand_pads_and_object():
 
     src = MujocoPoseSource()
     all_poses = dict(zip(src.link_names, src.link_poses()[0].numpy()))
-    sim = GaussTacSim(allegro_pad_specs(), all_poses, settings=default_hand_settings(dx=2e-3))
+    sim = GaussTacSim(allegro_pad_specs(), all_poses, settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
     cube_pose = make_pose([0.08, -0.06, 0.05])  # between the camera and the hand, in view
     sim.add_rigid_object("cube", Sphere(radius=0.01, pose=cube_pose))
     hand = load_ply(ASSET_DIR / "gaussians.ply")
@@ -268,7 +268,7 @@ def test_maps_return_to_rest_while_the_object_stays_near(hand_poses):
     Measured: 23 / 7.7 / 4.6 µm depth and 13.5 / 5.7 / 4.7 µm shear after 1 / 2 / 3 steps. (Single
     particles plateau at 12-19 µm: tests/mpm/test_integration.py's strict xfail; a taxel
     averages the sub-cell noise of the particles under it.)"""
-    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings())
+    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(), pad_solver="mpm")
     R = 6e-3
     W = apex_frame(sim, hand_poses)
 
@@ -296,16 +296,16 @@ def test_pad_that_crosses_an_object_within_a_step_wakes(hand_poses):
         return {n: make_pose([dx, 0.0, 0.0]) @ T for n, T in hand_poses.items()}
 
     for end, awake in ((0.04, True), (-0.08, False)):
-        sim = GaussTacSim(allegro_pad_specs(), shifted(-0.04), settings=default_hand_settings(dx=2e-3))
+        sim = GaussTacSim(allegro_pad_specs(), shifted(-0.04), settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
         add_ball(sim, hand_poses, friction=0.0)  # on the pad of the unshifted hand
         assert not sim.is_awake(INDEX), "4 cm from the ball: asleep"
         sim.begin_step(shifted(end))
         assert sim.is_awake(INDEX) == awake, end
         if awake:  # the end pose alone is clear of the ball, like the start
-            far = GaussTacSim(allegro_pad_specs(), shifted(end), settings=default_hand_settings(dx=2e-3))
+            far = GaussTacSim(allegro_pad_specs(), shifted(end), settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
             add_ball(far, hand_poses, friction=0.0)
             assert not far.is_awake(INDEX)
-    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=2e-3))
+    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
     W, R = apex_frame(sim, hand_poses), 6e-3
     away = lambda dx: make_pose(W[:3, 3] + W[:3, 2] * R + [dx, 0.0, 0.0])  # noqa: E731 (dx = 0: touching)
     sim.add_rigid_object("ball", Sphere(radius=R, pose=away(-0.04)))

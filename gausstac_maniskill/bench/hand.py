@@ -51,7 +51,7 @@ def pads_in_contact(dx: float = 1.5e-3, repeats: int = 4) -> list[dict]:
     poses = _hand_poses()
     rows = []
     for k in range(5):
-        sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=dx))
+        sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=dx), pad_solver="mpm")
         touched = list(sim.pads)[:k]
         for i, name in enumerate(sim.pads):
             # every pad gets a plate; untouched ones keep it 5 cm away (they sleep)
@@ -90,7 +90,7 @@ def press_vs_hertz(dx: float, thickness: float, depths=(0.25e-3, 0.5e-3, 0.75e-3
 
     poses = _hand_poses()
     spec = PadSpec(link=INDEX, thickness=thickness, cone_deg=70.0)
-    sim = GaussTacSim([spec], {INDEX: poses[INDEX]}, settings=default_hand_settings(dx=dx))
+    sim = GaussTacSim([spec], {INDEX: poses[INDEX]}, settings=default_hand_settings(dx=dx), pad_solver="mpm")
     plate = Box(half_extents=(0.015, 0.015, 0.004), pose=_plate_pose(sim, poses, INDEX, 0.5e-3), friction=0.0)
     sim.add_rigid_object("plate", plate)
     sim.step(poses, 0.05)  # JIT + settle

@@ -55,7 +55,7 @@ def sponge_scene(field: int = 1, dx: float = 1e-3):
     pose = np.eye(4)
     pose[2, 3] = 0.1
     spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
-    sim = GaussTacSim([spec], {INDEX: pose}, settings=default_hand_settings(dx=dx))
+    sim = GaussTacSim([spec], {INDEX: pose}, settings=default_hand_settings(dx=dx), pad_solver="mpm")
     W = pose @ sim.pads[INDEX].sensor_frame  # sensor z: out of the pad, towards the sponge
     R = W[:3, :3]
     sx, sy, sz = SPONGE_SIZE

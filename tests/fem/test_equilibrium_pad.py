@@ -273,6 +273,40 @@ def test_fem_pad_bad_input():
         EquilibriumPad(sim.pads[bp.INDEX], model="hooke")
 
 
+def test_default_pads_are_at_equilibrium_until_a_soft_object_comes():
+    """GaussTacSim's default (pad_solver="auto"): the pads solved at equilibrium; a soft object
+    added before they touched anything turns them into MPM pads (which then meet it); one added
+    after is refused with what to do. pad_surface="particles" (the equilibrium pads' contact is
+    on the mesh) resolves to the MPM pads."""
+    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+
+    args = ([bp.index_spec()], {bp.INDEX: bp.LINK_POSE})
+    settings = default_hand_settings(dx=DX)
+    mat = bp.index_spec().material
+    with pytest.warns(Warning, match="spans only"):
+        soft = GaussTacSim(*args, settings=settings)
+    assert soft.pad_solver == "fem" and bp.INDEX in soft._fem
+    W = bp.LINK_POSE @ soft.pads[bp.INDEX].sensor_frame
+    # a 6 × 6 × 3 mm block of the pad's material touching the pad face (particles 0.5 mm apart)
+    g = np.stack(np.meshgrid(np.arange(-3e-3, 3e-3, 5e-4), np.arange(-3e-3, 3e-3, 5e-4), np.arange(2.5e-4, 3e-3, 5e-4),
+                             indexing="ij"), -1).reshape(-1, 3)
+    soft.add_soft_object("block", g @ W[:3, :3].T + W[:3, 3] + W[:3, 2] * 1e-4, mat)
+    assert soft.pad_solver == "mpm" and not soft._fem
+    soft.step({bp.INDEX: bp.LINK_POSE}, 0.01)
+    assert soft.is_awake(bp.INDEX)  # an MPM pad, woken by the block beside it
+
+    with pytest.warns(Warning, match="spans only"):
+        sim = GaussTacSim(*args, settings=settings)
+    sim.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
+    sim.step({bp.INDEX: bp.LINK_POSE}, 0.05)
+    assert sim._fem[bp.INDEX].touching
+    with pytest.raises(ConfigError, match="touched something already.*pad_solver='mpm'"):
+        sim.add_soft_object("block", g + [0, 0, 0.2], mat)
+    with pytest.warns(Warning, match="spans only"):
+        assert GaussTacSim(*args, settings=settings, pad_surface="particles").pad_solver == "mpm"
+
+
 def test_centre_state_neo_hookean_linearises_to_the_linear_stress():
     """The two material laws of the pad agree at small strain (the stress read for the maps)."""
     from gausstac_maniskill.fem.hex import centre_state, voxel_body

@@ -25,7 +25,7 @@ def pressed():
     pads asleep."""
     names = [s.link for s in allegro_pad_specs()]
     poses = dict(zip(names, MujocoPoseSource().link_poses(names)[0].double().numpy()))
-    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=1.5e-3))
+    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=1.5e-3), pad_solver="mpm")
     W = poses[INDEX] @ sim.pads[INDEX].sensor_frame
     centre = lambda d, s: make_pose(W[:3, 3] + W[:3, 2] * (R - d) + W[:3, 0] * s)  # noqa: E731
     sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3, 0.0), friction=0.8))
