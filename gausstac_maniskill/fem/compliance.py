@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "compliance_key", "surface_compliance", "readout_responses", "estimated_bytes"]
+__all__ = ["cache_dir", "array_digest", "compliance_key", "surface_compliance", "readout_responses",
+           "estimated_bytes"]
 
 #: Bump when the stored layout or the way W is computed changes: old files are then ignored.
 FORMAT = 1
@@ -47,19 +48,26 @@ def cache_dir() -> Path | None:
     return Path(base) / "gausstac_maniskill"
 
 
+def array_digest(arrays, extra: str = "") -> str:
+    """Hex SHA-256 of ``arrays`` (each with its dtype and shape, C order) and then ``extra``:
+    the key of what is computed from them (kept on disk or in this process)."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+    h.update(extra.encode())
+    return h.hexdigest()
+
+
 def compliance_key(body) -> str:
     """Hex digest naming ``body``'s compliance up to its Young's modulus (W ∝ 1/E): its
     elements, element size, fixed degrees of freedom, surface points (to 1e-6 of an element)
     and their elements, and ν."""
     b = body.body
-    h = hashlib.sha256()
     points = np.round((body.points - b.origin) / b.size * 1e6).astype(np.int64)
-    for a in (b.voxels, body.fixed, points, body.point_elements):
-        a = np.ascontiguousarray(a)
-        h.update(str((a.dtype.str, a.shape)).encode())
-        h.update(a.tobytes())
-    h.update(repr((FORMAT, round(b.size, 15), round(body.nu, 15))).encode())
-    return h.hexdigest()[:32]
+    return array_digest((b.voxels, body.fixed, points, body.point_elements),
+                        repr((FORMAT, round(b.size, 15), round(body.nu, 15))))[:32]
 
 
 def surface_compliance(body, workers: int | None = None, progress: bool = True, cache: bool = True) -> np.ndarray:
@@ -100,11 +108,8 @@ def readout_responses(body, A, workers: int | None = None, progress: bool = True
 
     A = sp.csr_matrix(A, dtype=np.float64)
     A.sort_indices()
-    h = hashlib.sha256()
-    for a in (A.indptr, A.indices, A.data):
-        h.update(str((a.dtype.str, a.shape)).encode())
-        h.update(np.ascontiguousarray(a).tobytes())
-    h.update(repr(float(body.E)).encode())  # M ∝ 1/E where A does not depend on E (compliance_key leaves E out)
+    # E too: M ∝ 1/E where A does not depend on E (compliance_key leaves E out)
+    key = array_digest((A.indptr, A.indices, A.data), repr(float(body.E)))[:16]
     S, R = body.num_points, A.shape[0]
 
     def compute():
@@ -112,7 +117,7 @@ def readout_responses(body, A, workers: int | None = None, progress: bool = True
                          f"{body.name}: response of {R} {what} (once; cached)")
         return out.reshape(R, 3 * S)
 
-    return _cached(body, f"readout-{compliance_key(body)}-{h.hexdigest()[:16]}", (R, 3 * S), compute, cache)
+    return _cached(body, f"readout-{compliance_key(body)}-{key}", (R, 3 * S), compute, cache)
 
 
 def _cached(body, stem: str, shape: tuple, compute, cache: bool) -> np.ndarray:

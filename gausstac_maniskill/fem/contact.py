@@ -670,13 +670,10 @@ class QuasiStaticBody:
         Maxwell–Betti (K symmetric) their responses are the readouts' responses to point forces."""
         import scipy.sparse as sp
 
-        A = sp.csr_matrix(A)
+        A = sp.csc_matrix(A)
         if A.shape[1] != self.body.num_dofs:
             raise ConfigError(f"{self.name}: a readout of shape {A.shape} does not act on {self.body.num_dofs} dofs")
-        keep = self._row < self.num_free
-        P = sp.csr_matrix((np.ones(int(keep.sum())), (self._row[keep], np.flatnonzero(keep))),
-                          shape=(self.num_free, self.body.num_dofs))
-        return (P @ A.T).tocsc()
+        return A[:, self._free].T.tocsc()  # free degrees of freedom, in elimination order
 
     def solve_columns(self, points) -> np.ndarray:
         """[k, S, 3, 3] compliance columns of surface ``points`` [k]: entry [d, s, i, j] is the

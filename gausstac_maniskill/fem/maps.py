@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tactile.extract import map_tensors
+from .contact import _xyz_rows
 from .hex import _gauss_gradients, _moduli
 
 __all__ = ["map_readout", "PadMaps"]
@@ -88,6 +89,7 @@ class PadMaps:
         M = readout_responses(body, map_readout(pad, body, binning), cache=cache,
                               what=f"taxel readouts of pad {pad.name!r}")  # [4T, 3S] float32
         self.Mt = np.ascontiguousarray(M.T)  # [3S, 4T]: a loaded point's rows are contiguous
+        self._inside = (binning.taxel >= 0).any(axis=1)  # particles whose footprint meets the layout
 
     def maps(self, force: np.ndarray) -> dict:
         """The maps (:func:`~gausstac_maniskill.tactile.extract.tactile_maps`'s dict of float32
@@ -95,9 +97,8 @@ class PadMaps:
         b, S = self.binning, self.pad.sensor_frame[:3, :3]
         T = b.rows * b.cols
         loaded = np.flatnonzero(np.abs(force).sum(1) > 0)
-        cols = (3 * loaded[:, None] + np.arange(3)).ravel()
-        r = force[loaded].ravel() @ self.Mt[cols].astype(np.float64)
+        r = force[loaded].ravel() @ self.Mt[_xyz_rows(loaded)].astype(np.float64)
         fn = np.zeros(self.pad.num_particles)  # pressing force along −z on each particle
         np.add.at(fn, self.point_particles[loaded], -(force[loaded] @ S[:, 2]))
-        inside = (b.taxel >= 0).any(axis=1)
-        return map_tensors(r[:T], r[T:2 * T], r[2 * T:3 * T], b.accumulate(inside, fn), r[3 * T:], b.rows, b.cols)
+        return map_tensors(r[:T], r[T:2 * T], r[2 * T:3 * T], b.accumulate(self._inside, fn), r[3 * T:],
+                           b.rows, b.cols)

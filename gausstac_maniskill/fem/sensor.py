@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import functools
-import hashlib
 import time
 import warnings
 from collections import OrderedDict
@@ -25,7 +24,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import ConfigError, SimulationWarning
-from .compliance import estimated_bytes
+from .compliance import array_digest, estimated_bytes
 from .contact import ContactResult, Indenters
 from .hex import centre_state, voxel_body
 from .pad import collider_indenter, pad_body, pad_lattice
@@ -57,14 +56,9 @@ def forget_bodies() -> None:
 def _body_key(pad, model: str) -> str:
     """Digest of what a pad's body is built from: its particles (rest positions, bond, surface,
     depth and normal of the contact surface), spacing, material and the model."""
-    h = hashlib.sha256()
-    for a in (pad.rest, pad.kinematic, pad.surface, pad.depth, pad.normal):
-        a = np.ascontiguousarray(a)
-        h.update(str((a.dtype.str, a.shape)).encode())
-        h.update(a.tobytes())
     mat = pad.spec.material
-    h.update(repr((pad.spacing, mat.E, mat.nu, model)).encode())
-    return h.hexdigest()
+    return array_digest((pad.rest, pad.kinematic, pad.surface, pad.depth, pad.normal),
+                        repr((pad.spacing, mat.E, mat.nu, model)))
 
 
 class EquilibriumPad:
@@ -102,6 +96,7 @@ class EquilibriumPad:
         self._cache, self._cache_of = {}, object()  # what _derived() computed, and from which result
         self._pose: dict | None = None  # {key: the collider's frame in the link frame [4, 4]} at the last solve
         self._strained = False  # the last solve moved the surface beyond LINEAR_LIMIT (warned)
+        self._maps_key: tuple = (None, None)  # (binning, its key in the body's derived data), see tactile_maps
         #: outer iterations of a solve before it gives up (the finite-strain fixed point takes up to ~200)
         self.max_iterations = 60 if model == "linear" else 400
         #: [m] points this close to the collider enter a solve's first iteration; the others join
@@ -351,11 +346,9 @@ class EquilibriumPad:
             return None
         from .maps import PadMaps
 
-        if getattr(self, "_maps_key", (None,))[0] is not binning:  # the digest once per binning
-            h = hashlib.sha256()
-            for a in (binning.taxel, binning.weight, self.pad.sensor_frame, self.point_particles):
-                h.update(np.ascontiguousarray(a).tobytes())
-            self._maps_key = (binning, ("maps", h.hexdigest()))
+        if self._maps_key[0] is not binning:  # the digest once per binning
+            digest = array_digest((binning.taxel, binning.weight, self.pad.sensor_frame, self.point_particles))
+            self._maps_key = (binning, ("maps", digest))
         key = self._maps_key[1]
         derived = self.body.derived
         if key not in derived:
