@@ -37,6 +37,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench compile
 	$(PY) -m gausstac_maniskill.bench soft
 	$(PY) -m gausstac_maniskill.bench patch
+	$(PY) -m gausstac_maniskill.bench patch --pad-solver fem --out out/bench_patch_fem
 	$(PY) -m gausstac_maniskill.bench look
 	$(PY) -m gausstac_maniskill.bench close
 	$(PY) -m gausstac_maniskill.bench drive_contact

@@ -31,3 +31,8 @@ class SimulationWarning(UserWarning):
     """The simulation met a state it cannot resolve physically (a pad torn from its link
     by an object pushed into its core, or dragged off it) and recovered from it; the message
     says what it did and at which step."""
+
+
+class CostWarning(UserWarning):
+    """A scene runs far slower than it could with another setting; the message says what a
+    step costs this way and which option avoids it."""

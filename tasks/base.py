@@ -201,6 +201,11 @@ class GaussTacEnv(BaseEnv):
             ``~/.cache/gausstac_maniskill``). ``"mpm"``: the pads are explicit MPM particles
             (finite strain; soft objects too).
         fem_model: the ``"fem"`` pads' material, ``"linear"`` (default) or ``"neo_hookean"``.
+        fem_precompute: the ``"fem"`` pads' compliance among all their surface points computed
+            once (True) or solved point by point as contact reaches them (False); default
+            (None): in full up to 256 MiB (the Allegro fingertips at the default ``mpm_dx``),
+            point by point above, with a :class:`~gausstac_maniskill.errors.CostWarning`
+            (:class:`~gausstac_maniskill.cosim.GaussTacSim`'s ``fem_precompute``).
     """
 
     SUPPORTED_ROBOTS = ["allegro_hand_right_gausstac"]
@@ -211,7 +216,7 @@ class GaussTacEnv(BaseEnv):
                  splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
                  pad_reaction: bool = False, splat_lod: bool = True, splat_cull: bool = True,
-                 pad_solver: str = "auto", fem_model: str = "linear", **kwargs):
+                 pad_solver: str = "auto", fem_model: str = "linear", fem_precompute: bool | None = None, **kwargs):
         backend.ensure_init()
         _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
@@ -220,7 +225,9 @@ class GaussTacEnv(BaseEnv):
         if pad_solver not in ("auto", "mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
             raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'auto', 'mpm' or 'fem' "
                               "and fem_model 'linear' or 'neo_hookean'")
-        self.pad_solver, self.fem_model = pad_solver, fem_model
+        if fem_precompute not in (None, True, False):
+            raise ConfigError(f"fem_precompute={fem_precompute!r} must be None, True or False")
+        self.pad_solver, self.fem_model, self.fem_precompute = pad_solver, fem_model, fem_precompute
         self.mpm_sleep_margin = float(mpm_sleep_margin)
         self.splat_size = tuple(int(v) for v in splat_size)
         self.render_size = tuple(int(v) for v in render_size)
@@ -511,7 +518,7 @@ class GaussTacEnv(BaseEnv):
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
                                    urdf=agent.pad_urdf(), settings=settings,
                                    sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver_used,
-                                   fem_model=self.fem_model)
+                                   fem_model=self.fem_model, fem_precompute=self.fem_precompute)
         self.cosims = self._batch.scenes
         for name, obj in self._rigid.items():
             cols = [copy.deepcopy(obj.collider) for _ in range(self.num_envs)]

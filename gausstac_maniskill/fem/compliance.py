@@ -85,7 +85,7 @@ def surface_compliance(body, workers: int | None = None, progress: bool = True, 
 
     def compute():
         out = _responses(body, body.point_loads(np.arange(S)), body.E, workers, progress,
-                         f"{body.name}: compliance at {S} surface points (once; cached)")
+                         f"{body.name}: compliance at {S} surface points{_once(cache)}")
         flat = out.reshape(3 * S, 3 * S)  # rows (d, j), columns (s, i)
         flat += flat.T  # W is symmetric (Maxwell-Betti); the solves agree with that to rounding
         flat *= np.float32(0.5)
@@ -114,10 +114,15 @@ def readout_responses(body, A, workers: int | None = None, progress: bool = True
 
     def compute():
         out = _responses(body, body.dofs_to_free(A), 1.0, workers, progress,
-                         f"{body.name}: response of {R} {what} (once; cached)")
+                         f"{body.name}: response of {R} {what}{_once(cache)}")
         return out.reshape(R, 3 * S)
 
     return _cached(body, f"readout-{compliance_key(body)}-{key}", (R, 3 * S), compute, cache)
+
+
+def _once(cache: bool) -> str:
+    """The progress bar's note on whether the result will be kept on disk."""
+    return " (once; cached)" if cache and cache_dir() is not None else ""
 
 
 def _cached(body, stem: str, shape: tuple, compute, cache: bool) -> np.ndarray:

@@ -5,7 +5,7 @@
   kinematic particles, touched on the link mesh (the point ``depth`` along ``normal`` from
   each outermost particle, as ``GaussTacSim(pad_surface="mesh")``).
 * :func:`layer_body`: a flat layer of thickness h bonded to a rigid base (a quarter, with
-  symmetry planes x = 0 and y = 0), touched at its top face.
+  symmetry planes x = 0 and y = 0, or the whole layer), touched at its top face.
 """
 from __future__ import annotations
 
@@ -60,25 +60,31 @@ def pad_lattice(pad) -> tuple[np.ndarray, np.ndarray]:
     return origin, ijk
 
 
-def layer_body(h: float, half_width: float, size: float, E: float, nu: float, model: str = "linear") -> QuasiStaticBody:
-    """A quarter of a flat layer [0, W]² × [0, h] (W = ``half_width``) of cube elements of edge
-    ``size`` [m], bonded to a rigid base at z = 0, with frictionless symmetry planes x = 0 and
-    y = 0 and free outer faces; touched at the centres of its top faces (z = h). Forces on it
-    are a quarter of the whole layer's. ``model`` as in :class:`QuasiStaticBody`."""
+def layer_body(h: float, half_width: float, size: float, E: float, nu: float, model: str = "linear",
+               quarter: bool = True) -> QuasiStaticBody:
+    """A flat layer of thickness ``h`` [m] of cube elements of edge ``size`` [m], bonded to a
+    rigid base at z = 0 and touched at the centres of its top faces (z = h); its outer faces
+    are free. ``model`` as in :class:`QuasiStaticBody`.
+
+    ``quarter`` (default): the quarter [0, W]² × [0, h] (W = ``half_width``) with frictionless
+    symmetry planes x = 0 and y = 0; forces on it are a quarter of the whole layer's under a
+    load symmetric about both planes. Otherwise the whole layer [−W, W]² × [0, h]."""
     nz = int(round(h / size))
     if nz < 1 or abs(nz * size - h) > 1e-6 * h:
         raise ConfigError(f"layer_body: h={h!r} m is not a whole number of elements of {size!r} m")
     nxy = math.ceil(half_width / size - 1e-9)
-    i, j, k = np.meshgrid(np.arange(nxy), np.arange(nxy), np.arange(nz), indexing="ij")
+    span = np.arange(nxy) if quarter else np.arange(-nxy, nxy)
+    i, j, k = np.meshgrid(span, span, np.arange(nz), indexing="ij")
     body = voxel_body(np.stack([i, j, k], -1).reshape(-1, 3), np.zeros(3), size)
     nodes = body.nodes
     fixed = np.zeros((len(nodes), 3), bool)
     fixed[nodes[:, 2] == 0] = True
-    fixed[nodes[:, 0] == 0, 0] = True
-    fixed[nodes[:, 1] == 0, 1] = True
+    if quarter:
+        fixed[nodes[:, 0] == 0, 0] = True
+        fixed[nodes[:, 1] == 0, 1] = True
     top = np.flatnonzero(body.voxels[:, 2] == nz - 1)
     points = (body.voxels[top] + [0.5, 0.5, 1.0]) * size
-    return QuasiStaticBody(body, E, nu, fixed, points, top, name="layer", model=model)
+    return QuasiStaticBody(body, E, nu, fixed, points, top, name="layer" if quarter else "whole layer", model=model)
 
 
 def collider_indenter(collider, link_pose=None) -> "Indenter":

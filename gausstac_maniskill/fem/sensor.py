@@ -23,7 +23,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import ConfigError, SimulationWarning
+from ..errors import ConfigError, CostWarning, SimulationWarning
 from .compliance import array_digest, estimated_bytes
 from .contact import ContactResult, Indenters
 from .hex import centre_state, voxel_body
@@ -51,6 +51,20 @@ _BODIES: OrderedDict = OrderedDict()
 def forget_bodies() -> None:
     """Drop the bodies kept in this process (their memory returns once no pad uses them)."""
     _BODIES.clear()
+
+
+def _warn_point_by_point(body) -> None:
+    """Say that ``body``'s compliance is too large to compute in full by default, what that
+    costs, and how to avoid it (:class:`~gausstac_maniskill.errors.CostWarning`)."""
+    S = body.num_points
+    warnings.warn(CostWarning(
+        f"{body.name}: its compliance among {S} surface points would take {estimated_bytes(S) / 1e9:.2f} GB "
+        f"(over fem.sensor.PRECOMPUTE_BYTES = {PRECOMPUTE_BYTES / 2 ** 20:.0f} MiB), so it is solved point by "
+        f"point: each point that newly comes into contact costs three solves of the whole pad "
+        f"({body.num_free} unknowns), seconds per press step on a large pad (`bench patch --pad-solver fem`). "
+        f"GaussTacSim(fem_precompute=True) (or BatchedCosim's, or the tasks' kwarg) computes it once instead "
+        f"({3 * S} solves, with a progress bar, kept on disk), after which a press costs milliseconds."),
+        stacklevel=4)
 
 
 def _body_key(pad, model: str) -> str:
@@ -130,6 +144,8 @@ class EquilibriumPad:
             precompute = self.precompute
             if precompute is None:
                 precompute = estimated_bytes(body.num_points) <= PRECOMPUTE_BYTES
+                if not precompute:
+                    _warn_point_by_point(body)
             if precompute:
                 body.precompute_compliance()
             self._body = body

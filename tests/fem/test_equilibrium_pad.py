@@ -187,19 +187,33 @@ def test_fem_pad_linear_model_says_when_pressed_beyond_its_range():
         assert len([c for c in caught if issubclass(c.category, SimulationWarning)]) == 2
 
 
-def test_fem_precompute_reaches_the_pads():
+def test_fem_precompute_reaches_the_pads(monkeypatch):
     """Guard: GaussTacSim(fem_precompute=...) decides whether a pad's compliance is computed
-    in full when its body is built (the default does at this coarse grid) or point by point."""
+    in full when its body is built (the default does at this coarse grid) or point by point;
+    a pad whose compliance exceeds the default's limit is solved point by point and says so,
+    naming the option (a CostWarning), while one asked for point by point says nothing."""
+    import warnings
+
     from gausstac_maniskill.bench import pad as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.errors import CostWarning
+    from gausstac_maniskill.fem import sensor
     from gausstac_maniskill.fem.sensor import forget_bodies
 
-    for choice, full in ((False, False), (None, True)):
+    for choice, limit, full in ((False, None, False), (None, None, True), (None, 1, False)):
         forget_bodies()  # (bodies are kept per process: build each one anew)
+        if limit is not None:
+            monkeypatch.setattr(sensor, "PRECOMPUTE_BYTES", limit)
         with pytest.warns(Warning, match="spans only"):
             sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
                               pad_solver="fem", fem_precompute=choice)
-        sim.prepare_pads()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sim.prepare_pads()
+        costly = [str(c.message) for c in caught if issubclass(c.category, CostWarning)]
+        assert len(costly) == (limit is not None), costly
+        if costly:
+            assert "point by point" in costly[0] and "fem_precompute=True" in costly[0]
         body = sim._fem[bp.INDEX].body
         assert (body.columns_solved == body.num_points) is full
     forget_bodies()
