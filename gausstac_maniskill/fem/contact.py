@@ -226,12 +226,15 @@ def _newton(M, b, f, mu, tol, iterations) -> tuple[np.ndarray, np.ndarray] | Non
 
     P, z, closed, slipping, zt = _coulomb_projection(M, b, f, mu, r)
     res = residual(f, P)
+    target = tol * tol
     for step in range(iterations + 1):
-        if res.max() < tol * tol:  # converged: the answer is P, so P must pass too
-            f, (P, z, closed, slipping, zt) = P, _coulomb_projection(M, b, P, mu, r)
-            res = residual(f, P)
-            if res.max() < tol * tol:
-                return f, np.where(closed, np.where(slipping, 2, 1), 0)
+        if res.max() < target:  # converged: the answer is P, so P must pass too
+            out = _coulomb_projection(M, b, P, mu, r)
+            if residual(P, out[0]).max() < tol * tol:
+                return P, np.where(out[2], np.where(out[3], 2, 1), 0)
+            # P sits on a point's stick/slip kink, where a Newton step from P can lead back to
+            # this iterate (a two-cycle): go on from the iterate instead, to a closer target
+            target *= 0.01
         if step == iterations:
             return None
         delta = np.where(closed[:, None], 0.0, -f)  # an open point's force goes to 0
