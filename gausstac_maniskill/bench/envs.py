@@ -11,7 +11,7 @@ Rows:
   driven by its scripted expert through a whole episode: until it succeeds and ``--settle``
   more steps, or the task's time limit (``--steps N``: at most N timed steps). The mean
   step is therefore one of the episode as a user records it, approach included. These rows
-  use the MPM pads at dx = 2 mm. PressCube (or the ``--sweep-tasks``) also runs at finer MPM
+  use the tasks' default pads (``pad_solver="auto"``) at dx = 2 mm. PressCube (or the ``--sweep-tasks``) also runs at finer MPM
   grids (``--dx``), where the "outcome" column is the force error at the end (speed vs
   accuracy), with each of ``--pad-solvers`` (``fem``: the pads solved at equilibrium,
   ``GaussTacEnv(pad_solver="fem")``, its time in the MPM column; ``auto``: the tasks'
@@ -62,7 +62,7 @@ class _Run:
     """One GaussTac env driven by its scripted expert, with the step timings it recorded."""
 
     def __init__(self, env_id: str, camera: str = "splat", dx: float = 2e-3, resets: int = 3,
-                 steps: int | None = None, settle: int = 5, pad_solver: str = "mpm"):
+                 steps: int | None = None, settle: int = 5, pad_solver: str = "auto"):
         import gymnasium as gym
         from mani_skill.utils.registration import REGISTERED_ENVS
 
@@ -118,7 +118,7 @@ class _Run:
 
 
 def run_gausstac(env_id: str, steps: int | None = None, camera: str = "splat", dx: float = 2e-3,
-                 resets: int = 3, settle: int = 5, pad_solver: str = "mpm") -> dict:
+                 resets: int = 3, settle: int = 5, pad_solver: str = "auto") -> dict:
     """One expert episode of ``env_id`` (see the module docstring); its timings and outcome."""
     run = _Run(env_id, camera, dx, resets, steps, settle, pad_solver)
     while not run.finished:
@@ -186,8 +186,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out/bench", help="folder for envs.json")
     ap.add_argument("--tasks", nargs="+", default=TASKS, choices=TASKS, metavar="ENV_ID",
                     help=f"GaussTac tasks to run (default: all of {', '.join(TASKS)})")
-    ap.add_argument("--pad-solvers", nargs="+", default=["mpm"], choices=["auto", "mpm", "fem"],
-                    help="the pads' solvers of the resolution sweep (GaussTacEnv's pad_solver; auto: the tasks' "
+    ap.add_argument("--pad-solvers", nargs="+", default=["auto"], choices=["auto", "mpm", "fem"],
+                    help="the pads' solvers of the resolution sweep (GaussTacEnv's pad_solver; auto, the default: the tasks' "
                          "default, fem for rigid objects)")
     ap.add_argument("--sweep-tasks", nargs="+", default=["GaussTac-PressCube-v1"], choices=TASKS, metavar="ENV_ID",
                     help="tasks of the resolution sweep (default: PressCube)")
@@ -205,7 +205,7 @@ def main(argv=None) -> int:
     for env_id in args.sweep_tasks:
         for solver in args.pad_solvers:
             for dx in args.dx:
-                if dx != 2e-3 or solver != "mpm" or env_id not in args.tasks:  # (that one ran above)
+                if dx != 2e-3 or solver != "auto" or env_id not in args.tasks:  # (that one ran above)
                     run = run_gausstac(env_id, args.steps, "splat", dx, settle=args.settle, pad_solver=solver)
                     runs.append((f"{env_id} ({solver} pads)", "splat", dx, run))
     if not args.no_fsr:
