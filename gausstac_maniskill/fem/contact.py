@@ -794,7 +794,7 @@ class QuasiStaticBody:
             if self.model == "neo_hookean":
                 res = self._solve_finite_strain(sdf, margin, tol, max_iterations, warm, friction)
             else:
-                res = self._solve_linear(sdf, geometry, margin, tol, max_iterations, friction)
+                res = self._solve_linear(sdf, geometry, margin, tol, max_iterations, friction, warm)
         if friction is not None:
             friction.finish(res)
         else:
@@ -820,12 +820,16 @@ class QuasiStaticBody:
         friction.idx, friction.last = idx, (idx, f)
         return f
 
-    def _solve_linear(self, sdf, geometry, margin, tol, max_iterations, friction=None) -> ContactResult:
+    def _solve_linear(self, sdf, geometry, margin, tol, max_iterations, friction=None, warm=None) -> ContactResult:
         u = np.zeros((self.num_points, 3))
         taken = np.zeros(self.num_points, bool)
-        phi, n = sdf(self.points)
+        if geometry == "deformed" and warm is not None and warm.displacement.shape == u.shape:
+            # read first where the last step left the surface, its loaded points in the problem:
+            # one pass where nothing moved since
+            u = warm.displacement.copy()
+            taken |= np.abs(warm.force).sum(1) > 0
         for it in range(1, max_iterations + 1):
-            if geometry == "deformed" and it > 1:
+            if it == 1 or geometry == "deformed":
                 phi, n = sdf(self.points + u)
                 phi = phi - np.einsum("si,si->s", n, u)  # g = φ(x) + n·(u_new − u) = phi + n·u_new
             gap_now = phi + np.einsum("si,si->s", n, u)

@@ -230,3 +230,30 @@ def test_newton_agrees_with_tresca_iterations_on_a_pressed_layer(monkeypatch):
     monkeypatch.setattr(contact, "NEWTON_ITERATIONS", 40)
     deeper = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.48).solve(_plate_indenter(h - 0.4e-3, 0.5), warm=new)
     assert len(calls) == 1 and deeper.total_force[2] < 1.5 * new.total_force[2]
+
+
+def test_a_solve_from_its_own_solution_takes_one_pass():
+    """Guard of the warm start on the deformed geometry (contact read where the surface is):
+    a sphere pressed into a bonded layer, then solved again from that result with nothing
+    moved, reads the same forces in one outer pass (it took two or three when every solve
+    started from the rest surface), with friction or without; and without friction (a unique
+    solution) a deeper press from it matches the same press from rest."""
+    from gausstac_maniskill.fem import Indenter
+
+    h, R = 4e-3, 5e-3
+
+    def ball(depth, mu):
+        pose = np.eye(4)
+        pose[2, 3] = h + R - depth
+        return Indenter(sphere(R, np.zeros(3)), pose, mu)
+
+    for mu in (0.0, 0.5):
+        body = layer_body(h, 6e-3, 0.5e-3, 0.3e6, 0.48)
+        first = body.solve(ball(0.4e-3, mu), geometry="deformed", margin=0.0)
+        assert first.iterations >= 2
+        again = body.solve(ball(0.4e-3, mu), geometry="deformed", margin=0.0, warm=first)
+        assert again.iterations == 1
+        np.testing.assert_allclose(again.force, first.force, rtol=0, atol=1e-5 * np.abs(first.force).max())
+    deeper = body.solve(ball(0.6e-3, 0.0), geometry="deformed", margin=0.0, warm=first)
+    cold = body.solve(ball(0.6e-3, 0.0), geometry="deformed", margin=0.0)
+    assert deeper.total_force[2] == pytest.approx(cold.total_force[2], rel=1e-5)
