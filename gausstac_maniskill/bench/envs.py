@@ -11,11 +11,11 @@ Rows:
   driven by its scripted expert through a whole episode: until it succeeds and ``--settle``
   more steps, or the task's time limit (``--steps N``: at most N timed steps). The mean
   step is therefore one of the episode as a user records it, approach included. These rows
-  use the tasks' default pads (``pad_solver="auto"``) at dx = 2 mm. PressCube (or the ``--sweep-tasks``) also runs at finer MPM
-  grids (``--dx``), where the "outcome" column is the force error at the end (speed vs
-  accuracy), with each of ``--pad-solvers`` (``fem``: the pads solved at equilibrium,
-  ``GaussTacEnv(pad_solver="fem")``, its time in the MPM column; ``auto``: the tasks'
-  default, fem for rigid objects and the MPM's with a soft one);
+  use the tasks' default pads (``pad_solver="auto"``) at dx = 2 mm. PressCube (or the
+  ``--sweep-tasks``) also runs at finer MPM grids (``--dx``), where the "outcome" column is
+  the force error at the end (speed vs accuracy), with each of ``--pad-solvers`` (``fem``:
+  the pads solved at equilibrium, ``GaussTacEnv(pad_solver="fem")``, its time in the MPM
+  column; ``auto``: the tasks' default, fem for rigid objects and the MPM's with a soft one);
 * the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
   CPU machine: rigid meshes only, no pad deformation), made in the same process and stepped
   in turn with the splat run, so that both see the same machine load (the "camera side by
@@ -187,8 +187,8 @@ def main(argv=None) -> int:
     ap.add_argument("--tasks", nargs="+", default=TASKS, choices=TASKS, metavar="ENV_ID",
                     help=f"GaussTac tasks to run (default: all of {', '.join(TASKS)})")
     ap.add_argument("--pad-solvers", nargs="+", default=["auto"], choices=["auto", "mpm", "fem"],
-                    help="the pads' solvers of the resolution sweep (GaussTacEnv's pad_solver; auto, the default: the tasks' "
-                         "default, fem for rigid objects)")
+                    help="the pads' solvers of the resolution sweep (GaussTacEnv's pad_solver; auto, the default: "
+                         "the tasks' default, fem for rigid objects)")
     ap.add_argument("--sweep-tasks", nargs="+", default=["GaussTac-PressCube-v1"], choices=TASKS, metavar="ENV_ID",
                     help="tasks of the resolution sweep (default: PressCube)")
     ap.add_argument("--no-fsr", action="store_true", help="skip ManiSkill's FSR-tactile Allegro row")

@@ -149,7 +149,8 @@ CASES = [(w, 5e-3) for w in (10e-3, 20e-3, 40e-3)] + [(40e-3, r) for r in (2.5e-
 def main(argv: list[str] | None = None) -> int:
     ap = cli("patch", __doc__)
     ap.add_argument("--pad-solver", choices=("mpm", "fem"), default="mpm",
-                    help="the explicit MPM pads with and without the active patch (default), or the pads at equilibrium")
+                    help="the explicit MPM pads with and without the active patch (default), "
+                         "or the pads at equilibrium")
     ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
     ap.add_argument("--patch-radius", type=float, nargs="*", default=[4e-3, 6e-3],
                     help="active patch radii [m] to run beside the whole pad (default: 1 and 1.5 layers; MPM only)")
