@@ -95,8 +95,9 @@ class GaussTacSim:
             dx = 1 mm), else point by point with a
             :class:`~gausstac_maniskill.errors.CostWarning` (a 40 mm block pad: 10–12 s per
             press step point by point, 23–28 ms with its 1.5 GB compliance, 11 minutes once on
-            2 cores; ``bench patch --pad-solver fem``). True at dx = 0.75 mm: 532 MB and 5 minutes on 2 cores once per pad
-            shape, then a press costs 15 ms (sphere) to 0.7 s (plate) instead of 8–34 s.
+            2 cores; ``bench patch --pad-solver fem``). True at dx = 0.75 mm: 532 MB and 5
+            minutes on 2 cores once per pad shape, then a press costs 15 ms (sphere) to 0.7 s
+            (plate) instead of 8–34 s.
     """
 
     def __init__(self, pads: Sequence[PadSpec], link_poses: Mapping[str, np.ndarray], *,

@@ -216,15 +216,16 @@ class GaussTacEnv(BaseEnv):
                  splat_background=None, record_mpm_state: bool = True, camera: str = "splat",
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
                  pad_reaction: bool = False, splat_lod: bool = True, splat_cull: bool = True,
-                 pad_solver: str = "auto", fem_model: str = "linear", fem_precompute: bool | None = None, **kwargs):
+                 pad_solver: str = "auto", fem_model: str = "linear", fem_precompute: bool | None = None,
+                 **kwargs):
         backend.ensure_init()
         _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
         self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
         if pad_solver not in ("auto", "mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
-            raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'auto', 'mpm' or 'fem' "
-                              "and fem_model 'linear' or 'neo_hookean'")
+            raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'auto', 'mpm' "
+                              "or 'fem' and fem_model 'linear' or 'neo_hookean'")
         if fem_precompute not in (None, True, False):
             raise ConfigError(f"fem_precompute={fem_precompute!r} must be None, True or False")
         self.pad_solver, self.fem_model, self.fem_precompute = pad_solver, fem_model, fem_precompute
