@@ -77,7 +77,8 @@ class GaussTacSim:
             ``"mpm"``: the pads are MPM particles relaxed with a pseudo-mass,
             in contact with rigid and soft objects. ``"fem"``: each awake pad is solved at
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
-            one cube element per soft particle, no locking as ν → 0.5, no pseudo-mass), against
+            cube elements on the particle lattice, cut by the layer's curved surface and bond,
+            no locking as ν → 0.5, no pseudo-mass), against
             the rigid objects within reach (each surface point meets the nearest); soft objects
             are refused. The splat camera draws
             these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)

@@ -4,8 +4,9 @@
 [--pad-sizes 1e-3 5e-4] [--depths 2.5e-4 5e-4 1e-3] [--friction 0.5] [--mpm-dx 1e-3 | --no-mpm]
 [--out DIR]``
 
-The pad solved at equilibrium instead of relaxed by the explicit MPM: one cube element per
-particle (selective reduced integration, no volumetric locking), its linear stiffness factored
+The pad solved at equilibrium instead of relaxed by the explicit MPM: cube elements on the
+particle lattice (the pad's cut by its curved surface and bond; selective reduced integration,
+no volumetric locking), its linear stiffness factored
 once in the link frame, contact solved on the surface points near the collider
 (:mod:`gausstac_maniskill.fem.contact`). No time step, no pseudo-mass.
 

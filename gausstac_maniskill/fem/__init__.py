@@ -5,7 +5,8 @@ pseudo-mass; this package solves the equilibrium itself. A pad is quasi-static a
 rates (its elastic wave crosses it in under a millisecond), and in its link frame its rest
 shape never changes, so its stiffness matrix is assembled and factored once:
 
-* :mod:`.hex` — trilinear hexahedra on the pad's particle lattice (one voxel per particle),
+* :mod:`.hex` — trilinear hexahedra on the pad's particle lattice (whole cubes, or cut
+  cells that follow a curved layer's surface and bond),
   selective reduced integration against volumetric locking, assembly and interpolation.
 * :mod:`.contact` — contact of the body's surface points with rigid colliders (frictionless:
   a linear complementarity problem; with Coulomb friction: semismooth Newton on Alart and

@@ -62,12 +62,12 @@ def array_digest(arrays, extra: str = "") -> str:
 
 def compliance_key(body) -> str:
     """Hex digest naming ``body``'s compliance up to its Young's modulus (W ∝ 1/E): its
-    elements, element size, fixed degrees of freedom, surface points (to 1e-6 of an element)
-    and their elements, and ν."""
+    elements (and their fill, for cut cells), element size, fixed degrees of freedom, surface
+    points (to 1e-6 of an element) and their elements, and ν."""
     b = body.body
     points = np.round((body.points - b.origin) / b.size * 1e6).astype(np.int64)
-    return array_digest((b.voxels, body.fixed, points, body.point_elements),
-                        repr((FORMAT, round(b.size, 15), round(body.nu, 15))))[:32]
+    arrays = (b.voxels, body.fixed, points, body.point_elements) + (() if b.fill is None else (b.fill,))
+    return array_digest(arrays, repr((FORMAT, round(b.size, 15), round(body.nu, 15))))[:32]
 
 
 def surface_compliance(body, workers: int | None = None, progress: bool = True, cache: bool = True) -> np.ndarray:

@@ -554,13 +554,15 @@ class QuasiStaticBody:
         model: ``"linear"`` (small strain, the default) or ``"neo_hookean"`` (finite strain:
             :func:`~.hex.neo_hookean_forces`, solved by fixed-point iterations on the linear
             stiffness's factor, each with the contact solved exactly; see :meth:`solve`).
+        point_sources: [S] what each point stands for, for its owner's bookkeeping (a pad: the
+            soft particle whose surface it is; default: ``point_elements``).
     """
 
     def __init__(self, body: VoxelBody, E: float, nu: float, fixed, points, point_elements, name: str = "body",
-                 model: str = "linear"):
+                 model: str = "linear", point_sources=None):
         if model not in ("linear", "neo_hookean"):
             raise ConfigError(f"{name}: model={model!r} must be 'linear' or 'neo_hookean'")
-        self._args = (body, E, nu, fixed, points, point_elements, name, model)  # to rebuild it (pickling)
+        self._args = (body, E, nu, fixed, points, point_elements, name, model, point_sources)  # (pickling)
         self.body, self.E, self.nu, self.name, self.model = body, float(E), float(nu), name, model
         fixed = np.asarray(fixed, bool)
         if fixed.ndim == 1:
@@ -582,6 +584,7 @@ class QuasiStaticBody:
         self._factor = None  # K's sparse LU, computed on first use (:attr:`_lu`)
         self.points = np.asarray(points, float).reshape(-1, 3)
         self.point_elements = np.asarray(point_elements, np.int64)
+        self.point_sources = self.point_elements if point_sources is None else np.asarray(point_sources, np.int64)
         nodes, self._weights = trilinear(body, self.points, self.point_elements)
         self._point_rows = self._row[nodes[:, :, None] * 3 + np.arange(3)]  # [S, 8, 3]
         self._columns: dict[int, np.ndarray] = {}  # point -> its compliance column [S, 3, 3], as solved

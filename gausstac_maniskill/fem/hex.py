@@ -7,6 +7,14 @@ Int. J. Numer. Meth. Eng. 15:1413; for a parallelepiped it equals the B-bar meth
 constant volume change per element). The volume change is then one value per element, which
 keeps the element free of volumetric locking as ν → 0.5.
 
+A body may also be made of *cut cells* (the finite cell method, Parvizian, Düster & Rank 2007,
+Comput. Mech. 41:121): each cube carries a ``fill``, the material's relative stiffness at n³
+sub-cell points (1 where the cube holds the soft material, a large factor where it holds the
+rigid base, a tiny one where it is empty). Its deviatoric part is then integrated on those
+points and its volume change, still one value per element, weighted by their mean. A curved
+layer is so represented by the cubes that its surface and its bond cut, instead of a
+staircase of whole cubes.
+
 Node numbering of an element: corner c = (i, j, k) ∈ {0, 1}³ is node ``4i + 2j + k``
 (:data:`CORNERS`); degrees of freedom are node-major, 3 per node (x, y, z).
 """
@@ -19,7 +27,7 @@ import numpy as np
 from ..errors import ConfigError
 
 __all__ = ["CORNERS", "VoxelBody", "voxel_body", "element_stiffness", "stiffness", "trilinear", "dissection_order",
-           "neo_hookean_forces", "centre_state"]
+           "neo_hookean_forces", "centre_state", "subcell_points"]
 
 #: Corner offsets (i, j, k) of an element's 8 nodes, in node order.
 CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], np.int64)
@@ -35,6 +43,9 @@ class VoxelBody:
         voxels: [E, 3] int, lattice index of each element's lowest corner.
         nodes: [V, 3] int, lattice index of each node.
         element_nodes: [E, 8] int, node of each element corner (order :data:`CORNERS`).
+        fill: None (every element a whole cube of the material) or [E, n³] cut cells: the
+            material's relative stiffness at each element's sub-cell points
+            (:func:`subcell_points`), each standing for 1/n³ of the cube (module docstring).
     """
 
     origin: np.ndarray
@@ -42,6 +53,7 @@ class VoxelBody:
     voxels: np.ndarray
     nodes: np.ndarray
     element_nodes: np.ndarray
+    fill: np.ndarray | None = None
 
     @property
     def num_dofs(self) -> int:
@@ -52,9 +64,10 @@ class VoxelBody:
         return (self.element_nodes[:, :, None] * 3 + np.arange(3)).reshape(len(self.voxels), 24)
 
 
-def voxel_body(voxels, origin, size: float) -> VoxelBody:
+def voxel_body(voxels, origin, size: float, fill=None) -> VoxelBody:
     """The body of elements at lattice indices ``voxels`` [E, 3] (int), lattice origin
-    ``origin`` [3] m and element edge ``size`` [m]; shared corners become one node."""
+    ``origin`` [3] m and element edge ``size`` [m]; shared corners become one node. ``fill``:
+    [E, n³] cut cells (:class:`VoxelBody`), each row with some material (> 0 somewhere)."""
     voxels = np.asarray(voxels, np.int64).reshape(-1, 3)
     if not len(voxels):
         raise ConfigError("voxel_body: no element")
@@ -62,10 +75,17 @@ def voxel_body(voxels, origin, size: float) -> VoxelBody:
         raise ConfigError(f"voxel_body: size={size!r} m must be > 0")
     if len(np.unique(voxels, axis=0)) != len(voxels):
         raise ConfigError("voxel_body: an element appears twice")
+    if fill is not None:
+        fill = np.asarray(fill, float)
+        n = round(fill.shape[-1] ** (1 / 3)) if fill.ndim == 2 else 0
+        if fill.shape != (len(voxels), n ** 3) or n < 1:
+            raise ConfigError(f"voxel_body: fill has shape {fill.shape}, expected ({len(voxels)}, n³)")
+        if not np.isfinite(fill).all() or (fill < 0).any() or not (fill.max(1) > 0).all():
+            raise ConfigError("voxel_body: fill must be finite, >= 0, and > 0 somewhere in every element")
     corners = voxels[:, None, :] + CORNERS[None]
     nodes, inverse = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
     return VoxelBody(np.asarray(origin, float).copy(), float(size), voxels, nodes,
-                     inverse.reshape(len(voxels), 8))
+                     inverse.reshape(len(voxels), 8), fill)
 
 
 def _shape_gradients(xi: np.ndarray, size: float) -> np.ndarray:
@@ -115,16 +135,45 @@ def element_stiffness(size: float, E: float, nu: float) -> np.ndarray:
     return K + bulk * np.outer(vol, vol) * size ** 3
 
 
+def subcell_points(n: int) -> np.ndarray:
+    """[n³, 3] reference coordinates in (−1, 1)³ of the centres of a cube's n × n × n sub-cells."""
+    q = (2.0 * np.arange(n) + 1.0) / n - 1.0
+    return np.stack(np.meshgrid(q, q, q, indexing="ij"), -1).reshape(-1, 3)
+
+
+def _cut_element_stiffness(body: VoxelBody, E: float, nu: float) -> np.ndarray:
+    """[E, 576] stiffness [N/m] of each cut cell of ``body`` (``body.fill`` set): the
+    deviatoric part integrated exactly over each sub-cell (2×2×2 Gauss points) times its fill,
+    the volumetric part at the centre times the fill's mean."""
+    mu, bulk = _moduli(E, nu)
+    m = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    dev = 2.0 * mu * (np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5]) - np.outer(m, m) / 3.0)
+    n = round(body.fill.shape[1] ** (1 / 3))
+    gauss = (2.0 * CORNERS - 1.0) / (np.sqrt(3.0) * n)  # a sub-cell's 2×2×2 Gauss points about its centre
+
+    def integrated(centre):  # ∫ Bᵀ D_dev B over the sub-cell, per unit of its volume (exact for Q1)
+        return np.mean([(lambda B: B.T @ dev @ B)(_strain_matrix(_shape_gradients(centre + g, body.size)))
+                        for g in gauss], axis=0)
+
+    sub = subcell_points(n)
+    per_point = np.stack([integrated(xi) for xi in sub]).reshape(len(sub), 576)
+    vol = m @ _strain_matrix(_shape_gradients(np.zeros(3), body.size))
+    v = body.size ** 3
+    return (body.fill @ per_point) * (v / len(sub)) + np.outer(body.fill.mean(1), bulk * v * np.outer(vol, vol).ravel())
+
+
 def stiffness(body: VoxelBody, E: float, nu: float):
     """The assembled stiffness [N/m] of ``body``, ``scipy.sparse`` CSR [3V, 3V]."""
     import scipy.sparse as sp
 
-    Ke = element_stiffness(body.size, E, nu)
     dofs = body.element_dofs()
     n = len(dofs)
     rows = np.repeat(dofs, 24, axis=1).ravel()
     cols = np.tile(dofs, (1, 24)).ravel()
-    data = np.broadcast_to(Ke.ravel(), (n, 576)).ravel()
+    if body.fill is None:
+        data = np.broadcast_to(element_stiffness(body.size, E, nu).ravel(), (n, 576)).ravel()
+    else:
+        data = _cut_element_stiffness(body, E, nu).ravel()
     return sp.coo_matrix((data, (rows, cols)), shape=(body.num_dofs,) * 2).tocsr()
 
 
@@ -196,8 +245,12 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     """Internal nodal forces [V, 3] [N] of ``body`` displaced by ``u`` [V, 3] [m], for the
     decoupled compressible Neo-Hookean solid ψ = μ/2 (J^(−2/3) tr C − 3) + K/2 (ln J)² with the
     same split as :func:`element_stiffness`: the isochoric part on the 2×2×2 Gauss points, the
-    volumetric part with J of the element's centre (F-bar: one volume change per element).
-    Its linearisation at u = 0 is :func:`stiffness` exactly (μ = E/(2(1+ν)), K = E/(3(1−2ν))).
+    volumetric part with J of the element's centre (F-bar: one volume change per element); cut
+    cells weight them by their fill, the isochoric part at the sub-cell centres (so their
+    linearisation differs from :func:`stiffness`'s exact sub-cell integrals by the midpoint
+    rule's error, 1 % for 4³ sub-cells: the fixed point converges to the same solution).
+    For whole cubes its linearisation at u = 0 is :func:`stiffness` exactly (μ = E/(2(1+ν)),
+    K = E/(3(1−2ν))).
     First Piola stresses P = μ J^(−2/3) (F − tr(FᵀF)/3 F⁻ᵀ) and P₀ = K ln J₀ F₀⁻ᵀ, with
     F⁻ᵀ = cof F / J.
 
@@ -206,6 +259,12 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     """
     mu, bulk = _moduli(E, nu)
     G, G0 = _gauss_gradients(body.size)
+    v = body.size ** 3
+    w = np.full((len(body.voxels), len(G)), v / len(G))  # [E, points] volume × relative stiffness
+    w0 = np.full(len(body.voxels), v)
+    if body.fill is not None:  # cut cells: the isochoric part on the sub-cell points (see stiffness)
+        G = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(round(body.fill.shape[1] ** (1 / 3)))])
+        w, w0 = body.fill * (v / body.fill.shape[1]), body.fill.mean(1) * v
     ut = u[body.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
     eye = np.eye(3)
     F = eye + np.matmul(ut[:, None], G[None])  # [E, 8 Gauss points, 3, 3]
@@ -216,8 +275,7 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     I1 = np.einsum("egij,egij->eg", F, F)
     P = (mu * J ** (-2.0 / 3.0))[..., None, None] * (F - (I1 / (3.0 * J))[..., None, None] * _cofactor3(F))
     P0 = (bulk * np.log(J0) / J0)[:, None, None] * _cofactor3(F0)
-    v = body.size ** 3
-    fe = np.matmul(P, G.transpose(0, 2, 1)[None]).sum(1) * (v / 8.0) + (P0 @ G0.T) * v  # [E, 3, 8]
+    fe = (np.matmul(P, G.transpose(0, 2, 1)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
     f = np.zeros((len(body.nodes), 3))
     nodes = body.element_nodes.ravel()
     for i in range(3):

@@ -35,7 +35,7 @@ def map_readout(pad, body, binning) -> "scipy.sparse.csr_matrix":
     T = binning.rows * binning.cols
     S = pad.sensor_frame[:3, :3]  # sensor axes in the link frame (columns x, y, z)
     elem = np.full(pad.num_particles, -1)
-    elem[np.flatnonzero(~pad.kinematic)] = np.arange(len(body.body.voxels))
+    elem[np.flatnonzero(~pad.kinematic)] = np.arange(int((~pad.kinematic).sum()))  # element e: soft particle e
     inside = (binning.taxel >= 0).any(axis=1)
     surf = pad.surface & inside
     soft = ~pad.kinematic & inside

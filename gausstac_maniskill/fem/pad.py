@@ -1,9 +1,11 @@
 """Quasi-static bodies for the product's pads and for the thin-layer benchmark.
 
-* :func:`pad_body`: a :class:`~gausstac_maniskill.tactile.pad.Pad` (link frame) as one cube
-  element per soft particle (edge: the particle spacing), bonded where it meets the pad's
-  kinematic particles, touched on the link mesh (the point ``depth`` along ``normal`` from
-  each outermost particle, as ``GaussTacSim(pad_surface="mesh")``).
+* :func:`pad_body`: a :class:`~gausstac_maniskill.tactile.pad.Pad` (link frame) as cube
+  elements on its particle lattice (edge: the particle spacing), touched on the link mesh (the
+  point ``depth`` along ``normal`` from each outermost particle, as
+  ``GaussTacSim(pad_surface="mesh")``). By default the cubes are cut by the layer's curved
+  surface and bond (:func:`pad_cells`); ``cells="voxel"``: one whole cube per soft particle,
+  bonded where it meets the kinematic particles (a staircase, the body before 2026-11-27).
 * :func:`layer_body`: a flat layer of thickness h bonded to a rigid base (a quarter, with
   symmetry planes x = 0 and y = 0, or the whole layer), touched at its top face.
 """
@@ -17,10 +19,19 @@ from ..errors import ConfigError
 from .contact import QuasiStaticBody
 from .hex import CORNERS, voxel_body
 
-__all__ = ["pad_body", "pad_lattice", "layer_body", "collider_indenter"]
+__all__ = ["pad_body", "pad_cells", "pad_lattice", "layer_body", "collider_indenter"]
+
+#: Sub-cells per axis at which a cut cell samples what it holds (4: 64 per cube).
+SUBCELLS = 4
+#: Relative stiffness of the rigid base's part of a cut cell (the link the layer is bonded to).
+CORE_STIFFNESS = 1e3
+#: Relative stiffness of a cut cell's empty part (the finite cell method's α: keeps a cell with
+#: a sliver of material from a near-singular stiffness).
+EMPTY_STIFFNESS = 1e-4
 
 
-def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = "linear") -> QuasiStaticBody:
+def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = "linear",
+             cells: str = "cut") -> QuasiStaticBody:
     """The soft layer of ``pad`` as a quasi-static body in its link frame (metres).
 
     Args:
@@ -28,13 +39,30 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
             spacing ``pad.spacing``, as :func:`~gausstac_maniskill.tactile.pad.build_pad` makes).
         E, nu: Young's modulus [Pa] and Poisson's ratio (default: the pad's material).
         model: ``"linear"`` or ``"neo_hookean"`` (:class:`QuasiStaticBody`).
+        cells: ``"cut"`` (default, :func:`pad_cells`) or ``"voxel"`` (a whole cube per soft
+            particle: the layer's curved surface and bond as staircases).
+
+    Element e < (number of soft particles) is the cube of the e-th soft particle either way;
+    each surface point passes its force to the particle ``point_sources`` names.
     """
+    if cells not in ("cut", "voxel"):
+        raise ConfigError(f"pad {pad.name!r}: cells={cells!r} must be 'cut' or 'voxel'")
     mat = pad.spec.material
     E = mat.E if E is None else E
     nu = mat.nu if nu is None else nu
     s = pad.spacing
     origin, ijk = pad_lattice(pad)
     soft = ~pad.kinematic
+    surface = np.flatnonzero(pad.surface[soft])
+    points = pad.rest[soft][surface] + pad.depth[soft][surface, None] * pad.normal[soft][surface]
+    name = f"pad {pad.name!r}"
+    if cells == "cut":
+        body, fixed = pad_cells(pad)
+        # each point is interpolated from the cut cell that holds it (the cells hold the surface)
+        lookup = {tuple(v): e for e, v in enumerate(body.voxels)}
+        holder = np.array([lookup.get(tuple(v), -1) for v in np.floor((points - origin) / s).astype(np.int64)])
+        elements = np.where(holder >= 0, holder, surface)
+        return QuasiStaticBody(body, E, nu, fixed, points, elements, name=name, model=model, point_sources=surface)
     body = voxel_body(ijk[soft], origin, s)
     # the bond: every node the soft elements share with a kinematic particle's cube
     span = ijk.max(0) + 2  # lattice nodes run 0 … max + 1 on each axis
@@ -43,10 +71,67 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
         return (v[..., 0] * span[1] + v[..., 1]) * span[2] + v[..., 2]
 
     fixed = np.isin(key(body.nodes), key(ijk[pad.kinematic][:, None, :] + CORNERS[None]))
-    surface = np.flatnonzero(pad.surface[soft])
-    rest = pad.rest[soft][surface]
-    points = rest + pad.depth[soft][surface, None] * pad.normal[soft][surface]
-    return QuasiStaticBody(body, E, nu, fixed, points, surface, name=f"pad {pad.name!r}", model=model)
+    return QuasiStaticBody(body, E, nu, fixed, points, surface, name=name, model=model)
+
+
+def pad_cells(pad):
+    """The soft layer of ``pad`` as cut cells on its particle lattice: (body, fixed [V] bool).
+
+    The layer is where the depth below the link mesh lies in [0, thickness]. Each particle
+    knows its depth d and the outward normal n of the nearest face, so near it the depth at x is
+    d − n·(x − x_p) (exact for a plane; off by s²/2ρ for a surface of curvature radius ρ). The
+    cubes are every soft particle's (first, in order), every kinematic particle's that the bond
+    cuts, and every empty one next to a surface particle that the surface cuts (its centre
+    outside the mesh, each read from the nearest surface particle). Each cube samples the depth
+    at :data:`SUBCELLS`³ sub-cell centres: 1 in the layer, :data:`CORE_STIFFNESS` in the base,
+    :data:`EMPTY_STIFFNESS` outside (the fill of :class:`~.hex.VoxelBody`). The nodes deeper
+    than the bond are held. At the rim, where the pad's cone ends the layer, the cubes stay
+    whole (a staircase there, away from where the pad is pressed).
+    """
+    from .hex import subcell_points
+
+    s, t = pad.spacing, pad.spec.thickness
+    origin, ijk = pad_lattice(pad)
+    n_p = len(ijk)
+    span = ijk.max(0) + 4  # lattice indices shifted by 1 stay in 0 … max + 2
+
+    def key(v):
+        v = v + 1
+        return (v[..., 0] * span[1] + v[..., 1]) * span[2] + v[..., 2]
+
+    soft = np.flatnonzero(~pad.kinematic)
+    kin = np.flatnonzero(pad.kinematic)
+    # empty cubes next to the surface particles: each read from its nearest one
+    surf = np.flatnonzero(pad.surface & ~pad.kinematic)
+    offsets = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)])
+    cand = (ijk[surf][:, None, :] + offsets[None]).reshape(-1, 3)
+    src = np.repeat(surf, len(offsets))
+    dist2 = np.tile((offsets ** 2).sum(1), len(surf))
+    keys = key(cand)
+    free = ~np.isin(keys, key(ijk))
+    cand, src, dist2, keys = cand[free], src[free], dist2[free], keys[free]
+    order = np.lexsort((dist2, keys))
+    first = order[np.r_[True, keys[order][1:] != keys[order][:-1]]]
+    cand, src = cand[first], src[first]
+    centre_depth = pad.depth[src] - np.einsum("ij,ij->i", pad.normal[src], (cand - ijk[src]) * s)
+    cand, src = cand[centre_depth < 0], src[centre_depth < 0]  # outside the mesh only (not past the rim)
+    voxels = np.concatenate([ijk[soft], ijk[kin], cand])
+    source = np.concatenate([soft, kin, src])
+    sub = 0.5 * subcell_points(SUBCELLS)  # offsets from a cube's centre, in cube edges
+    x = (voxels - ijk[source])[:, None, :] + sub[None]  # [C, Q, 3] from the source particle, in edges
+    depth = pad.depth[source][:, None] - np.einsum("ci,cqi->cq", pad.normal[source], x) * s
+    fill = np.where(depth < 0, EMPTY_STIFFNESS, np.where(depth <= t, 1.0, CORE_STIFFNESS))
+    layer = (depth >= 0) & (depth <= t)
+    keep = layer.any(1)
+    keep[:len(soft)] = True  # every soft particle's cube, in order
+    body = voxel_body(voxels[keep], origin, s, fill[keep])
+    # a node is held where it lies deeper than the bond, read from the cubes around it
+    el_source = source[keep]
+    corner = (body.voxels[:, None, :] + CORNERS[None] - 0.5 - ijk[el_source][:, None, :]) * s  # [E, 8, 3]
+    corner_depth = pad.depth[el_source][:, None] - np.einsum("ei,eai->ea", pad.normal[el_source], corner)
+    nodes = body.element_nodes.ravel()
+    mean_depth = np.bincount(nodes, corner_depth.ravel(), len(body.nodes)) / np.bincount(nodes, minlength=len(body.nodes))
+    return body, mean_depth > t
 
 
 def pad_lattice(pad) -> tuple[np.ndarray, np.ndarray]:

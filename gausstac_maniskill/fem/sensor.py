@@ -6,10 +6,12 @@ stuck points hold, the finite-strain iterate) and turns it into what the tactile
 wrenches and the renderer read from a pad: each particle's world position, deformation
 gradient, Cauchy stress and contact force.
 
-The body has one cube element per soft particle, centred on it, so a particle's
-displacement is the mean of its element's eight nodes and its stress the element's at its
-centre (:func:`~.hex.centre_state`). A surface point (on the link mesh, ``depth`` along
-``normal`` from its particle) passes its contact force to its particle. Kinematic particles
+The body has a cube element centred on each soft particle (the first elements, in order; the
+cubes are cut by the layer's surface and bond, and cut cubes without a particle complete it:
+:func:`~.pad.pad_cells`), so a particle's displacement is the mean of its element's eight nodes
+and its stress the element's at its centre (:func:`~.hex.centre_state`). A surface point (on
+the link mesh, ``depth`` along ``normal`` from its particle) passes its contact force to its
+particle. Kinematic particles
 ride with the link. Units: SI; "link frame" is the pad's link's frame, "world" the scene's.
 """
 from __future__ import annotations
@@ -26,8 +28,8 @@ import numpy as np
 from ..errors import ConfigError, CostWarning, SimulationWarning
 from .compliance import array_digest, estimated_bytes
 from .contact import ContactResult, Indenters
-from .hex import centre_state, voxel_body
-from .pad import collider_indenter, pad_body, pad_lattice
+from .hex import centre_state
+from .pad import collider_indenter, pad_body, pad_cells
 
 __all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES", "forget_bodies"]
 
@@ -46,6 +48,7 @@ BODY_CACHE = 4
 #: forces are not physical (the tasks' experts stay under 25 %; random actions reach 160 %).
 LINEAR_LIMIT = 0.5
 _BODIES: OrderedDict = OrderedDict()
+_NODES: dict = {}  # nodes of each pad geometry's body (EquilibriumPad.shape), by _body_key
 
 
 def forget_bodies() -> None:
@@ -69,10 +72,11 @@ def _warn_point_by_point(body) -> None:
 
 def _body_key(pad, model: str) -> str:
     """Digest of what a pad's body is built from: its particles (rest positions, bond, surface,
-    depth and normal of the contact surface), spacing, material and the model."""
+    depth and normal of the contact surface), spacing, layer thickness (where the cut cells
+    place the bond), material and the model."""
     mat = pad.spec.material
     return array_digest((pad.rest, pad.kinematic, pad.surface, pad.depth, pad.normal),
-                        repr((pad.spacing, mat.E, mat.nu, model)))
+                        repr((pad.spacing, pad.spec.thickness, mat.E, mat.nu, model, "cut")))
 
 
 class EquilibriumPad:
@@ -154,7 +158,7 @@ class EquilibriumPad:
     @property
     def point_particles(self) -> np.ndarray:
         """[S] the pad particle of each of the body's surface points."""
-        return self.soft[self.body.point_elements]
+        return self.soft[self.body.point_sources]
 
     # ------------------------------------------------------------------ solving
     def solve(self, colliders, link_pose: np.ndarray) -> ContactResult:
@@ -231,9 +235,10 @@ class EquilibriumPad:
     @functools.cached_property
     def shape(self) -> tuple[int, int]:
         """(S, V): the body's surface points and nodes, from the pad alone (no assembly)."""
-        origin, ijk = pad_lattice(self.pad)
-        nodes = voxel_body(ijk[self.soft], origin, self.pad.spacing).nodes
-        return int(self.pad.surface[self.soft].sum()), len(nodes)
+        key = _body_key(self.pad, "")
+        if key not in _NODES:  # the same pad in every env of a batch: its cut cells once (0.3 s)
+            _NODES[key] = len(pad_cells(self.pad)[0].nodes)
+        return int(self.pad.surface[self.soft].sum()), _NODES[key]
 
     def flat_state(self, holders: Sequence[str]) -> dict[str, np.ndarray]:
         """:meth:`state` as a flat dict of fixed-shape arrays (S, V from :attr:`shape`, H =
@@ -385,8 +390,10 @@ class EquilibriumPad:
             if self.result is not None:
                 body = self.body
                 u = self.node_displacement()
-                local[self.soft] += u[body.body.element_nodes].mean(1)
-                F[self.soft], sigma[self.soft] = centre_state(body.body, u, body.E, body.nu, self.model)
+                n = len(self.soft)  # element e < n is soft particle e's cube (pad_body)
+                local[self.soft] += u[body.body.element_nodes[:n]].mean(1)
+                F_e, sigma_e = centre_state(body.body, u, body.E, body.nu, self.model)
+                F[self.soft], sigma[self.soft] = F_e[:n], sigma_e[:n]
                 np.add.at(force, self.point_particles, self.result.force)
             d["particles"] = (local, F, sigma, force)
         return d["particles"]
