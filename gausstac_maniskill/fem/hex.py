@@ -9,11 +9,10 @@ keeps the element free of volumetric locking as ν → 0.5.
 
 A body may also be made of *cut cells* (the finite cell method, Parvizian, Düster & Rank 2007,
 Comput. Mech. 41:121): each cube carries a ``fill``, the material's relative stiffness at n³
-sub-cell points (1 where the cube holds the soft material, a large factor where it holds the
-rigid base, a tiny one where it is empty). Its deviatoric part is then integrated on those
-points and its volume change, still one value per element, weighted by their mean. A curved
-layer is so represented by the cubes that its surface and its bond cut, instead of a
-staircase of whole cubes.
+sub-cell points (1 where the cube holds the material, a tiny one where it is empty). Its
+deviatoric part is then integrated over those sub-cells and its volume change, still one value
+per element, weighted by their mean. A curved layer is so represented by the cubes that its
+surface cuts, instead of a staircase of whole cubes.
 
 Node numbering of an element: corner c = (i, j, k) ∈ {0, 1}³ is node ``4i + 2j + k``
 (:data:`CORNERS`); degrees of freedom are node-major, 3 per node (x, y, z).
