@@ -55,6 +55,11 @@ class VoxelBody:
     fill: np.ndarray | None = None
 
     @property
+    def subcells(self) -> int:
+        """n, the sub-cells per axis of the cut cells (0 for whole cubes)."""
+        return 0 if self.fill is None else round(self.fill.shape[1] ** (1 / 3))
+
+    @property
     def num_dofs(self) -> int:
         return 3 * len(self.nodes)
 
@@ -121,44 +126,33 @@ def element_stiffness(size: float, E: float, nu: float) -> np.ndarray:
     Gauss points, volumetric part (bulk modulus K = E / (3(1 − 2ν))) on the centre point."""
     if not -1.0 < nu < 0.5:
         raise ConfigError(f"element_stiffness: nu={nu!r} must lie in (-1, 0.5)")
+    dev, vol = _split_stiffness(size, E, nu, 1)
+    return (dev[0] + vol).reshape(24, 24)
+
+
+def _split_stiffness(size: float, E: float, nu: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The two parts of a cube's stiffness [N/m], each [.., 576] (a flattened 24 × 24):
+    ``dev`` [n³, 576], the deviatoric part of each of its n × n × n sub-cells (the order of
+    :func:`subcell_points`), integrated exactly on the sub-cell's 2×2×2 Gauss points; ``vol``
+    [576], the volumetric part of the whole cube, at its centre."""
     mu, bulk = _moduli(E, nu)
     m = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
-    dev = 2.0 * mu * (np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5]) - np.outer(m, m) / 3.0)
-    K = np.zeros((24, 24))
-    G, G0 = _gauss_gradients(size)
-    for g in G:
-        B = _strain_matrix(g)
-        K += B.T @ dev @ B * (size ** 3 / 8.0)
-    B0 = _strain_matrix(G0)
-    vol = m @ B0  # [24] volume change per unit nodal displacement / element volume
-    return K + bulk * np.outer(vol, vol) * size ** 3
+    D = 2.0 * mu * (np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5]) - np.outer(m, m) / 3.0)
+    gauss = (2.0 * CORNERS - 1.0) / (np.sqrt(3.0) * n)  # a sub-cell's Gauss points about its centre
+    w = size ** 3 / (8 * n ** 3)
+    dev = np.zeros((n ** 3, 24, 24))
+    for q, centre in enumerate(subcell_points(n)):
+        for g in gauss:
+            B = _strain_matrix(_shape_gradients(centre + g, size))
+            dev[q] += B.T @ D @ B * w
+    vol = m @ _strain_matrix(_shape_gradients(np.zeros(3), size))  # [24] volume change per unit displacement / volume
+    return dev.reshape(n ** 3, 576), (bulk * np.outer(vol, vol) * size ** 3).ravel()
 
 
 def subcell_points(n: int) -> np.ndarray:
     """[n³, 3] reference coordinates in (−1, 1)³ of the centres of a cube's n × n × n sub-cells."""
     q = (2.0 * np.arange(n) + 1.0) / n - 1.0
     return np.stack(np.meshgrid(q, q, q, indexing="ij"), -1).reshape(-1, 3)
-
-
-def _cut_element_stiffness(body: VoxelBody, E: float, nu: float) -> np.ndarray:
-    """[E, 576] stiffness [N/m] of each cut cell of ``body`` (``body.fill`` set): the
-    deviatoric part integrated exactly over each sub-cell (2×2×2 Gauss points) times its fill,
-    the volumetric part at the centre times the fill's mean."""
-    mu, bulk = _moduli(E, nu)
-    m = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
-    dev = 2.0 * mu * (np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5]) - np.outer(m, m) / 3.0)
-    n = round(body.fill.shape[1] ** (1 / 3))
-    gauss = (2.0 * CORNERS - 1.0) / (np.sqrt(3.0) * n)  # a sub-cell's 2×2×2 Gauss points about its centre
-
-    def integrated(centre):  # ∫ Bᵀ D_dev B over the sub-cell, per unit of its volume (exact for Q1)
-        return np.mean([(lambda B: B.T @ dev @ B)(_strain_matrix(_shape_gradients(centre + g, body.size)))
-                        for g in gauss], axis=0)
-
-    sub = subcell_points(n)
-    per_point = np.stack([integrated(xi) for xi in sub]).reshape(len(sub), 576)
-    vol = m @ _strain_matrix(_shape_gradients(np.zeros(3), body.size))
-    v = body.size ** 3
-    return (body.fill @ per_point) * (v / len(sub)) + np.outer(body.fill.mean(1), bulk * v * np.outer(vol, vol).ravel())
 
 
 def stiffness(body: VoxelBody, E: float, nu: float):
@@ -171,8 +165,9 @@ def stiffness(body: VoxelBody, E: float, nu: float):
     cols = np.tile(dofs, (1, 24)).ravel()
     if body.fill is None:
         data = np.broadcast_to(element_stiffness(body.size, E, nu).ravel(), (n, 576)).ravel()
-    else:
-        data = _cut_element_stiffness(body, E, nu).ravel()
+    else:  # cut cells: each sub-cell's deviatoric part times its fill, the volumetric part times their mean
+        dev, vol = _split_stiffness(body.size, E, nu, body.subcells)
+        data = (body.fill @ dev + np.outer(body.fill.mean(1), vol)).ravel()
     return sp.coo_matrix((data, (rows, cols)), shape=(body.num_dofs,) * 2).tocsr()
 
 
@@ -262,7 +257,7 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     w = np.full((len(body.voxels), len(G)), v / len(G))  # [E, points] volume × relative stiffness
     w0 = np.full(len(body.voxels), v)
     if body.fill is not None:  # cut cells: the isochoric part on the sub-cell points (see stiffness)
-        G = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(round(body.fill.shape[1] ** (1 / 3)))])
+        G = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(body.subcells)])
         w, w0 = body.fill * (v / body.fill.shape[1]), body.fill.mean(1) * v
     ut = u[body.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
     eye = np.eye(3)

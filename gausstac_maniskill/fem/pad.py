@@ -19,7 +19,7 @@ from ..errors import ConfigError
 from .contact import QuasiStaticBody
 from .hex import CORNERS, voxel_body
 
-__all__ = ["pad_body", "pad_cells", "default_cells", "pad_lattice", "layer_body", "collider_indenter"]
+__all__ = ["pad_body", "pad_elements", "pad_cells", "default_cells", "pad_lattice", "layer_body", "collider_indenter"]
 
 #: Sub-cells per axis at which a cut cell samples what it holds (4: 64 per cube).
 SUBCELLS = 4
@@ -44,34 +44,50 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
     Element e < (number of soft particles) is the cube of the e-th soft particle either way;
     each surface point passes its force to the particle ``point_sources`` names.
     """
-    cells = default_cells(model) if cells is None else cells
-    if cells not in ("cut", "voxel"):
-        raise ConfigError(f"pad {pad.name!r}: cells={cells!r} must be 'cut' or 'voxel'")
     mat = pad.spec.material
     E = mat.E if E is None else E
     nu = mat.nu if nu is None else nu
-    s = pad.spacing
-    origin, ijk = pad_lattice(pad)
     soft = ~pad.kinematic
     surface = np.flatnonzero(pad.surface[soft])
     points = pad.rest[soft][surface] + pad.depth[soft][surface, None] * pad.normal[soft][surface]
-    name = f"pad {pad.name!r}"
+    body, fixed = pad_elements(pad, default_cells(model) if cells is None else cells)
+    elements = surface
+    if body.fill is not None:  # each point is interpolated from the cut cell that holds it
+        key = _lattice_key(pad_lattice(pad)[1])
+        element_keys = key(body.voxels)
+        order = np.argsort(element_keys)
+        wanted = key(np.floor((points - body.origin) / body.size).astype(np.int64))
+        at = np.minimum(np.searchsorted(element_keys, wanted, sorter=order), len(order) - 1)
+        held = element_keys[order[at]] == wanted
+        elements = np.where(held, order[at], surface)
+    return QuasiStaticBody(body, E, nu, fixed, points, elements, name=f"pad {pad.name!r}", model=model,
+                           point_sources=surface)
+
+
+def pad_elements(pad, cells: str):
+    """The elements of ``pad``'s body and its held nodes: (body, fixed [V] bool). ``cells``:
+    ``"cut"`` (:func:`pad_cells`) or ``"voxel"`` (a whole cube per soft particle, held at every
+    node it shares with a kinematic particle's cube)."""
     if cells == "cut":
-        body, fixed = pad_cells(pad)
-        # each point is interpolated from the cut cell that holds it (the cells hold the surface)
-        lookup = {tuple(v): e for e, v in enumerate(body.voxels)}
-        holder = np.array([lookup.get(tuple(v), -1) for v in np.floor((points - origin) / s).astype(np.int64)])
-        elements = np.where(holder >= 0, holder, surface)
-        return QuasiStaticBody(body, E, nu, fixed, points, elements, name=name, model=model, point_sources=surface)
-    body = voxel_body(ijk[soft], origin, s)
-    # the bond: every node the soft elements share with a kinematic particle's cube
-    span = ijk.max(0) + 2  # lattice nodes run 0 … max + 1 on each axis
+        return pad_cells(pad)
+    if cells != "voxel":
+        raise ConfigError(f"pad {pad.name!r}: cells={cells!r} must be 'cut' or 'voxel'")
+    origin, ijk = pad_lattice(pad)
+    body = voxel_body(ijk[~pad.kinematic], origin, pad.spacing)
+    key = _lattice_key(ijk)
+    return body, np.isin(key(body.nodes), key(ijk[pad.kinematic][:, None, :] + CORNERS[None]))
+
+
+def _lattice_key(ijk: np.ndarray):
+    """One integer per lattice index [..., 3] (a cell or a node) within one step around the
+    cells ``ijk`` [N, 3]: the function that maps them."""
+    span = ijk.max(0) + 4  # indices −1 … max + 2, shifted by 1
 
     def key(v):
+        v = np.asarray(v) + 1
         return (v[..., 0] * span[1] + v[..., 1]) * span[2] + v[..., 2]
 
-    fixed = np.isin(key(body.nodes), key(ijk[pad.kinematic][:, None, :] + CORNERS[None]))
-    return QuasiStaticBody(body, E, nu, fixed, points, surface, name=name, model=model)
+    return key
 
 
 def default_cells(model: str) -> str:
@@ -102,13 +118,7 @@ def pad_cells(pad):
 
     s, t = pad.spacing, pad.spec.thickness
     origin, ijk = pad_lattice(pad)
-    n_p = len(ijk)
-    span = ijk.max(0) + 4  # lattice indices shifted by 1 stay in 0 … max + 2
-
-    def key(v):
-        v = v + 1
-        return (v[..., 0] * span[1] + v[..., 1]) * span[2] + v[..., 2]
-
+    key = _lattice_key(ijk)
     soft = np.flatnonzero(~pad.kinematic)
     kin = np.flatnonzero(pad.kinematic)
     # empty cubes next to the surface particles: each read from its nearest one

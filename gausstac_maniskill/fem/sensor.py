@@ -28,8 +28,8 @@ import numpy as np
 from ..errors import ConfigError, CostWarning, SimulationWarning
 from .compliance import array_digest, estimated_bytes
 from .contact import ContactResult, Indenters
-from .hex import centre_state, voxel_body
-from .pad import collider_indenter, default_cells, pad_body, pad_cells, pad_lattice
+from .hex import centre_state
+from .pad import collider_indenter, default_cells, pad_body, pad_elements
 
 __all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES", "forget_bodies"]
 
@@ -76,7 +76,7 @@ def _body_key(pad, model: str) -> str:
     place the bond), material and the model."""
     mat = pad.spec.material
     return array_digest((pad.rest, pad.kinematic, pad.surface, pad.depth, pad.normal),
-                        repr((pad.spacing, pad.spec.thickness, mat.E, mat.nu, model, default_cells(model))))
+                        repr((pad.spacing, pad.spec.thickness, mat.E, mat.nu, model)))
 
 
 class EquilibriumPad:
@@ -237,11 +237,7 @@ class EquilibriumPad:
         """(S, V): the body's surface points and nodes, from the pad alone (no assembly)."""
         key = _body_key(self.pad, self.model)
         if key not in _NODES:  # the same pad in every env of a batch: its cells once (0.3 s)
-            if default_cells(self.model) == "cut":
-                _NODES[key] = len(pad_cells(self.pad)[0].nodes)
-            else:
-                origin, ijk = pad_lattice(self.pad)
-                _NODES[key] = len(voxel_body(ijk[self.soft], origin, self.pad.spacing).nodes)
+            _NODES[key] = len(pad_elements(self.pad, default_cells(self.model))[0].nodes)
         return int(self.pad.surface[self.soft].sum()), _NODES[key]
 
     def flat_state(self, holders: Sequence[str]) -> dict[str, np.ndarray]:
