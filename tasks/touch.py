@@ -12,15 +12,17 @@ its root at the origin. A cube is placed ``cube_gap`` in front of the apex of pa
   ``two_way=two_way``: the pads' MPM reaction wrench is applied to it in SAPIEN, so a
   pad can push it.
 
-Two-way coupling is explicit: the wrench of one MPM step acts on the cube during the
-next SAPIEN step (with a two-way object the MPM steps after every SAPIEN step, see
-``GaussTacEnv.mpm_every_sim_step``). That is stable only if the cube's mass
-m > k·dt²/4, with k ≈ 2 kN/m the contact stiffness of a default pad on a cube face and dt
-the SAPIEN timestep: 50 g at ManiSkill's 100 Hz. So the default cube is steel
-(7800 kg/m³, 62 g for 20 mm): pushed at 20 mm/s it moves in stick–slip steps of 0.3–1 mm
-and ends within about 0.6 mm of the hand's travel past first contact. A cube too light for
-the rate gets a warning (it is pushed in jumps). (The pads' quasi-static mass scaling also
-makes them heavier than they are, so a fast pad hits the cube with too much momentum.)
+Two-way coupling is implicit by default: with a two-way cube, ``pad_reaction`` defaults to
+``True``, so the pads' push reaches the cube through one implicit spring per object
+(:mod:`.contact_spring`) and the hand through its joint drives (:mod:`.joint_contact`),
+renewed after every SAPIEN step. Pushed at 20 mm/s, the default 62 g steel cube then moves
+with the hand and peaks at 0.013 m/s (the hand: 0.02 m/s).
+
+``pad_reaction=False`` keeps the older explicit coupling: the wrench of one MPM step acts on
+the cube as a force during the next SAPIEN step. That is stable only if the cube's mass
+m > k·dt²/4 (k the contact stiffness of a pad on a cube face, dt the SAPIEN timestep), and
+even above it the cube moves in stick–slip lurches: 0.088 m/s peaks on the Ability index
+pad's cut-cell body, pushed at 20 mm/s. A cube too light for the rate gets a warning there.
 
 The pads feel the cube through the MPM; in SAPIEN a pad link collides with its rigid core
 only (the link without its soft layer), so the cube reaches the core only once it has
@@ -64,6 +66,8 @@ class TouchEnv(GaussTacEnv):
             cube face at reset [m] (may be < 0 to start pressed in).
         free_cube: dynamic cube on a pedestal instead of a fixed one.
         two_way: with ``free_cube``, apply the pads' reaction wrench to the cube in SAPIEN.
+        pad_reaction: as :class:`~gausstac_maniskill.tasks.base.GaussTacEnv`; default
+            (None): ``True`` (implicit coupling) with a two-way cube, else ``False``.
         cube_density: [kg/m^3] (free cube; default steel, see above).
         cube_friction: Coulomb friction of the cube, in SAPIEN (with the pedestal) and
             against the pads in the MPM.
@@ -78,7 +82,8 @@ class TouchEnv(GaussTacEnv):
     def __init__(self, *args, touch_pad: str | None = None, cube_half_size: float = 0.01,
                  cube_gap: float = 0.003, free_cube: bool = False, two_way: bool = True,
                  cube_density: float = 7800.0, cube_friction: float = 0.5, ground: bool = True,
-                 ground_altitude: float = -0.15, force_threshold: float = 0.05, init_qpos=None, **kwargs):
+                 ground_altitude: float = -0.15, force_threshold: float = 0.05, init_qpos=None,
+                 pad_reaction=None, **kwargs):
         for name, v, lo, hi in (("cube_half_size", cube_half_size, 1e-3, 0.2), ("cube_gap", cube_gap, -0.01, 0.2),
                                 ("cube_density", cube_density, 1.0, 1e5), ("cube_friction", cube_friction, 0.0, 10.0),
                                 ("force_threshold", force_threshold, 0.0, 1e4)):
@@ -94,7 +99,9 @@ class TouchEnv(GaussTacEnv):
         self.ground_altitude = float(ground_altitude) if ground else None  # read by GaussTacEnv._load_scene
         self.force_threshold = float(force_threshold)
         self.init_qpos = None if init_qpos is None else np.asarray(init_qpos, np.float32)
-        super().__init__(*args, **kwargs)
+        if pad_reaction is None:  # a two-way cube is pushed through the implicit springs
+            pad_reaction = self.two_way
+        super().__init__(*args, pad_reaction=pad_reaction, **kwargs)
 
     # ------------------------------------------------------------------ scene
     def _splat_camera_pose(self):
@@ -120,14 +127,14 @@ class TouchEnv(GaussTacEnv):
         b.add_box_collision(half_size=[h] * 3, material=mat, density=self.cube_density)
         b.add_box_visual(half_size=[h] * 3, material=sapien.render.RenderMaterial(base_color=[0.8, 0.35, 0.2, 1]))
         self.cube = b.build(name="cube") if self.free_cube else b.build_kinematic(name="cube")
-        if self.two_way:
+        if self.two_way and self.pad_coupling != "implicit":
             m_min = _PAD_CONTACT_STIFFNESS * self.sim_timestep ** 2 / 4  # the MPM steps with SAPIEN
             mass = self.cube_density * (2 * h) ** 3
             if mass < m_min:
                 warnings.warn(f"GaussTac-Touch-v1: free cube of {mass * 1e3:.3g} g is lighter than "
                               f"~{m_min * 1e3:.3g} g, the least the explicit two-way coupling keeps stable at "
                               f"{1 / self.sim_timestep:g} Hz simulation; expect the pad to push it in jumps "
-                              "(raise cube_density or sim_freq)")
+                              "(raise cube_density or sim_freq, or keep pad_reaction=True, the implicit coupling)")
         from ..render import box_gaussians
 
         self.add_mpm_rigid("cube", self.cube, Box(half_extents=(h, h, h), friction=self.cube_friction),
