@@ -239,42 +239,72 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     """Internal nodal forces [V, 3] [N] of ``body`` displaced by ``u`` [V, 3] [m], for the
     decoupled compressible Neo-Hookean solid ψ = μ/2 (J^(−2/3) tr C − 3) + K/2 (ln J)² with the
     same split as :func:`element_stiffness`: the isochoric part on the 2×2×2 Gauss points, the
-    volumetric part with J of the element's centre (F-bar: one volume change per element); cut
-    cells weight them by their fill, the isochoric part at the sub-cell centres (so their
-    linearisation differs from :func:`stiffness`'s exact sub-cell integrals by the midpoint
-    rule's error, 1 % for 4³ sub-cells: the fixed point converges to the same solution).
-    For whole cubes its linearisation at u = 0 is :func:`stiffness` exactly (μ = E/(2(1+ν)),
-    K = E/(3(1−2ν))).
+    volumetric part with J of the element's centre (F-bar: one volume change per element).
     First Piola stresses P = μ J^(−2/3) (F − tr(FᵀF)/3 F⁻ᵀ) and P₀ = K ln J₀ F₀⁻ᵀ, with
-    F⁻ᵀ = cof F / J.
+    F⁻ᵀ = cof F / J. Its linearisation at u = 0 is :func:`stiffness` exactly (μ = E/(2(1+ν)),
+    K = E/(3(1−2ν))).
+
+    Cut cells (``body.fill``) take the linear forces of :func:`stiffness` (each sub-cell
+    integrated exactly) plus the finite-strain remainder P(F) − P_lin(F) of their material
+    sub-cells (fill ≥ ½) at the sub-cell centres, the volumetric one at the cube's centre
+    weighted by their share of the cube. The empty sub-cells (the fill of
+    :data:`~.pad.EMPTY_STIFFNESS`, outside the layer) stay linear: they only keep the mesh
+    regular, and under finite strain they would invert where the surface moves far. The
+    linearisation is again :func:`stiffness` exactly.
 
     Raises:
-        FloatingPointError: an element is inverted (J ≤ 0 at a point).
+        FloatingPointError: an element is inverted (J ≤ 0 at a point of its material).
     """
     mu, bulk = _moduli(E, nu)
     G, G0 = _gauss_gradients(body.size)
     v = body.size ** 3
-    w = np.full((len(body.voxels), len(G)), v / len(G))  # [E, points] volume × relative stiffness
-    w0 = np.full(len(body.voxels), v)
-    if body.fill is not None:  # cut cells: the isochoric part on the sub-cell points (see stiffness)
-        G = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(body.subcells)])
-        w, w0 = body.fill * (v / body.fill.shape[1]), body.fill.mean(1) * v
     ut = u[body.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
+    if body.fill is None:
+        w = np.full((len(body.voxels), len(G)), v / len(G))  # [E, points] volume of each point
+        w0 = np.full(len(body.voxels), v)
+        fe = _neo_hookean_element_forces(ut, G, G0, w, w0, mu, bulk, remainder=False)
+    else:
+        n = body.subcells
+        dev, vol = _split_stiffness(body.size, E, nu, n)
+        Ke = (body.fill @ dev + np.outer(body.fill.mean(1), vol)).reshape(-1, 24, 24)
+        ue = u[body.element_nodes].reshape(len(body.voxels), 24)  # dofs 3a + i, as element_dofs
+        fe = np.einsum("eij,ej->ei", Ke, ue).reshape(-1, 8, 3).transpose(0, 2, 1)
+        material = body.fill >= 0.5
+        G = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(n)])
+        w = np.where(material, body.fill, 0.0) * (v / n ** 3)
+        w0 = w.sum(1)
+        fe = fe + _neo_hookean_element_forces(ut, G, G0, w, w0, mu, bulk, remainder=True)
+    f = np.zeros((len(body.nodes), 3))
+    nodes = body.element_nodes.ravel()
+    for i in range(3):
+        f[:, i] = np.bincount(nodes, fe[:, i, :].ravel(), minlength=len(body.nodes))
+    return f
+
+
+def _neo_hookean_element_forces(ut, G, G0, w, w0, mu, bulk, remainder: bool) -> np.ndarray:
+    """[E, 3, 8] element nodal forces [N] of :func:`neo_hookean_forces`' solid from each
+    element's nodal displacements ``ut`` [E, 3, 8] [m]: the isochoric stress at points of shape
+    gradients ``G`` [points, 8, 3] weighted by ``w`` [E, points] [m³], the volumetric one at the
+    centre (``G0`` [8, 3]) weighted by ``w0`` [E] [m³]. Points of weight 0 are left out (taken
+    undeformed, their J unchecked). ``remainder``: only the stresses' part beyond their
+    linearisation, P(F) − 2μ dev ε and P₀(F₀) − K tr(ε₀) I."""
     eye = np.eye(3)
-    F = eye + np.matmul(ut[:, None], G[None])  # [E, 8 Gauss points, 3, 3]
+    F = eye + np.matmul(ut[:, None], G[None])  # [E, points, 3, 3]
     F0 = eye + ut @ G0  # [E, 3, 3] at the centre
+    if remainder:
+        F[w <= 0.0] = eye
+        F0[w0 <= 0.0] = eye
     J, J0 = _det3(F), _det3(F0)
     if (J <= 0).any() or (J0 <= 0).any():
         raise FloatingPointError("an element is inverted (J <= 0)")
     I1 = np.einsum("egij,egij->eg", F, F)
     P = (mu * J ** (-2.0 / 3.0))[..., None, None] * (F - (I1 / (3.0 * J))[..., None, None] * _cofactor3(F))
     P0 = (bulk * np.log(J0) / J0)[:, None, None] * _cofactor3(F0)
-    fe = (np.matmul(P, G.transpose(0, 2, 1)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
-    f = np.zeros((len(body.nodes), 3))
-    nodes = body.element_nodes.ravel()
-    for i in range(3):
-        f[:, i] = np.bincount(nodes, fe[:, i, :].ravel(), minlength=len(body.nodes))
-    return f
+    if remainder:
+        H, H0 = F - eye, F0 - eye
+        P -= mu * (H + np.swapaxes(H, -1, -2) - (2.0 / 3.0) * np.trace(H, axis1=-2, axis2=-1)[..., None, None] * eye)
+        P0 -= bulk * np.trace(H0, axis1=-2, axis2=-1)[:, None, None] * eye
+    return (np.matmul(P, G.transpose(0, 2, 1)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
 
 
 def centre_state(body: VoxelBody, u: np.ndarray, E: float, nu: float, model: str = "linear"):

@@ -91,10 +91,10 @@ def _lattice_key(ijk: np.ndarray):
 
 
 def default_cells(model: str) -> str:
-    """The cells :func:`pad_body` builds for ``model``: ``"cut"`` for ``"linear"``; ``"voxel"``
-    (whole cubes) for ``"neo_hookean"``, whose cut cells' near-empty parts invert under finite
-    strain (the sphere's 1 mm press at 1 mm elements: J ≤ 0 at the 13th iteration)."""
-    return "cut" if model == "linear" else "voxel"
+    """The cells :func:`pad_body` builds for ``model``: ``"cut"`` for both models. (Finite
+    strain kept whole cubes until its cut cells' empty parts stayed linear and their groups
+    were joined face to face, see :func:`~.hex.neo_hookean_forces` and :func:`pad_cells`.)"""
+    return "cut"
 
 
 def pad_cells(pad):
@@ -138,20 +138,71 @@ def pad_cells(pad):
     voxels = np.concatenate([ijk[soft], ijk[kin], cand])
     source = np.concatenate([soft, kin, src])
     sub = 0.5 * subcell_points(SUBCELLS)  # offsets from a cube's centre, in cube edges
+
     x = (voxels - ijk[source])[:, None, :] + sub[None]  # [C, Q, 3] from the source particle, in edges
     depth = pad.depth[source][:, None] - np.einsum("ci,cqi->cq", pad.normal[source], x) * s
     layer = (depth >= 0) & (depth <= t)
     fill = np.where(layer, 1.0, EMPTY_STIFFNESS)
     keep = layer.any(1)
     keep[:len(soft)] = True  # every soft particle's cube, in order
-    body = voxel_body(voxels[keep], origin, s, fill[keep])
+    voxels, source, fill = _face_connected(voxels[keep], source[keep], fill[keep])
+    body = voxel_body(voxels, origin, s, fill)
     # a node is held where it lies deeper than half an edge above the bond, read from the cubes around it
-    el_source = source[keep]
+    el_source = source
     corner = (body.voxels[:, None, :] + CORNERS[None] - 0.5 - ijk[el_source][:, None, :]) * s  # [E, 8, 3]
     corner_depth = pad.depth[el_source][:, None] - np.einsum("ei,eai->ea", pad.normal[el_source], corner)
     nodes = body.element_nodes.ravel()
     mean_depth = np.bincount(nodes, corner_depth.ravel(), len(body.nodes)) / np.bincount(nodes, minlength=len(body.nodes))
     return body, mean_depth > t - 0.5 * s
+
+
+_FACES = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
+
+
+def _face_connected(voxels, source, fill, rounds: int = 4):
+    """Cubes ``voxels`` [C, 3] (their ``source`` particles [C] and ``fill`` [C, Q]) joined face
+    to face: a group of cubes that touches the rest along an edge or at a corner only would
+    turn about it freely (a mechanism: a zero pivot in the stiffness, which a load on those
+    cubes sends to 10⁹ m). Each round adds empty cubes (fill :data:`EMPTY_STIFFNESS`, their
+    source the group's particle) that join such groups to the main body: those face to face
+    with a group and within one cube of the main body. The first cube's body is the main one."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    for _ in range(rounds):
+        lo = voxels.min(0) - 3  # room for two steps out on every side
+        key = _lattice_key(voxels - lo)
+        keys = key(voxels - lo)
+        order = np.argsort(keys)
+        nb = (voxels[:, None, :] + _FACES[None]).reshape(-1, 3)
+        pos = np.clip(np.searchsorted(keys[order], key(nb - lo)), 0, len(keys) - 1)
+        hit = keys[order][pos] == key(nb - lo)
+        a = np.repeat(np.arange(len(voxels)), 6)[hit]
+        graph = coo_matrix((np.ones(len(a)), (a, order[pos][hit])), shape=(len(voxels),) * 2)
+        labels = connected_components(graph, directed=False)[1]
+        stray = labels != labels[0]
+        if not stray.any():
+            break
+        main = voxels[~stray]
+        cand = (voxels[stray][:, None, :] + _FACES[None]).reshape(-1, 3)
+        src = np.repeat(source[stray], 6)
+        cand_key = key(cand - lo)
+        new = ~np.isin(cand_key, keys)
+        # within one cube (26-neighbourhood) of the main body
+        near = np.zeros(len(cand), bool)
+        main_key = np.sort(key(main - lo))
+        for d in np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)]):
+            q = key(cand + d - lo)
+            p = np.clip(np.searchsorted(main_key, q), 0, len(main_key) - 1)
+            near |= main_key[p] == q
+        take = np.flatnonzero(new & near)
+        take = take[np.unique(cand_key[take], return_index=True)[1]]
+        if not len(take):
+            break
+        voxels = np.concatenate([voxels, cand[take]])
+        source = np.concatenate([source, src[take]])
+        fill = np.concatenate([fill, np.full((len(take), fill.shape[1]), EMPTY_STIFFNESS)])
+    return voxels, source, fill
 
 
 def pad_lattice(pad) -> tuple[np.ndarray, np.ndarray]:

@@ -61,8 +61,8 @@ def test_dissection_order_factor_solves_the_system():
 def test_cut_cells_full_are_whole_cubes_and_neo_hookean_linearises_to_them():
     """Cut cells (``fill``): full ones assemble the whole cubes' stiffness to rounding (each
     sub-cell integrated exactly); with any fill, the finite-strain forces linearise to the cut
-    stiffness within the sub-cells' midpoint rule (1 % for 4³), and an element that is half
-    empty is about half as stiff."""
+    stiffness exactly (their finite-strain part is added to it), their empty sub-cells stay
+    linear, and an element that is half empty is about half as stiff."""
     from gausstac_maniskill.fem.hex import neo_hookean_forces
 
     E, nu = 0.26e6, 0.48
@@ -76,7 +76,15 @@ def test_cut_cells_full_are_whole_cubes_and_neo_hookean_linearises_to_them():
     K = stiffness(cut, E, nu)
     u = rng.normal(size=(len(cut.nodes), 3)) * 1e-9
     f = neo_hookean_forces(cut, u, E, nu).ravel()
-    assert np.abs(f - K @ u.ravel()).max() < 0.02 * np.abs(K @ u.ravel()).max()
+    assert np.abs(f - K @ u.ravel()).max() < 1e-4 * np.abs(K @ u.ravel()).max()  # strain 1e-6: exact to O(ε)
+    # the empty parts (fill 1e-4) stay linear: material in the bottom quarter of each cube, a
+    # top corner pushed 1.5 mm across its cube turns the cube's top inside out, not its bottom
+    bottom = voxel_body(vox, np.zeros(3), 1e-3, fill=np.where(np.arange(64) % 4 == 0, 1.0, 1e-4)[None].repeat(len(vox), 0))
+    far = np.zeros((len(bottom.nodes), 3))
+    far[np.flatnonzero((bottom.nodes[:, 2] == 2) & (bottom.nodes[:, 0] == 0))[0], 0] = 1.5e-3
+    assert np.isfinite(neo_hookean_forces(bottom, far, E, nu)).all()
+    with pytest.raises(FloatingPointError):  # the whole cubes invert
+        neo_hookean_forces(full, far, E, nu)
     one = voxel_body([[0, 0, 0]], np.zeros(3), 1e-3)
     half_fill = np.where(np.arange(64) < 32, 1.0, 0.0)[None]  # the lower half (x < ½) of the cube
     half = voxel_body([[0, 0, 0]], np.zeros(3), 1e-3, fill=half_fill)
