@@ -245,9 +245,10 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     K = E/(3(1−2ν))).
 
     Cut cells (``body.fill``) take the linear forces of :func:`stiffness` (each sub-cell
-    integrated exactly) plus the finite-strain remainder P(F) − P_lin(F) of their material
-    sub-cells (fill ≥ ½) at the sub-cell centres, the volumetric one at the cube's centre
-    weighted by their share of the cube. The empty sub-cells (the fill of
+    integrated exactly) plus the finite-strain remainder P(F) − P_lin(F): a cube full of
+    material on its 2×2×2 Gauss points (the whole cube's law again), a cut one on its material
+    sub-cells' centres (fill ≥ ½), the volumetric one at the cube's centre weighted by their
+    share of the cube. The empty sub-cells (the fill of
     :data:`~.pad.EMPTY_STIFFNESS`, outside the layer) stay linear: they only keep the mesh
     regular, and under finite strain they would invert where the surface moves far. The
     linearisation is again :func:`stiffness` exactly.
@@ -269,11 +270,14 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
         Ke = (body.fill @ dev + np.outer(body.fill.mean(1), vol)).reshape(-1, 24, 24)
         ue = u[body.element_nodes].reshape(len(body.voxels), 24)  # dofs 3a + i, as element_dofs
         fe = np.einsum("eij,ej->ei", Ke, ue).reshape(-1, 8, 3).transpose(0, 2, 1)
-        material = body.fill >= 0.5
-        G = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(n)])
-        w = np.where(material, body.fill, 0.0) * (v / n ** 3)
-        w0 = w.sum(1)
-        fe = fe + _neo_hookean_element_forces(ut, G, G0, w, w0, mu, bulk, remainder=True)
+        # whole cubes of material: the remainder on the 2×2×2 Gauss points (exact for their linear part)
+        whole = (body.fill == 1.0).all(1)
+        w = np.full((int(whole.sum()), len(G)), v / len(G))
+        fe[whole] += _neo_hookean_element_forces(ut[whole], G, G0, w, w.sum(1), mu, bulk, remainder=True)
+        cut = ~whole  # the rest on their material sub-cells' centres
+        Gs = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(n)])
+        w = np.where(body.fill[cut] >= 0.5, body.fill[cut], 0.0) * (v / n ** 3)
+        fe[cut] += _neo_hookean_element_forces(ut[cut], Gs, G0, w, w.sum(1), mu, bulk, remainder=True)
     f = np.zeros((len(body.nodes), 3))
     nodes = body.element_nodes.ravel()
     for i in range(3):

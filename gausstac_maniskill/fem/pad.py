@@ -39,7 +39,7 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
         model: ``"linear"`` or ``"neo_hookean"`` (:class:`QuasiStaticBody`).
         cells: ``"cut"`` (:func:`pad_cells`) or ``"voxel"`` (a whole cube per soft particle: the
             layer's curved surface and bond as staircases). Default :func:`default_cells`:
-            cut cells for the linear model, whole cubes under finite strain.
+            cut cells.
 
     Element e < (number of soft particles) is the cube of the e-th soft particle either way;
     each surface point passes its force to the particle ``point_sources`` names.
