@@ -123,10 +123,9 @@ def pad_cells(pad):
     kin = np.flatnonzero(pad.kinematic)
     # empty cubes next to the surface particles: each read from its nearest one
     surf = np.flatnonzero(pad.surface & ~pad.kinematic)
-    offsets = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)])
-    cand = (ijk[surf][:, None, :] + offsets[None]).reshape(-1, 3)
-    src = np.repeat(surf, len(offsets))
-    dist2 = np.tile((offsets ** 2).sum(1), len(surf))
+    cand = (ijk[surf][:, None, :] + _NEIGHBOURS[None]).reshape(-1, 3)
+    src = np.repeat(surf, len(_NEIGHBOURS))
+    dist2 = np.tile((_NEIGHBOURS ** 2).sum(1), len(surf))
     keys = key(cand)
     free = ~np.isin(keys, key(ijk))
     cand, src, dist2, keys = cand[free], src[free], dist2[free], keys[free]
@@ -156,7 +155,9 @@ def pad_cells(pad):
     return body, mean_depth > t - 0.5 * s
 
 
-_FACES = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
+#: a lattice cell's 26 neighbours (faces, edges, corners) and its 6 face neighbours
+_NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)])
+_FACES = _NEIGHBOURS[np.abs(_NEIGHBOURS).sum(1) == 1]
 
 
 def _face_connected(voxels, source, fill, rounds: int = 4):
@@ -183,18 +184,12 @@ def _face_connected(voxels, source, fill, rounds: int = 4):
         stray = labels != labels[0]
         if not stray.any():
             break
-        main = voxels[~stray]
         cand = (voxels[stray][:, None, :] + _FACES[None]).reshape(-1, 3)
         src = np.repeat(source[stray], 6)
         cand_key = key(cand - lo)
         new = ~np.isin(cand_key, keys)
-        # within one cube (26-neighbourhood) of the main body
-        near = np.zeros(len(cand), bool)
-        main_key = np.sort(key(main - lo))
-        for d in np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1) if (i, j, k) != (0, 0, 0)]):
-            q = key(cand + d - lo)
-            p = np.clip(np.searchsorted(main_key, q), 0, len(main_key) - 1)
-            near |= main_key[p] == q
+        main_key = key(voxels[~stray] - lo)
+        near = np.isin(key(cand[:, None, :] + _NEIGHBOURS[None] - lo), main_key).any(1)  # within one cube of it
         take = np.flatnonzero(new & near)
         take = take[np.unique(cand_key[take], return_index=True)[1]]
         if not len(take):
