@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ConfigError, SimulationError
-from .hex import VoxelBody, dissection_order, neo_hookean_forces, stiffness, trilinear
+from .hex import VoxelBody, dissection_order, neo_hookean_remainder, stiffness, trilinear
 
 __all__ = ["QuasiStaticBody", "ContactResult", "Indenter", "Indenters", "solve_lcp", "solve_frictional",
            "tangent_bases"]
@@ -746,14 +746,16 @@ class QuasiStaticBody:
 
     def internal_forces(self, u: np.ndarray) -> np.ndarray:
         """[V, 3] internal nodal forces [N] of the body displaced by ``u`` [V, 3] [m], under its
-        own model (linear: K u; neo-Hookean: :func:`~.hex.neo_hookean_forces`).
+        own model (linear: K u; neo-Hookean: :func:`~.hex.neo_hookean_forces`, as K u plus
+        :func:`~.hex.neo_hookean_remainder` with the stiffness assembled here).
 
         Raises:
             FloatingPointError: a neo-Hookean element is inverted.
         """
+        linear = (self._K @ u.ravel()).reshape(-1, 3)
         if self.model == "linear":
-            return (self._K @ u.ravel()).reshape(-1, 3)
-        return neo_hookean_forces(self.body, u, self.E, self.nu)
+            return linear
+        return linear + neo_hookean_remainder(self.body, u, self.E, self.nu)
 
     def nodal_displacement(self, points, forces) -> np.ndarray:
         """[V, 3] displacement [m] of every node under ``forces`` [m, 3] [N] at surface ``points`` [m]
@@ -910,7 +912,7 @@ class QuasiStaticBody:
             us = self._interp(u)
             phi, n = sdf(self.points + us)
             try:
-                remainder = self.internal_forces(u) - (self._K @ u.ravel()).reshape(-1, 3)
+                remainder = neo_hookean_remainder(body, u, self.E, self.nu)  # internal forces less K u
             except FloatingPointError as err:
                 raise _Diverged(f"{err} at iteration {it}") from None
             u_load = self._solve_nodes(-remainder)

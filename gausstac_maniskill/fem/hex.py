@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import ConfigError
 
 __all__ = ["CORNERS", "VoxelBody", "voxel_body", "element_stiffness", "stiffness", "trilinear", "dissection_order",
-           "neo_hookean_forces", "centre_state", "subcell_points"]
+           "neo_hookean_forces", "neo_hookean_remainder", "centre_state", "subcell_points"]
 
 #: Corner offsets (i, j, k) of an element's 8 nodes, in node order.
 CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], np.int64)
@@ -59,6 +59,11 @@ class VoxelBody:
     def subcells(self) -> int:
         """n, the sub-cells per axis of the cut cells (0 for whole cubes)."""
         return 0 if self.fill is None else round(self.fill.shape[1] ** (1 / 3))
+
+    def first(self, n: int) -> "VoxelBody":
+        """The body's first ``n`` elements, on the same nodes (their numbering kept)."""
+        return VoxelBody(self.origin, self.size, self.voxels[:n], self.nodes, self.element_nodes[:n],
+                         None if self.fill is None else self.fill[:n])
 
     @property
     def num_dofs(self) -> int:
@@ -255,17 +260,25 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     volumetric part with J of the element's centre (F-bar: one volume change per element).
     First Piola stresses P = μ J^(−2/3) (F − tr(FᵀF)/3 F⁻ᵀ) and P₀ = K ln J₀ F₀⁻ᵀ, with
     F⁻ᵀ = cof F / J. Its linearisation at u = 0 is :func:`stiffness` exactly (μ = E/(2(1+ν)),
-    K = E/(3(1−2ν))).
+    K = E/(3(1−2ν))): the forces are K u plus :func:`neo_hookean_remainder`.
 
-    Cut cells (``body.fill``) take the linear forces of :func:`stiffness` (each sub-cell
-    integrated exactly) plus the finite-strain remainder P(F) − P_lin(F): a cube full of
-    material on its 2×2×2 Gauss points (the whole cube's law again), a cut one at least
-    :data:`CUT_FINITE_SHARE` full on its material sub-cells' centres (fill ≥ ½), the
+    Raises:
+        FloatingPointError: an element is inverted (J ≤ 0 at a point of its material).
+    """
+    return (stiffness(body, E, nu) @ u.ravel()).reshape(-1, 3) + neo_hookean_remainder(body, u, E, nu)
+
+
+def neo_hookean_remainder(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> np.ndarray:
+    """[V, 3] [N] :func:`neo_hookean_forces` less the linear forces K u (:func:`stiffness`):
+    the finite-strain remainder P(F) − P_lin(F) of each element's stresses, P_lin = 2μ dev ε
+    and K tr(ε₀) I. A whole cube takes it on its 2×2×2 Gauss points (where K's deviatoric part
+    is integrated, exactly: so K u plus this is the whole cube's law); a cut cube (``body.fill``)
+    at least :data:`CUT_FINITE_SHARE` full on its material sub-cells' centres (fill ≥ ½), the
     volumetric one at the cube's centre weighted by their share of the cube. The empty
     sub-cells (the fill of :data:`~.pad.EMPTY_STIFFNESS`, outside the layer) and the cubes
     less full stay linear: they only keep the mesh regular, and under finite strain they
     invert or run away where the surface moves far (the finite cell method's known weakness
-    at large strain). The linearisation is again :func:`stiffness` exactly.
+    at large strain).
 
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point of its material).
@@ -274,25 +287,16 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     G, G0 = _gauss_gradients(body.size)
     v = body.size ** 3
     ut = u[body.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
-    if body.fill is None:
-        w = np.full((len(body.voxels), len(G)), v / len(G))  # [E, points] volume of each point
-        w0 = np.full(len(body.voxels), v)
-        fe = _neo_hookean_element_forces(ut, G, G0, w, w0, mu, bulk, remainder=False)
-    else:
-        n = body.subcells
-        dev, vol = _split_stiffness(body.size, E, nu, n)
-        Ke = (body.fill @ dev + np.outer(body.fill.mean(1), vol)).reshape(-1, 24, 24)
-        ue = u[body.element_nodes].reshape(len(body.voxels), 24)  # dofs 3a + i, as element_dofs
-        fe = np.einsum("eij,ej->ei", Ke, ue).reshape(-1, 8, 3).transpose(0, 2, 1)
-        # whole cubes of material: the remainder on the 2×2×2 Gauss points (exact for their linear part)
-        whole = (body.fill == 1.0).all(1)
-        w = np.full((int(whole.sum()), len(G)), v / len(G))
-        fe[whole] += _neo_hookean_element_forces(ut[whole], G, G0, w, w.sum(1), mu, bulk, remainder=True)
+    fe = np.zeros(ut.shape)
+    whole = np.ones(len(body.voxels), bool) if body.fill is None else (body.fill == 1.0).all(1)
+    w = np.full((int(whole.sum()), len(G)), v / len(G))  # [E, points] volume of each point
+    fe[whole] = _remainder_element_forces(ut[whole], G, G0, w, mu, bulk)
+    if body.fill is not None:
         material = body.fill >= 0.5
-        cut = ~whole & (material.mean(1) >= CUT_FINITE_SHARE)  # on their material sub-cells' centres
-        Gs = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(n)])
-        w = np.where(material[cut], body.fill[cut], 0.0) * (v / n ** 3)
-        fe[cut] += _neo_hookean_element_forces(ut[cut], Gs, G0, w, w.sum(1), mu, bulk, remainder=True)
+        cut = ~whole & (material.mean(1) >= CUT_FINITE_SHARE)
+        Gs = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(body.subcells)])
+        w = np.where(material[cut], body.fill[cut], 0.0) * (v / body.fill.shape[1])
+        fe[cut] = _remainder_element_forces(ut[cut], Gs, G0, w, mu, bulk)
     f = np.zeros((len(body.nodes), 3))
     nodes = body.element_nodes.ravel()
     for i in range(3):
@@ -300,29 +304,27 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     return f
 
 
-def _neo_hookean_element_forces(ut, G, G0, w, w0, mu, bulk, remainder: bool) -> np.ndarray:
-    """[E, 3, 8] element nodal forces [N] of :func:`neo_hookean_forces`' solid from each
-    element's nodal displacements ``ut`` [E, 3, 8] [m]: the isochoric stress at points of shape
+def _remainder_element_forces(ut, G, G0, w, mu, bulk) -> np.ndarray:
+    """[E, 3, 8] element nodal forces [N] of :func:`neo_hookean_remainder` from each element's
+    nodal displacements ``ut`` [E, 3, 8] [m]: the isochoric stresses at points of shape
     gradients ``G`` [points, 8, 3] weighted by ``w`` [E, points] [m³], the volumetric one at the
-    centre (``G0`` [8, 3]) weighted by ``w0`` [E] [m³]. Points of weight 0 are left out (taken
-    undeformed, their J unchecked). ``remainder``: only the stresses' part beyond their
-    linearisation, P(F) − 2μ dev ε and P₀(F₀) − K tr(ε₀) I."""
+    centre (``G0`` [8, 3]) weighted by their sum. Points of weight 0 are left out (taken
+    undeformed, their J unchecked)."""
     eye = np.eye(3)
+    w0 = w.sum(1)
     F = eye + np.matmul(ut[:, None], G[None])  # [E, points, 3, 3]
     F0 = eye + ut @ G0  # [E, 3, 3] at the centre
-    if remainder:
-        F[w <= 0.0] = eye
-        F0[w0 <= 0.0] = eye
+    F[w <= 0.0] = eye
+    F0[w0 <= 0.0] = eye
     J, J0 = _det3(F), _det3(F0)
     if (J <= 0).any() or (J0 <= 0).any():
         raise FloatingPointError("an element is inverted (J <= 0)")
     I1 = np.einsum("egij,egij->eg", F, F)
-    P = (mu * J ** (-2.0 / 3.0))[..., None, None] * (F - (I1 / (3.0 * J))[..., None, None] * _cofactor3(F))
-    P0 = (bulk * np.log(J0) / J0)[:, None, None] * _cofactor3(F0)
-    if remainder:
-        H, H0 = F - eye, F0 - eye
-        P -= mu * (H + np.swapaxes(H, -1, -2) - (2.0 / 3.0) * np.trace(H, axis1=-2, axis2=-1)[..., None, None] * eye)
-        P0 -= bulk * np.trace(H0, axis1=-2, axis2=-1)[:, None, None] * eye
+    H, H0 = F - eye, F0 - eye
+    P = (mu * J ** (-2.0 / 3.0))[..., None, None] * (F - (I1 / (3.0 * J))[..., None, None] * _cofactor3(F)) \
+        - mu * (H + np.swapaxes(H, -1, -2) - (2.0 / 3.0) * np.trace(H, axis1=-2, axis2=-1)[..., None, None] * eye)
+    P0 = (bulk * np.log(J0) / J0)[:, None, None] * _cofactor3(F0) \
+        - bulk * np.trace(H0, axis1=-2, axis2=-1)[:, None, None] * eye
     return (np.matmul(P, G.transpose(0, 2, 1)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
 
 

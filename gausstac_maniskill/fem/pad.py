@@ -19,7 +19,7 @@ from ..errors import ConfigError
 from .contact import QuasiStaticBody
 from .hex import CORNERS, voxel_body
 
-__all__ = ["pad_body", "pad_elements", "pad_cells", "default_cells", "pad_lattice", "layer_body", "collider_indenter"]
+__all__ = ["pad_body", "pad_elements", "pad_cells", "pad_lattice", "layer_body", "collider_indenter"]
 
 #: Sub-cells per axis at which a cut cell samples what it holds (4: 64 per cube).
 SUBCELLS = 4
@@ -29,7 +29,7 @@ EMPTY_STIFFNESS = 1e-4
 
 
 def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = "linear",
-             cells: str | None = None) -> QuasiStaticBody:
+             cells: str = "cut") -> QuasiStaticBody:
     """The soft layer of ``pad`` as a quasi-static body in its link frame (metres).
 
     Args:
@@ -37,9 +37,10 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
             spacing ``pad.spacing``, as :func:`~gausstac_maniskill.tactile.pad.build_pad` makes).
         E, nu: Young's modulus [Pa] and Poisson's ratio (default: the pad's material).
         model: ``"linear"`` or ``"neo_hookean"`` (:class:`QuasiStaticBody`).
-        cells: ``"cut"`` (:func:`pad_cells`) or ``"voxel"`` (a whole cube per soft particle: the
-            layer's curved surface and bond as staircases). Default :func:`default_cells`:
-            cut cells.
+        cells: ``"cut"`` (default, :func:`pad_cells`; for both models since finite strain
+            keeps its cut cubes' empty parts linear, :func:`~.hex.neo_hookean_remainder`) or
+            ``"voxel"`` (a whole cube per soft particle: the layer's curved surface and bond as
+            staircases).
 
     Element e < (number of soft particles) is the cube of the e-th soft particle either way;
     each surface point passes its force to the particle ``point_sources`` names.
@@ -50,7 +51,7 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
     soft = ~pad.kinematic
     surface = np.flatnonzero(pad.surface[soft])
     points = pad.rest[soft][surface] + pad.depth[soft][surface, None] * pad.normal[soft][surface]
-    body, fixed = pad_elements(pad, default_cells(model) if cells is None else cells)
+    body, fixed = pad_elements(pad, cells)
     elements = surface
     if body.fill is not None:  # each point is interpolated from the cut cell that holds it
         key = _lattice_key(pad_lattice(pad)[1])
@@ -88,13 +89,6 @@ def _lattice_key(ijk: np.ndarray):
         return (v[..., 0] * span[1] + v[..., 1]) * span[2] + v[..., 2]
 
     return key
-
-
-def default_cells(model: str) -> str:
-    """The cells :func:`pad_body` builds for ``model``: ``"cut"`` for both models. (Finite
-    strain kept whole cubes until its cut cells' empty parts stayed linear and their groups
-    were joined face to face, see :func:`~.hex.neo_hookean_forces` and :func:`pad_cells`.)"""
-    return "cut"
 
 
 def pad_cells(pad):
@@ -137,7 +131,6 @@ def pad_cells(pad):
     voxels = np.concatenate([ijk[soft], ijk[kin], cand])
     source = np.concatenate([soft, kin, src])
     sub = 0.5 * subcell_points(SUBCELLS)  # offsets from a cube's centre, in cube edges
-
     x = (voxels - ijk[source])[:, None, :] + sub[None]  # [C, Q, 3] from the source particle, in edges
     depth = pad.depth[source][:, None] - np.einsum("ci,cqi->cq", pad.normal[source], x) * s
     layer = (depth >= 0) & (depth <= t)
@@ -147,9 +140,8 @@ def pad_cells(pad):
     voxels, source, fill = _face_connected(voxels[keep], source[keep], fill[keep])
     body = voxel_body(voxels, origin, s, fill)
     # a node is held where it lies deeper than half an edge above the bond, read from the cubes around it
-    el_source = source
-    corner = (body.voxels[:, None, :] + CORNERS[None] - 0.5 - ijk[el_source][:, None, :]) * s  # [E, 8, 3]
-    corner_depth = pad.depth[el_source][:, None] - np.einsum("ei,eai->ea", pad.normal[el_source], corner)
+    corner = (body.voxels[:, None, :] + CORNERS[None] - 0.5 - ijk[source][:, None, :]) * s  # [E, 8, 3]
+    corner_depth = pad.depth[source][:, None] - np.einsum("ei,eai->ea", pad.normal[source], corner)
     nodes = body.element_nodes.ravel()
     mean_depth = np.bincount(nodes, corner_depth.ravel(), len(body.nodes)) / np.bincount(nodes, minlength=len(body.nodes))
     return body, mean_depth > t - 0.5 * s
@@ -175,9 +167,9 @@ def _face_connected(voxels, source, fill, rounds: int = 4):
         key = _lattice_key(voxels - lo)
         keys = key(voxels - lo)
         order = np.argsort(keys)
-        nb = (voxels[:, None, :] + _FACES[None]).reshape(-1, 3)
-        pos = np.clip(np.searchsorted(keys[order], key(nb - lo)), 0, len(keys) - 1)
-        hit = keys[order][pos] == key(nb - lo)
+        nb = key((voxels[:, None, :] + _FACES[None]).reshape(-1, 3) - lo)
+        pos = np.clip(np.searchsorted(keys[order], nb), 0, len(keys) - 1)
+        hit = keys[order[pos]] == nb
         a = np.repeat(np.arange(len(voxels)), 6)[hit]
         graph = coo_matrix((np.ones(len(a)), (a, order[pos][hit])), shape=(len(voxels),) * 2)
         labels = connected_components(graph, directed=False)[1]

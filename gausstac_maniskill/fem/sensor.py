@@ -29,7 +29,7 @@ from ..errors import ConfigError, CostWarning, SimulationWarning
 from .compliance import array_digest, estimated_bytes
 from .contact import ContactResult, Indenters
 from .hex import centre_state
-from .pad import collider_indenter, default_cells, pad_body, pad_elements
+from .pad import collider_indenter, pad_body, pad_elements
 
 __all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES", "forget_bodies"]
 
@@ -237,7 +237,7 @@ class EquilibriumPad:
         """(S, V): the body's surface points and nodes, from the pad alone (no assembly)."""
         key = _body_key(self.pad, self.model)
         if key not in _NODES:  # the same pad in every env of a batch: its cells once (0.3 s)
-            _NODES[key] = len(pad_elements(self.pad, default_cells(self.model))[0].nodes)
+            _NODES[key] = len(pad_elements(self.pad, "cut")[0].nodes)
         return int(self.pad.surface[self.soft].sum()), _NODES[key]
 
     def flat_state(self, holders: Sequence[str]) -> dict[str, np.ndarray]:
@@ -390,10 +390,9 @@ class EquilibriumPad:
             if self.result is not None:
                 body = self.body
                 u = self.node_displacement()
-                n = len(self.soft)  # element e < n is soft particle e's cube (pad_body)
-                local[self.soft] += u[body.body.element_nodes[:n]].mean(1)
-                F_e, sigma_e = centre_state(body.body, u, body.E, body.nu, self.model)
-                F[self.soft], sigma[self.soft] = F_e[:n], sigma_e[:n]
+                cubes = body.body.first(len(self.soft))  # element e is soft particle e's cube (pad_body)
+                local[self.soft] += u[cubes.element_nodes].mean(1)
+                F[self.soft], sigma[self.soft] = centre_state(cubes, u, body.E, body.nu, self.model)
                 np.add.at(force, self.point_particles, self.result.force)
             d["particles"] = (local, F, sigma, force)
         return d["particles"]
