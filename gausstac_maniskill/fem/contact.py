@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ConfigError, SimulationError
-from .hex import VoxelBody, dissection_order, neo_hookean_remainder, stiffness, trilinear
+from .hex import VoxelBody, dissection_order, neo_hookean_remainder, stiffness, strain_points, trilinear
 
 __all__ = ["QuasiStaticBody", "ContactResult", "Indenter", "Indenters", "solve_lcp", "solve_frictional",
            "tangent_bases"]
@@ -599,6 +599,7 @@ class QuasiStaticBody:
         self._point_rows = self._row[nodes[:, :, None] * 3 + np.arange(3)]  # [S, 8, 3]
         self._columns: dict[int, np.ndarray] = {}  # point -> its compliance column [S, 3, 3], as solved
         self._compliance: np.ndarray | None = None  # [3S, 3S] all of W, once computed (precompute_compliance)
+        self._strain_points = None  # the finite-strain remainder's integration points, built on first use
         #: what other modules compute once from this body and keep with it (e.g. :class:`~.maps.PadMaps`)
         self.derived: dict = {}
 
@@ -755,7 +756,14 @@ class QuasiStaticBody:
         linear = (self._K @ u.ravel()).reshape(-1, 3)
         if self.model == "linear":
             return linear
-        return linear + neo_hookean_remainder(self.body, u, self.E, self.nu)
+        return linear + self._remainder(u)
+
+    def _remainder(self, u: np.ndarray) -> np.ndarray:
+        """[V, 3] :func:`~.hex.neo_hookean_remainder` [N] of node displacements ``u`` [V, 3] [m]
+        (the body's integration points built once)."""
+        if self._strain_points is None:
+            self._strain_points = strain_points(self.body)
+        return neo_hookean_remainder(self.body, u, self.E, self.nu, self._strain_points)
 
     def nodal_displacement(self, points, forces) -> np.ndarray:
         """[V, 3] displacement [m] of every node under ``forces`` [m, 3] [N] at surface ``points`` [m]
@@ -912,7 +920,7 @@ class QuasiStaticBody:
             us = self._interp(u)
             phi, n = sdf(self.points + us)
             try:
-                remainder = neo_hookean_remainder(body, u, self.E, self.nu)  # internal forces less K u
+                remainder = self._remainder(u)  # internal forces less K u
             except FloatingPointError as err:
                 raise _Diverged(f"{err} at iteration {it}") from None
             u_load = self._solve_nodes(-remainder)

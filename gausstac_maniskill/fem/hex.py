@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import ConfigError
 
 __all__ = ["CORNERS", "VoxelBody", "voxel_body", "element_stiffness", "stiffness", "trilinear", "dissection_order",
-           "neo_hookean_forces", "neo_hookean_remainder", "centre_state", "subcell_points"]
+           "neo_hookean_forces", "neo_hookean_remainder", "strain_points", "centre_state", "subcell_points"]
 
 #: Corner offsets (i, j, k) of an element's 8 nodes, in node order.
 CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], np.int64)
@@ -234,17 +234,6 @@ def _det3(F: np.ndarray) -> np.ndarray:
             + F[..., 0, 2] * (F[..., 1, 0] * F[..., 2, 1] - F[..., 1, 1] * F[..., 2, 0]))
 
 
-def _cofactor3(F: np.ndarray) -> np.ndarray:
-    """Cofactor matrices cof F = det(F) F⁻ᵀ [..., 3, 3] of 3×3 matrices F [..., 3, 3]."""
-    c = np.empty_like(F)
-    for i in range(3):
-        i1, i2 = (i + 1) % 3, (i + 2) % 3
-        for j in range(3):
-            j1, j2 = (j + 1) % 3, (j + 2) % 3
-            c[..., i, j] = F[..., i1, j1] * F[..., i2, j2] - F[..., i1, j2] * F[..., i2, j1]
-    return c
-
-
 #: cut cubes with less than this share of material stay linear under finite strain. In a cube
 #: that is mostly empty, the nodes across the empty part are held only by the material's small
 #: shape-function gradients at the far side: the finite-strain forces there drove them metres
@@ -268,7 +257,7 @@ def neo_hookean_forces(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> n
     return (stiffness(body, E, nu) @ u.ravel()).reshape(-1, 3) + neo_hookean_remainder(body, u, E, nu)
 
 
-def neo_hookean_remainder(body: VoxelBody, u: np.ndarray, E: float, nu: float) -> np.ndarray:
+def neo_hookean_remainder(body: VoxelBody, u: np.ndarray, E: float, nu: float, points=None) -> np.ndarray:
     """[V, 3] [N] :func:`neo_hookean_forces` less the linear forces K u (:func:`stiffness`):
     the finite-strain remainder P(F) − P_lin(F) of each element's stresses, P_lin = 2μ dev ε
     and K tr(ε₀) I. A whole cube takes it on its 2×2×2 Gauss points (where K's deviatoric part
@@ -278,54 +267,27 @@ def neo_hookean_remainder(body: VoxelBody, u: np.ndarray, E: float, nu: float) -
     sub-cells (the fill of :data:`~.pad.EMPTY_STIFFNESS`, outside the layer) and the cubes
     less full stay linear: they only keep the mesh regular, and under finite strain they
     invert or run away where the surface moves far (the finite cell method's known weakness
-    at large strain).
+    at large strain). Evaluated by a Taichi kernel (:mod:`.neo_hookean`); ``points``: the
+    body's :func:`strain_points`, when the caller keeps them (else built here, a few ms).
 
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point of its material).
     """
+    from .neo_hookean import remainder_forces
+
     mu, bulk = _moduli(E, nu)
-    G, G0 = _gauss_gradients(body.size)
-    v = body.size ** 3
-    ut = u[body.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
-    fe = np.zeros(ut.shape)
-    whole = np.ones(len(body.voxels), bool) if body.fill is None else (body.fill == 1.0).all(1)
-    w = np.full((int(whole.sum()), len(G)), v / len(G))  # [E, points] volume of each point
-    fe[whole] = _remainder_element_forces(ut[whole], G, G0, w, mu, bulk)
-    if body.fill is not None:
-        material = body.fill >= 0.5
-        cut = ~whole & (material.mean(1) >= CUT_FINITE_SHARE)
-        Gs = np.stack([_shape_gradients(xi, body.size) for xi in subcell_points(body.subcells)])
-        w = np.where(material[cut], body.fill[cut], 0.0) * (v / body.fill.shape[1])
-        fe[cut] = _remainder_element_forces(ut[cut], Gs, G0, w, mu, bulk)
-    f = np.zeros((len(body.nodes), 3))
-    nodes = body.element_nodes.ravel()
-    for i in range(3):
-        f[:, i] = np.bincount(nodes, fe[:, i, :].ravel(), minlength=len(body.nodes))
-    return f
+    return remainder_forces(strain_points(body) if points is None else points, u, mu, bulk)
 
 
-def _remainder_element_forces(ut, G, G0, w, mu, bulk) -> np.ndarray:
-    """[E, 3, 8] element nodal forces [N] of :func:`neo_hookean_remainder` from each element's
-    nodal displacements ``ut`` [E, 3, 8] [m]: the isochoric stresses at points of shape
-    gradients ``G`` [points, 8, 3] weighted by ``w`` [E, points] [m³], the volumetric one at the
-    centre (``G0`` [8, 3]) weighted by their sum. Points of weight 0 are left out (taken
-    undeformed, their J unchecked)."""
-    eye = np.eye(3)
-    w0 = w.sum(1)
-    F = eye + np.matmul(ut[:, None], G[None])  # [E, points, 3, 3]
-    F0 = eye + ut @ G0  # [E, 3, 3] at the centre
-    F[w <= 0.0] = eye
-    F0[w0 <= 0.0] = eye
-    J, J0 = _det3(F), _det3(F0)
-    if (J <= 0).any() or (J0 <= 0).any():
-        raise FloatingPointError("an element is inverted (J <= 0)")
-    I1 = np.einsum("egij,egij->eg", F, F)
-    H, H0 = F - eye, F0 - eye
-    P = (mu * J ** (-2.0 / 3.0))[..., None, None] * (F - (I1 / (3.0 * J))[..., None, None] * _cofactor3(F)) \
-        - mu * (H + np.swapaxes(H, -1, -2) - (2.0 / 3.0) * np.trace(H, axis1=-2, axis2=-1)[..., None, None] * eye)
-    P0 = (bulk * np.log(J0) / J0)[:, None, None] * _cofactor3(F0) \
-        - bulk * np.trace(H0, axis1=-2, axis2=-1)[:, None, None] * eye
-    return (np.matmul(P, G.transpose(0, 2, 1)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
+def strain_points(body: VoxelBody):
+    """Where each element of ``body`` takes its finite-strain remainder
+    (:class:`~.neo_hookean.StrainPoints`; :func:`neo_hookean_remainder`)."""
+    from .neo_hookean import strain_points as points
+
+    gauss, centre = _gauss_gradients(body.size)
+    subcells = None if body.fill is None else np.stack(
+        [_shape_gradients(xi, body.size) for xi in subcell_points(body.subcells)])
+    return points(body, gauss, subcells, centre, CUT_FINITE_SHARE)
 
 
 def centre_state(body: VoxelBody, u: np.ndarray, E: float, nu: float, model: str = "linear"):

@@ -96,6 +96,31 @@ def test_cut_cells_full_are_whole_cubes_and_neo_hookean_linearises_to_them():
         voxel_body(vox, np.zeros(3), 1e-3, fill=np.zeros((len(vox), 8)))
 
 
+@pytest.mark.parametrize("fill", [None, 0.75])
+def test_neo_hookean_forces_of_a_homogeneous_deformation_are_its_stress(fill):
+    """An affine displacement u = (F − I) X of a 2×2×2 block: the nodal forces on the face
+    x = max add up to P e_x times its area, P the decoupled Neo-Hookean law's first Piola stress
+    μ J^(−2/3) (F − tr(FᵀF)/3 F⁻ᵀ) + K ln J F⁻ᵀ (any integration rule is exact for a constant F).
+    Whole cubes take their Gauss points; cut cubes ¾ full everywhere their sub-cell centres,
+    which must carry ¾ of it."""
+    from gausstac_maniskill.fem.hex import neo_hookean_forces
+
+    E, nu, s = 0.26e6, 0.48, 1e-3
+    vox = np.stack(np.meshgrid(range(2), range(2), range(2), indexing="ij"), -1).reshape(-1, 3)
+    body = voxel_body(vox, np.zeros(3), s, fill=None if fill is None else np.full((len(vox), 64), fill))
+    F = np.array([[0.9, 0.1, 0.0], [0.0, 1.05, -0.05], [0.02, 0.0, 0.85]])
+    X = body.nodes * s
+    f = neo_hookean_forces(body, X @ (F - np.eye(3)).T, E, nu)
+    mu, K = E / (2 * (1 + nu)), E / (3 * (1 - 2 * nu))
+    J = np.linalg.det(F)
+    Finv_T = np.linalg.inv(F).T
+    P = mu * J ** (-2 / 3) * (F - np.trace(F.T @ F) / 3 * Finv_T) + K * np.log(J) * Finv_T
+    face = body.nodes[:, 0] == body.nodes[:, 0].max()
+    expected = (1.0 if fill is None else fill) * P[:, 0] * (2 * s) ** 2
+    assert np.allclose(f[face].sum(0), expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+    assert np.abs(f.sum(0)).max() < 1e-9 * np.abs(expected).max()  # in equilibrium as a whole
+
+
 def test_bad_input_names_the_field():
     with pytest.raises(ConfigError, match="nu"):
         element_stiffness(1e-3, 0.3e6, 0.5)
