@@ -17,9 +17,10 @@ Which points an element integrates on (:class:`StrainPoints`, built once per bod
 * any other cube: none (it stays linear, :func:`~.hex.neo_hookean_remainder`).
 
 The kernel replaced a NumPy evaluation of the same sums (197 ms for the index pad's 14 005
-elements at 0.5 mm: its [E, 8, 3, 3] temporaries were memory-bound; BENCHMARKS.md, "ninth
-session"). One thread per element; the nodal sums are atomic adds, so on a parallel arch their
-order, and the last bits of the forces, may vary from run to run.
+elements at 0.5 mm: its [E, 8, 3, 3] temporaries were memory-bound; 16 ms in the kernel;
+BENCHMARKS.md, "ninth session"). One thread per element; the nodal sums are atomic adds, so
+their order, and the last bits of the forces, may vary from run to run. The NumPy sums stay
+(:func:`remainder_forces_numpy`): they serve Taichi's CUDA, where the kernel aborts.
 """
 
 from dataclasses import dataclass
@@ -29,7 +30,7 @@ import taichi as ti
 
 from .. import backend
 
-__all__ = ["StrainPoints", "strain_points", "remainder_forces"]
+__all__ = ["StrainPoints", "strain_points", "remainder_forces", "remainder_forces_numpy"]
 
 _F64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
 _F64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
@@ -40,30 +41,17 @@ _I32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
 #: an element's rule: no finite-strain points, the Gauss points, the sub-cell centres
 LINEAR, GAUSS, SUBCELLS = -1, 0, 1
 
-Elements = ti.types.argpack(  # one body's integration points (StrainPoints)
-    element_nodes=_I32_2,  # [E, 8] node of each corner
-    rule=_I32_1,  # [E] LINEAR, GAUSS or SUBCELLS
-    weight=_F64_2,  # [E, P] volume [m³] of each point (0: left out)
-    centre_weight=_F64_1,  # [E] volume [m³] of the centre's volumetric term
-    grads=_F64_4,  # [2, P, 8, 3] shape gradients [1/m] of each rule's points
-    centre_grads=_F64_2)  # [8, 3] shape gradients [1/m] at the centre
-
-
 @dataclass(frozen=True)
 class StrainPoints:
-    """Where each element of a body takes its finite-strain remainder (module docstring):
-    the arrays of :data:`Elements`, in the kernel's dtypes."""
+    """Where each element of a body takes its finite-strain remainder (module docstring), in
+    the kernel's dtypes."""
 
-    element_nodes: np.ndarray
-    rule: np.ndarray
-    weight: np.ndarray
-    centre_weight: np.ndarray
-    grads: np.ndarray
-    centre_grads: np.ndarray
-
-    def args(self):
-        return Elements(element_nodes=self.element_nodes, rule=self.rule, weight=self.weight,
-                        centre_weight=self.centre_weight, grads=self.grads, centre_grads=self.centre_grads)
+    element_nodes: np.ndarray  # [E, 8] int32, node of each corner
+    rule: np.ndarray  # [E] int32: LINEAR, GAUSS or SUBCELLS
+    weight: np.ndarray  # [E, P] volume [m³] of each point (0: left out)
+    centre_weight: np.ndarray  # [E] volume [m³] of the centre's volumetric term
+    grads: np.ndarray  # [2, P, 8, 3] shape gradients [1/m] of each rule's points
+    centre_grads: np.ndarray  # [8, 3] shape gradients [1/m] at the centre
 
 
 def strain_points(body, gauss: np.ndarray, subcells, centre: np.ndarray,
@@ -105,27 +93,33 @@ def _cofactor(F):
 
 
 @ti.kernel
-def _remainder(el: Elements, u: _F64_2, mu: ti.f64, bulk: ti.f64, out: _F64_2, inverted: _I32_1):
-    """out[node] += the remainder forces [N] of every element on its nodes (module docstring);
-    inverted[0] = 1 where J ≤ 0 at a point that counts."""
+def _remainder(element_nodes: _I32_2, rule: _I32_1, weight: _F64_2, centre_weight: _F64_1,  # StrainPoints
+               grads: _F64_4, centre_grads: _F64_2,
+               moduli: _F64_1,  # (μ, K) [Pa]
+               u: _F64_2, out: _F64_2, inverted: _I32_1):
+    """out[node] += the remainder forces [N] of every element on its nodes, for node
+    displacements u [V, 3] [m] (module docstring); inverted[0] = 1 where J ≤ 0 at a point that
+    counts. (Plain arguments: an argpack of float64 arrays, or a float64 scalar argument, read
+    misaligned on Taichi 1.7.4's CUDA.)"""
+    mu, bulk = moduli[0], moduli[1]
     eye = ti.Matrix.identity(ti.f64, 3)
     third = ti.cast(1.0, ti.f64) / 3.0  # in float64 (a literal's type is the default, float32)
-    for e in range(el.rule.shape[0]):
-        r = el.rule[e]
+    for e in range(rule.shape[0]):
+        r = rule[e]
         if r == LINEAR:
             continue
         ue = ti.Matrix.zero(ti.f64, 8, 3)  # the element's nodal displacements [m]
         for a in ti.static(range(8)):
             for i in ti.static(range(3)):
-                ue[a, i] = u[el.element_nodes[e, a], i]
+                ue[a, i] = u[element_nodes[e, a], i]
         fe = ti.Matrix.zero(ti.f64, 8, 3)  # its nodal forces [N]
-        for p in range(el.weight.shape[1]):
-            w = el.weight[e, p]
+        for p in range(weight.shape[1]):
+            w = weight[e, p]
             if w > 0.0:
                 H = ti.Matrix.zero(ti.f64, 3, 3)  # ∇u = Σ_a u_a ⊗ g_a
                 for a in ti.static(range(8)):
                     for i, j in ti.static(ti.ndrange(3, 3)):
-                        H[i, j] += ue[a, i] * el.grads[r, p, a, j]
+                        H[i, j] += ue[a, i] * grads[r, p, a, j]
                 F = eye + H
                 J = F.determinant()
                 if J <= 0.0:
@@ -137,12 +131,12 @@ def _remainder(el: Elements, u: _F64_2, mu: ti.f64, bulk: ti.f64, out: _F64_2, i
                         - mu * (H + H.transpose() - 2.0 * third * H.trace() * eye)
                     for a in ti.static(range(8)):
                         for i, j in ti.static(ti.ndrange(3, 3)):
-                            fe[a, i] += w * Pk[i, j] * el.grads[r, p, a, j]
-        w0 = el.centre_weight[e]
+                            fe[a, i] += w * Pk[i, j] * grads[r, p, a, j]
+        w0 = centre_weight[e]
         H0 = ti.Matrix.zero(ti.f64, 3, 3)
         for a in ti.static(range(8)):
             for i, j in ti.static(ti.ndrange(3, 3)):
-                H0[i, j] += ue[a, i] * el.centre_grads[a, j]
+                H0[i, j] += ue[a, i] * centre_grads[a, j]
         F0 = eye + H0
         J0 = F0.determinant()
         if J0 <= 0.0:
@@ -152,23 +146,69 @@ def _remainder(el: Elements, u: _F64_2, mu: ti.f64, bulk: ti.f64, out: _F64_2, i
             P0 = bulk * ti.log(J0) / J0 * _cofactor(F0) - bulk * H0.trace() * eye
             for a in ti.static(range(8)):
                 for i, j in ti.static(ti.ndrange(3, 3)):
-                    fe[a, i] += w0 * P0[i, j] * el.centre_grads[a, j]
+                    fe[a, i] += w0 * P0[i, j] * centre_grads[a, j]
         for a in ti.static(range(8)):
             for i in ti.static(range(3)):
-                out[el.element_nodes[e, a], i] += fe[a, i]
+                out[element_nodes[e, a], i] += fe[a, i]
 
 
 def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
     """[V, 3] remainder forces [N] (module docstring) for node displacements ``u`` [V, 3] [m],
-    shear and bulk moduli ``mu``, ``bulk`` [Pa].
+    shear and bulk moduli ``mu``, ``bulk`` [Pa]: the Taichi kernel where Taichi runs on the CPU;
+    on Taichi's CUDA the same sums in NumPy (:func:`remainder_forces_numpy`), because the kernel
+    aborts there with a misaligned address (Taichi 1.7.4, H100; cause not found yet).
 
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point that counts).
     """
-    backend.ensure_init()
+    if backend.ensure_init() != "cpu":
+        return remainder_forces_numpy(points, u, mu, bulk)
     out = np.zeros((len(u), 3))
     inverted = np.zeros(1, np.int32)
-    _remainder(points.args(), np.ascontiguousarray(u, np.float64), float(mu), float(bulk), out, inverted)
+    p = points
+    _remainder(p.element_nodes, p.rule, p.weight, p.centre_weight, p.grads, p.centre_grads,
+               np.array([mu, bulk], np.float64), np.ascontiguousarray(u, np.float64), out, inverted)
     if inverted[0]:
         raise FloatingPointError("an element is inverted (J <= 0)")
     return out
+
+
+def remainder_forces_numpy(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
+    """:func:`remainder_forces` in NumPy on the host (its [E, points, 3, 3] temporaries make it
+    about 12× slower than the kernel on 2 CPU cores)."""
+    ut = u[points.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
+    fe = np.zeros(ut.shape)
+    for rule in (GAUSS, SUBCELLS):
+        sel = points.rule == rule
+        if sel.any():
+            w = points.weight[sel]
+            used = (w > 0.0).any(0)  # the rule's points
+            fe[sel] = _element_forces(ut[sel], points.grads[rule][used], points.centre_grads, w[:, used],
+                                      points.centre_weight[sel], mu, bulk)
+    f = np.zeros((len(u), 3))
+    nodes = points.element_nodes.ravel()
+    for i in range(3):
+        f[:, i] = np.bincount(nodes, fe[:, i, :].ravel(), minlength=len(u))
+    return f
+
+
+def _element_forces(ut, G, G0, w, w0, mu, bulk) -> np.ndarray:
+    """[E, 3, 8] nodal forces [N] of elements with nodal displacements ``ut`` [E, 3, 8] [m]:
+    the isochoric remainder at points of shape gradients ``G`` [points, 8, 3] and volumes ``w``
+    [E, points] [m³] (0: left out, taken undeformed), the volumetric one at the centre (``G0``
+    [8, 3], volume ``w0`` [E])."""
+    eye = np.eye(3)
+    F = eye + np.matmul(ut[:, None], G[None])  # [E, points, 3, 3]
+    F0 = eye + ut @ G0  # [E, 3, 3] at the centre
+    F[w <= 0.0] = eye
+    F0[w0 <= 0.0] = eye
+    J, J0 = np.linalg.det(F), np.linalg.det(F0)
+    if (J <= 0).any() or (J0 <= 0).any():
+        raise FloatingPointError("an element is inverted (J <= 0)")
+    cof, cof0 = J[..., None, None] * np.linalg.inv(F).swapaxes(-1, -2), J0[:, None, None] * np.linalg.inv(F0).swapaxes(-1, -2)
+    I1 = np.einsum("egij,egij->eg", F, F)
+    H, H0 = F - eye, F0 - eye
+    P = (mu * J ** (-2.0 / 3.0))[..., None, None] * (F - (I1 / (3.0 * J))[..., None, None] * cof) \
+        - mu * (H + H.swapaxes(-1, -2) - (2.0 / 3.0) * np.trace(H, axis1=-2, axis2=-1)[..., None, None] * eye)
+    P0 = (bulk * np.log(J0) / J0)[:, None, None] * cof0 - bulk * np.trace(H0, axis1=-2, axis2=-1)[:, None, None] * eye
+    return (np.matmul(P, G.transpose(0, 2, 1)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
