@@ -18,8 +18,8 @@ Which points an element integrates on (:class:`StrainPoints`, built once per bod
 
 The kernel replaced a NumPy evaluation of the same sums (197 ms for the index pad's 14 005
 elements at 0.5 mm: its [E, 8, 3, 3] temporaries were memory-bound; 16 ms in the kernel;
-BENCHMARKS.md, "ninth session"). One thread per element; the nodal sums are atomic adds, so
-their order, and the last bits of the forces, may vary from run to run. The NumPy sums stay
+BENCHMARKS.md, "ninth session"). One thread per element writes its own nodal forces; their sums
+on the nodes are taken on the host in a fixed order, so a run repeats to the bit. The NumPy sums stay
 (:func:`remainder_forces_numpy`): they serve Taichi's CUDA, where the kernel aborts.
 """
 
@@ -34,6 +34,7 @@ __all__ = ["StrainPoints", "strain_points", "remainder_forces", "remainder_force
 
 _F64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
 _F64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+_F64_3 = ti.types.ndarray(dtype=ti.f64, ndim=3)
 _F64_4 = ti.types.ndarray(dtype=ti.f64, ndim=4)
 _I32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
 _I32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
@@ -96,11 +97,11 @@ def _cofactor(F):
 def _remainder(element_nodes: _I32_2, rule: _I32_1, weight: _F64_2, centre_weight: _F64_1,  # StrainPoints
                grads: _F64_4, centre_grads: _F64_2,
                moduli: _F64_1,  # (μ, K) [Pa]
-               u: _F64_2, out: _F64_2, inverted: _I32_1):
-    """out[node] += the remainder forces [N] of every element on its nodes, for node
-    displacements u [V, 3] [m] (module docstring); inverted[0] = 1 where J ≤ 0 at a point that
-    counts. (Plain arguments: an argpack of float64 arrays, or a float64 scalar argument, read
-    misaligned on Taichi 1.7.4's CUDA.)"""
+               u: _F64_2, out: _F64_3, inverted: _I32_1):
+    """out[e, a] = the remainder forces [N] of element e on its corner a, for node displacements
+    u [V, 3] [m] (module docstring); inverted[0] = 1 where J ≤ 0 at a point that counts.
+    (Plain arguments: with an argpack of float64 arrays and float64 scalar arguments it aborted
+    on Taichi 1.7.4's CUDA with a misaligned address, as it did with these and atomic nodal sums.)"""
     mu, bulk = moduli[0], moduli[1]
     eye = ti.Matrix.identity(ti.f64, 3)
     third = ti.cast(1.0, ti.f64) / 3.0  # in float64 (a literal's type is the default, float32)
@@ -149,7 +150,7 @@ def _remainder(element_nodes: _I32_2, rule: _I32_1, weight: _F64_2, centre_weigh
                     fe[a, i] += w0 * P0[i, j] * centre_grads[a, j]
         for a in ti.static(range(8)):
             for i in ti.static(range(3)):
-                out[element_nodes[e, a], i] += fe[a, i]
+                out[e, a, i] = fe[a, i]
 
 
 def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
@@ -163,14 +164,14 @@ def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float
     """
     if backend.ensure_init() != "cpu":
         return remainder_forces_numpy(points, u, mu, bulk)
-    out = np.zeros((len(u), 3))
+    fe = np.zeros((len(points.rule), 8, 3))
     inverted = np.zeros(1, np.int32)
     p = points
     _remainder(p.element_nodes, p.rule, p.weight, p.centre_weight, p.grads, p.centre_grads,
-               np.array([mu, bulk], np.float64), np.ascontiguousarray(u, np.float64), out, inverted)
+               np.array([mu, bulk], np.float64), np.ascontiguousarray(u, np.float64), fe, inverted)
     if inverted[0]:
         raise FloatingPointError("an element is inverted (J <= 0)")
-    return out
+    return _to_nodes(points, fe.transpose(0, 2, 1), len(u))
 
 
 def remainder_forces_numpy(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
@@ -185,10 +186,15 @@ def remainder_forces_numpy(points: StrainPoints, u: np.ndarray, mu: float, bulk:
             used = (w > 0.0).any(0)  # the rule's points
             fe[sel] = _element_forces(ut[sel], points.grads[rule][used], points.centre_grads, w[:, used],
                                       points.centre_weight[sel], mu, bulk)
-    f = np.zeros((len(u), 3))
+    return _to_nodes(points, fe, len(u))
+
+
+def _to_nodes(points: StrainPoints, fe: np.ndarray, num_nodes: int) -> np.ndarray:
+    """[V, 3] nodal sums of element forces ``fe`` [E, 3, 8] [N], in a fixed order."""
+    f = np.zeros((num_nodes, 3))
     nodes = points.element_nodes.ravel()
     for i in range(3):
-        f[:, i] = np.bincount(nodes, fe[:, i, :].ravel(), minlength=len(u))
+        f[:, i] = np.bincount(nodes, fe[:, i, :].ravel(), minlength=num_nodes)
     return f
 
 

@@ -1,6 +1,6 @@
 """The finite-strain remainder's two evaluations: the Taichi kernel (Taichi on the CPU) and the
-NumPy sums (Taichi on CUDA, where the kernel aborts). Code against code: this guards that the
-two stay the same law; the law itself is checked against the Neo-Hookean stress in
+NumPy sums (Taichi on CUDA, where the kernel aborted). Code against code: this guards that the
+two stay the same law, and that the kernel's sums repeat to the bit; the law itself is checked against the Neo-Hookean stress in
 tests/fem/test_hex.py and tests/fem/test_contact.py."""
 import numpy as np
 import pytest
@@ -27,6 +27,7 @@ def test_kernel_and_numpy_sums_agree_on_whole_and_cut_cubes():
     got, ref = remainder_forces(points, u, mu, bulk), remainder_forces_numpy(points, u, mu, bulk)
     assert np.abs(ref).max() > 1e-3
     assert np.allclose(got, ref, rtol=0.0, atol=1e-12 * np.abs(ref).max())
+    assert np.array_equal(remainder_forces(points, u, mu, bulk), got)  # a run repeats to the bit
     crushed = u.copy()
     crushed[body.element_nodes[0, 7]] = [-2e-3, -2e-3, -2e-3]  # a whole cube's corner through its opposite one
     for evaluate in (remainder_forces, remainder_forces_numpy):
