@@ -113,14 +113,24 @@ def test_covariance_input_equals_scale_rotation(scene_factory):
     assert torch.equal(b.rgb, c.rgb)
 
 
+def _same_picture(one: torch.Tensor, batched: torch.Tensor, label=None) -> None:
+    """A camera rendered alone against the same camera in a batch: equal to float32's last bits.
+    Not bit for bit: torch's vectorised ops round a tensor's tail by the CPU's vector width, so
+    the batched call's per-camera arithmetic may differ by an ulp (1.2e-7 in 187 of 3072 pixels on
+    the 2026-11-27 ninth session's host; bit-identical on earlier hosts). A camera that saw
+    another's Gaussians would differ by the colours themselves."""
+    err = float((one.cpu() - batched.cpu()).abs().max())
+    assert err <= 4e-7 * max(1.0, float(batched.abs().max())), (label, err)
+
+
 def test_batched_cameras_equal_single_renders(scene_factory):
     g = scene_factory(150, 1, seed=4)
     V, K = cameras()
     both = render(g, V, K, W, H, background=BG)
     for c in range(V.shape[0]):
         one = render(g, V[c:c + 1], K[c:c + 1], W, H, background=BG)
-        assert torch.equal(one.rgb[0], both.rgb[c])
-        assert torch.equal(one.depth[0], both.depth[c])
+        _same_picture(one.rgb[0], both.rgb[c])
+        _same_picture(one.depth[0], both.depth[c])
 
 
 def test_gaussian_ranges_render_each_env_as_if_alone(scene_factory):
@@ -148,7 +158,7 @@ def test_gaussian_ranges_render_each_env_as_if_alone(scene_factory):
                         K[c:c + 1], W, H, background=bg[c:c + 1], lighting=lights[c], normals=normals[lo:hi])
         assert one.alpha.max() > 0.3, "the env should show in camera %d" % c
         for name in ("rgb", "depth", "alpha"):
-            assert torch.equal(getattr(one, name)[0], getattr(out, name)[c]), (c, name)
+            _same_picture(getattr(one, name)[0], getattr(out, name)[c], (c, name))
     with pytest.raises(ConfigError, match=r"gaussian_ranges\[1\] = \[150, 371\]"):
         render(both, V, K, W, H, gaussian_ranges=torch.tensor([[0, 150], [150, 371], [0, 1]]))
     with pytest.raises(ConfigError, match="shape \\[C, 2\\] or \\[C, 2, 2\\] \\(C = 3\\)"):
@@ -160,7 +170,7 @@ def test_gaussian_ranges_render_each_env_as_if_alone(scene_factory):
 def test_two_ranges_per_camera_render_their_gaussians_alone(scene_factory):
     """[C, 2, 2] ranges: a camera sees its first range, then its second (a scene's shared
     Gaussians and one level of its hand, ``render.Detail``): every picture equals those
-    Gaussians, in that order, rendered alone, bit for bit (guards the kernel's indexing)."""
+    Gaussians, in that order, rendered alone, to the last bits (guards the kernel's indexing)."""
     g = scene_factory(300, 1, seed=23)
     V, K = cameras()
     ranges = torch.tensor([[[0, 100], [200, 300]], [[50, 50], [120, 260]], [[0, 300], [300, 300]]])
@@ -170,7 +180,7 @@ def test_two_ranges_per_camera_render_their_gaussians_alone(scene_factory):
         one = render(g[idx], V[c:c + 1], K[c:c + 1], W, H, background=BG)
         assert one.alpha.max() > 0.3, "the Gaussians should show in camera %d" % c
         for name in ("rgb", "depth", "alpha"):
-            assert torch.equal(getattr(one, name)[0], getattr(out, name)[c]), (c, name)
+            _same_picture(getattr(one, name)[0], getattr(out, name)[c], (c, name))
     with pytest.raises(ConfigError, match=r"gaussian_ranges\[1\] = \[\[50, 50\], \[260, 120\]\]"):
         render(g, V, K, W, H, gaussian_ranges=torch.tensor([[[0, 1], [1, 2]], [[50, 50], [260, 120]], [[0, 1]] * 2]))
 
