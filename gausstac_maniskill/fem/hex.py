@@ -141,8 +141,8 @@ def _split_stiffness(size: float, E: float, nu: float, n: int) -> tuple[np.ndarr
     """The two parts of a cube's stiffness [N/m], each [.., 576] (a flattened 24 × 24):
     ``dev`` [n³, 576], the deviatoric part of each of its n × n × n sub-cells (the order of
     :func:`subcell_points`), integrated exactly on the sub-cell's 2×2×2 Gauss points; ``vol``
-    [576], the volumetric part of the whole cube, at its centre. Cached (11 ms each, and every
-    finite-strain iteration on cut cells needs it): read-only arrays."""
+    [576], the volumetric part of the whole cube, at its centre. Cached (11 ms each; every
+    :func:`stiffness` of a body of that size and material needs it): read-only arrays."""
     mu, bulk = _moduli(E, nu)
     m = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     D = 2.0 * mu * (np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5]) - np.outer(m, m) / 3.0)

@@ -29,6 +29,7 @@ import numpy as np
 import taichi as ti
 
 from .. import backend
+from ..mpm.kernels import NDI, NDI2
 
 __all__ = ["StrainPoints", "strain_points", "remainder_forces", "remainder_forces_numpy"]
 
@@ -36,8 +37,6 @@ _F64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
 _F64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
 _F64_3 = ti.types.ndarray(dtype=ti.f64, ndim=3)
 _F64_4 = ti.types.ndarray(dtype=ti.f64, ndim=4)
-_I32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
-_I32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
 
 #: an element's rule: no finite-strain points, the Gauss points, the sub-cell centres
 LINEAR, GAUSS, SUBCELLS = -1, 0, 1
@@ -94,10 +93,10 @@ def _cofactor(F):
 
 
 @ti.kernel
-def _remainder(element_nodes: _I32_2, rule: _I32_1, weight: _F64_2, centre_weight: _F64_1,  # StrainPoints
+def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F64_1,  # StrainPoints
                grads: _F64_4, centre_grads: _F64_2,
                moduli: _F64_1,  # (μ, K) [Pa]
-               u: _F64_2, out: _F64_3, inverted: _I32_1):
+               u: _F64_2, out: _F64_3, inverted: NDI):
     """out[e, a] = the remainder forces [N] of element e on its corner a, for node displacements
     u [V, 3] [m] (module docstring); inverted[0] = 1 where J ≤ 0 at a point that counts.
     (Plain arguments: with an argpack of float64 arrays and float64 scalar arguments it aborted
