@@ -52,6 +52,12 @@ ANDERSON_DEPTH = 15
 #: (what whole cubes always needed); 0.5 carries the sphere's 1 mm press on cut cells of
 #: 0.5 mm (undamped: inverted at the 5th iteration of its second step)
 DAMPED_MIXING = (1.0, 0.5, 0.25)
+#: finite-strain iterations without halving the smallest node motion so far, after which the
+#: fixed point counts as stalled, while that motion is still above 100 tolerances (converging
+#: steps creep for longer below that, toward the tolerance; the stalled plate slide hovers at
+#: 1e-5–9e-5 m, 200–1800 tolerances: BENCHMARKS.md, "tenth session"). A stalled mixing then
+#: fails in about this many iterations instead of running to ``max_iterations``
+STALL_ITERATIONS = 100
 
 
 class _Diverged(Exception):
@@ -897,15 +903,18 @@ class QuasiStaticBody:
     def _solve_finite_strain(self, sdf, margin, tol, max_iterations, warm, friction=None) -> ContactResult:
         """The finite-strain solve, by fixed-point iterations preconditioned with the factored
         linear stiffness; where they diverge (a step that compresses thin cut cells far beyond
-        the linear stiffness) they start again from ``warm`` with the mixing damped
-        (:data:`DAMPED_MIXING`)."""
+        the linear stiffness) or stall (:data:`STALL_ITERATIONS`) they start again from ``warm``
+        with the mixing damped (:data:`DAMPED_MIXING`)."""
+        reasons = []
         for beta in DAMPED_MIXING:
             try:
                 return self._finite_strain_iterations(sdf, margin, tol, max_iterations, warm, friction, beta)
             except _Diverged as err:
-                reason = err.args[0]
-        raise SimulationError(f"{self.name}: {reason} (mixing {DAMPED_MIXING[-1]:g}); the press is too deep "
-                              "for the pad, or the step too large")
+                reasons.append(f"mixing {beta:g}: {err.args[0]}")
+        raise SimulationError(f"{self.name}: the finite-strain solve failed at every mixing ({'; '.join(reasons)}). "
+                              "The press may be too deep for the pad or the step too large; under a slide, the fixed "
+                              "point on the linear stiffness can stall (BENCHMARKS.md, 'the plate slide still "
+                              "stalls'). fem_model='linear' (small strain) and pad_solver='mpm' solve such steps")
 
     def _finite_strain_iterations(self, sdf, margin, tol, max_iterations, warm, friction, beta) -> ContactResult:
         body = self.body
@@ -916,6 +925,7 @@ class QuasiStaticBody:
         f = np.zeros((0, 3))
         idx = np.zeros(0, np.int64)
         mix = _Anderson(ANDERSON_DEPTH, beta)
+        mark, mark_it = math.inf, 0  # the smallest motion yet, at its last halving, and when
         for it in range(1, max_iterations + 1):
             us = self._interp(u)
             phi, n = sdf(self.points + us)
@@ -941,6 +951,11 @@ class QuasiStaticBody:
             if moved < tol:
                 u = u_new
                 break
+            if moved < 0.5 * mark:
+                mark, mark_it = moved, it
+            elif it - mark_it >= STALL_ITERATIONS and mark > 100.0 * tol:
+                raise _Diverged(f"finite-strain contact stalled: the largest node motion per iteration has not halved in "
+                                f"{STALL_ITERATIONS} iterations ({moved:.3g} m at iteration {it}, tolerance {tol:.3g} m)")
             u = mix.next(u, u_new)
         else:
             raise _Diverged(f"finite-strain contact did not converge in {max_iterations} iterations "

@@ -122,6 +122,23 @@ def test_finite_strain_warm_start_and_a_crushed_layer():
         body.solve(_plate(-0.5e-3), warm=first)  # the plate below the base: nothing can hold that
 
 
+def test_a_stalled_finite_strain_solve_stops_early_and_says_so(monkeypatch):
+    """Guards the stall detector's wiring, not physics: a fixed point that makes no progress (its
+    mixing replaced by one that returns its input) fails after STALL_ITERATIONS iterations per
+    mixing instead of max_iterations, with an error that names the stall at every mixing tried."""
+    from gausstac_maniskill.errors import SimulationError
+    from gausstac_maniskill.fem import contact
+
+    calls = []
+    monkeypatch.setattr(contact._Anderson, "next", lambda self, u, t: calls.append(1) or u)
+    h = 4e-3
+    body = _rollers(layer_body(h, 3e-3, 1e-3, 0.26e6, 0.48, model="neo_hookean"))
+    with pytest.raises(SimulationError, match=r"mixing 1: finite-strain contact stalled.*mixing 0\.25: finite-strain "
+                                              r"contact stalled.*fem_model='linear'"):
+        body.solve(_plate(0.8 * h), max_iterations=10_000)
+    assert len(calls) == len(contact.DAMPED_MIXING) * contact.STALL_ITERATIONS
+
+
 def _coulomb_violations(W, n, gap0, slip0, mu, f, state):
     """Largest violations of the contact conditions: gap, pull, cone [N], stuck slip [m], and the
     largest cosine between a slipping point's slip and its friction force (should be −1)."""
