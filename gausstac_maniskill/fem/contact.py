@@ -913,8 +913,8 @@ class QuasiStaticBody:
                 reasons.append(f"mixing {beta:g}: {err.args[0]}")
         raise SimulationError(f"{self.name}: the finite-strain solve failed at every mixing ({'; '.join(reasons)}). "
                               "The press may be too deep for the pad or the step too large; under a slide, the fixed "
-                              "point on the linear stiffness can stall (BENCHMARKS.md, 'the plate slide still "
-                              "stalls'). fem_model='linear' (small strain) and pad_solver='mpm' solve such steps")
+                              "point on the linear stiffness can stall (BENCHMARKS.md, 'the finite-strain plate slide "
+                              "still stalls'). fem_model='linear' (small strain) and pad_solver='mpm' solve such steps")
 
     def _finite_strain_iterations(self, sdf, margin, tol, max_iterations, warm, friction, beta) -> ContactResult:
         body = self.body
