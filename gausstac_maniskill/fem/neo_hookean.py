@@ -20,7 +20,8 @@ The kernel replaced a NumPy evaluation of the same sums (197 ms for the index pa
 elements at 0.5 mm: its [E, 8, 3, 3] temporaries were memory-bound; 16 ms in the kernel;
 BENCHMARKS.md, "ninth session"). One thread per element writes its own nodal forces; their sums
 on the nodes are taken on the host in a fixed order, so a run repeats to the bit. The NumPy sums stay
-(:func:`remainder_forces_numpy`): they serve Taichi's CUDA, where the kernel aborts.
+(:func:`remainder_forces_numpy`): they serve Taichi's CUDA, where the kernel's earlier form
+aborted and its present form has not run yet.
 """
 
 from dataclasses import dataclass
@@ -99,8 +100,14 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
                u: _F64_2, out: _F64_3, inverted: NDI):
     """out[e, a] = the remainder forces [N] of element e on its corner a, for node displacements
     u [V, 3] [m] (module docstring); inverted[0] = 1 where J ≤ 0 at a point that counts.
-    (Plain arguments: with an argpack of float64 arrays and float64 scalar arguments it aborted
-    on Taichi 1.7.4's CUDA with a misaligned address, as it did with these and atomic nodal sums.)"""
+
+    No local matrix lives across the (run-time) loop over points: each point reads the nodal
+    displacements from ``u`` and adds its forces to ``out``, one addition per corner and axis.
+    On Taichi 1.7.4's CUDA (H100) a local 8×3 matrix summed through that loop aborted with a
+    misaligned address, and the same kernel with the loop unrolled did not (BENCHMARKS.md,
+    "eleventh session"). This form has not run on CUDA yet, so :func:`remainder_forces` still
+    takes the NumPy sums there. (Several additions to one ``out`` entry within a point gave wrong
+    sums on the CPU at ``opt_level=0``, GAUSSTAC_COMPILE=fast: hence one per point.)"""
     mu, bulk = moduli[0], moduli[1]
     eye = ti.Matrix.identity(ti.f64, 3)
     third = ti.cast(1.0, ti.f64) / 3.0  # in float64 (a literal's type is the default, float32)
@@ -108,18 +115,30 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
         r = rule[e]
         if r == LINEAR:
             continue
-        ue = ti.Matrix.zero(ti.f64, 8, 3)  # the element's nodal displacements [m]
+        # volumetric stress K ln J₀ F₀⁻ᵀ less its linearisation K tr(ε₀) I, one per element (F-bar)
+        H0 = ti.Matrix.zero(ti.f64, 3, 3)
+        for a in ti.static(range(8)):
+            for i, j in ti.static(ti.ndrange(3, 3)):
+                H0[i, j] += u[element_nodes[e, a], i] * centre_grads[a, j]
+        F0 = eye + H0
+        J0 = F0.determinant()
+        P0 = ti.Matrix.zero(ti.f64, 3, 3)
+        if J0 <= 0.0:
+            inverted[0] = 1
+        else:
+            P0 = bulk * ti.log(J0) / J0 * _cofactor(F0) - bulk * H0.trace() * eye
+        w0 = centre_weight[e]
         for a in ti.static(range(8)):
             for i in ti.static(range(3)):
-                ue[a, i] = u[element_nodes[e, a], i]
-        fe = ti.Matrix.zero(ti.f64, 8, 3)  # its nodal forces [N]
+                out[e, a, i] = w0 * (P0[i, 0] * centre_grads[a, 0] + P0[i, 1] * centre_grads[a, 1]
+                                     + P0[i, 2] * centre_grads[a, 2])
         for p in range(weight.shape[1]):
             w = weight[e, p]
             if w > 0.0:
                 H = ti.Matrix.zero(ti.f64, 3, 3)  # ∇u = Σ_a u_a ⊗ g_a
                 for a in ti.static(range(8)):
                     for i, j in ti.static(ti.ndrange(3, 3)):
-                        H[i, j] += ue[a, i] * grads[r, p, a, j]
+                        H[i, j] += u[element_nodes[e, a], i] * grads[r, p, a, j]
                 F = eye + H
                 J = F.determinant()
                 if J <= 0.0:
@@ -130,33 +149,17 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
                     Pk = mu * ti.pow(J, -2.0 * third) * (F - I1 * third / J * _cofactor(F)) \
                         - mu * (H + H.transpose() - 2.0 * third * H.trace() * eye)
                     for a in ti.static(range(8)):
-                        for i, j in ti.static(ti.ndrange(3, 3)):
-                            fe[a, i] += w * Pk[i, j] * grads[r, p, a, j]
-        w0 = centre_weight[e]
-        H0 = ti.Matrix.zero(ti.f64, 3, 3)
-        for a in ti.static(range(8)):
-            for i, j in ti.static(ti.ndrange(3, 3)):
-                H0[i, j] += ue[a, i] * centre_grads[a, j]
-        F0 = eye + H0
-        J0 = F0.determinant()
-        if J0 <= 0.0:
-            inverted[0] = 1
-        else:
-            # volumetric stress K ln J₀ F₀⁻ᵀ less its linearisation K tr(ε₀) I, one per element (F-bar)
-            P0 = bulk * ti.log(J0) / J0 * _cofactor(F0) - bulk * H0.trace() * eye
-            for a in ti.static(range(8)):
-                for i, j in ti.static(ti.ndrange(3, 3)):
-                    fe[a, i] += w0 * P0[i, j] * centre_grads[a, j]
-        for a in ti.static(range(8)):
-            for i in ti.static(range(3)):
-                out[e, a, i] = fe[a, i]
+                        for i in ti.static(range(3)):
+                            out[e, a, i] += w * (Pk[i, 0] * grads[r, p, a, 0] + Pk[i, 1] * grads[r, p, a, 1]
+                                                 + Pk[i, 2] * grads[r, p, a, 2])
 
 
 def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
     """[V, 3] remainder forces [N] (module docstring) for node displacements ``u`` [V, 3] [m],
     shear and bulk moduli ``mu``, ``bulk`` [Pa]: the Taichi kernel where Taichi runs on the CPU;
-    on Taichi's CUDA the same sums in NumPy (:func:`remainder_forces_numpy`), because the kernel
-    aborts there with a misaligned address (Taichi 1.7.4, H100; cause not found yet).
+    on Taichi's CUDA the same sums in NumPy (:func:`remainder_forces_numpy`): the kernel's earlier
+    form aborted there with a misaligned address (Taichi 1.7.4, H100), and its present form
+    (:func:`_remainder`'s docstring) has not run there yet.
 
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point that counts).
