@@ -262,8 +262,9 @@ def neo_hookean_remainder(body: VoxelBody, u: np.ndarray, E: float, nu: float, p
     the finite-strain remainder P(F) − P_lin(F) of each element's stresses, P_lin = 2μ dev ε
     and K tr(ε₀) I. A whole cube takes it on its 2×2×2 Gauss points (where K's deviatoric part
     is integrated, exactly: so K u plus this is the whole cube's law); a cut cube (``body.fill``)
-    at least :data:`CUT_FINITE_SHARE` full on its material sub-cells' centres (fill ≥ ½), the
-    volumetric one at the cube's centre weighted by their share of the cube. The empty
+    at least :data:`CUT_FINITE_SHARE` full on the same points, each weighted by its octant's
+    material (sub-cells of fill ≥ ½), the volumetric one at the cube's centre weighted by the
+    material of the whole cube. The empty
     sub-cells (the fill of :data:`~.pad.EMPTY_STIFFNESS`, outside the layer) and the cubes
     less full stay linear: they only keep the mesh regular, and under finite strain they
     invert or run away where the surface moves far (the finite cell method's known weakness
@@ -285,9 +286,16 @@ def strain_points(body: VoxelBody):
     from .neo_hookean import strain_points as points
 
     gauss, centre = _gauss_gradients(body.size)
-    subcells = None if body.fill is None else np.stack(
-        [_shape_gradients(xi, body.size) for xi in subcell_points(body.subcells)])
-    return points(body, gauss, subcells, centre, CUT_FINITE_SHARE)
+    octants = None if body.fill is None else _octant_shares(body.subcells)
+    return points(body, gauss, octants, centre, CUT_FINITE_SHARE)
+
+
+def _octant_shares(n: int) -> np.ndarray:
+    """[n³, 8] the share of each of a cube's n³ sub-cells (:func:`subcell_points`) in the octant
+    of each Gauss point (:data:`CORNERS`' order): 1 in one octant, halves for a sub-cell on a mid-plane."""
+    xi = subcell_points(n)[:, None, :]  # [n³, 1, 3]
+    side = 2.0 * CORNERS[None] - 1.0  # [1, 8, 3] the octant's sign on each axis
+    return np.where(xi == 0.0, 0.5, (np.sign(xi) == side).astype(float)).prod(-1)
 
 
 def centre_state(body: VoxelBody, u: np.ndarray, E: float, nu: float, model: str = "linear"):

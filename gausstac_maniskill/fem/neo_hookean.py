@@ -11,9 +11,12 @@ integration point adds w P g_a to its element's node a (shape gradient g_a, volu
 
 Which points an element integrates on (:class:`StrainPoints`, built once per body):
 
-* a whole cube: its 2×2×2 Gauss points (where the stiffness's deviatoric part is integrated);
-* a cut cube at least :data:`~.hex.CUT_FINITE_SHARE` full: its material sub-cells' centres,
-  each weighted by its fill;
+* a whole cube: its 2×2×2 Gauss points (where the stiffness's deviatoric part is integrated),
+  each weighing an eighth of the cube;
+* a cut cube at least :data:`~.hex.CUT_FINITE_SHARE` full: the same points, each weighing the
+  material of its octant (the fill of the sub-cells there). Its material sub-cells' 64 centres
+  gave the same forces to 0.03 % and took up to twice the iterations under the plate
+  (BENCHMARKS.md, "eleventh session");
 * any other cube: none (it stays linear, :func:`~.hex.neo_hookean_remainder`).
 
 The kernel replaced a NumPy evaluation of the same sums (197 ms for the index pad's 14 005
@@ -37,10 +40,9 @@ __all__ = ["StrainPoints", "strain_points", "remainder_forces", "remainder_force
 _F64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
 _F64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
 _F64_3 = ti.types.ndarray(dtype=ti.f64, ndim=3)
-_F64_4 = ti.types.ndarray(dtype=ti.f64, ndim=4)
 
-#: an element's rule: no finite-strain points, the Gauss points, the sub-cell centres
-LINEAR, GAUSS, SUBCELLS = -1, 0, 1
+#: an element's rule: no finite-strain points, the Gauss points
+LINEAR, GAUSS = -1, 0
 
 @dataclass(frozen=True)
 class StrainPoints:
@@ -48,39 +50,35 @@ class StrainPoints:
     the kernel's dtypes."""
 
     element_nodes: np.ndarray  # [E, 8] int32, node of each corner
-    rule: np.ndarray  # [E] int32: LINEAR, GAUSS or SUBCELLS
-    weight: np.ndarray  # [E, P] volume [m³] of each point (0: left out)
+    rule: np.ndarray  # [E] int32: LINEAR or GAUSS
+    weight: np.ndarray  # [E, 8] volume [m³] of material each Gauss point stands for (0: left out)
     centre_weight: np.ndarray  # [E] volume [m³] of the centre's volumetric term
-    grads: np.ndarray  # [2, P, 8, 3] shape gradients [1/m] of each rule's points
+    grads: np.ndarray  # [8, 8, 3] shape gradients [1/m] at the Gauss points
     centre_grads: np.ndarray  # [8, 3] shape gradients [1/m] at the centre
 
 
-def strain_points(body, gauss: np.ndarray, subcells, centre: np.ndarray,
+def strain_points(body, gauss: np.ndarray, octants, centre: np.ndarray,
                   finite_share: float) -> StrainPoints:
     """The :class:`StrainPoints` of ``body`` (:class:`~.hex.VoxelBody`): ``gauss`` [8, 8, 3] the
-    shape gradients at the Gauss points, ``subcells`` [n³, 8, 3] at the sub-cell centres (cut
-    cells; None for whole cubes), ``centre`` [8, 3] at the centre; cut cubes with a share of
-    material (fill ≥ ½) below ``finite_share`` stay linear."""
+    shape gradients at the Gauss points, ``octants`` [n³, 8] the share of each sub-cell in each
+    Gauss point's octant (cut cells; None for whole cubes), ``centre`` [8, 3] the shape gradients
+    at the centre; cut cubes with a share of material (fill ≥ ½) below ``finite_share`` stay
+    linear."""
     E = len(body.voxels)
     v = body.size ** 3
-    P = len(gauss) if subcells is None else max(len(gauss), len(subcells))
-    grads = np.zeros((2, P, 8, 3))
-    grads[0, :len(gauss)] = gauss
-    weight = np.zeros((E, P))
+    weight = np.zeros((E, len(gauss)))
     rule = np.full(E, GAUSS, np.int32)
     if body.fill is None:
-        weight[:, :len(gauss)] = v / len(gauss)
+        weight[:] = v / len(gauss)
     else:
-        grads[1, :len(subcells)] = subcells
         whole = (body.fill == 1.0).all(1)
         material = body.fill >= 0.5
         cut = ~whole & (material.mean(1) >= finite_share)
-        weight[whole, :len(gauss)] = v / len(gauss)
-        weight[cut, :len(subcells)] = np.where(material[cut], body.fill[cut], 0.0) * (v / len(subcells))
-        rule[cut] = SUBCELLS
+        weight[whole] = v / len(gauss)
+        weight[cut] = (np.where(material[cut], body.fill[cut], 0.0) * (v / len(octants))) @ octants
         rule[~whole & ~cut] = LINEAR
     return StrainPoints(np.ascontiguousarray(body.element_nodes, np.int32), rule, weight, weight.sum(1),
-                        grads, np.ascontiguousarray(centre, np.float64))
+                        np.ascontiguousarray(gauss, np.float64), np.ascontiguousarray(centre, np.float64))
 
 
 @ti.func
@@ -95,7 +93,7 @@ def _cofactor(F):
 
 @ti.kernel
 def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F64_1,  # StrainPoints
-               grads: _F64_4, centre_grads: _F64_2,
+               grads: _F64_3, centre_grads: _F64_2,
                moduli: _F64_1,  # (μ, K) [Pa]
                u: _F64_2, out: _F64_3, inverted: NDI):
     """out[e, a] = the remainder forces [N] of element e on its corner a, for node displacements
@@ -112,8 +110,7 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
     eye = ti.Matrix.identity(ti.f64, 3)
     third = ti.cast(1.0, ti.f64) / 3.0  # in float64 (a literal's type is the default, float32)
     for e in range(rule.shape[0]):
-        r = rule[e]
-        if r == LINEAR:
+        if rule[e] == LINEAR:
             continue
         # volumetric stress K ln J₀ F₀⁻ᵀ less its linearisation K tr(ε₀) I, one per element (F-bar)
         H0 = ti.Matrix.zero(ti.f64, 3, 3)
@@ -138,7 +135,7 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
                 H = ti.Matrix.zero(ti.f64, 3, 3)  # ∇u = Σ_a u_a ⊗ g_a
                 for a in ti.static(range(8)):
                     for i, j in ti.static(ti.ndrange(3, 3)):
-                        H[i, j] += u[element_nodes[e, a], i] * grads[r, p, a, j]
+                        H[i, j] += u[element_nodes[e, a], i] * grads[p, a, j]
                 F = eye + H
                 J = F.determinant()
                 if J <= 0.0:
@@ -150,8 +147,8 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
                         - mu * (H + H.transpose() - 2.0 * third * H.trace() * eye)
                     for a in ti.static(range(8)):
                         for i in ti.static(range(3)):
-                            out[e, a, i] += w * (Pk[i, 0] * grads[r, p, a, 0] + Pk[i, 1] * grads[r, p, a, 1]
-                                                 + Pk[i, 2] * grads[r, p, a, 2])
+                            out[e, a, i] += w * (Pk[i, 0] * grads[p, a, 0] + Pk[i, 1] * grads[p, a, 1]
+                                                 + Pk[i, 2] * grads[p, a, 2])
 
 
 def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
@@ -181,13 +178,10 @@ def remainder_forces_numpy(points: StrainPoints, u: np.ndarray, mu: float, bulk:
     about 12× slower than the kernel on 2 CPU cores)."""
     ut = u[points.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
     fe = np.zeros(ut.shape)
-    for rule in (GAUSS, SUBCELLS):
-        sel = points.rule == rule
-        if sel.any():
-            w = points.weight[sel]
-            used = (w > 0.0).any(0)  # the rule's points
-            fe[sel] = _element_forces(ut[sel], points.grads[rule][used], points.centre_grads, w[:, used],
-                                      points.centre_weight[sel], mu, bulk)
+    sel = points.rule == GAUSS
+    if sel.any():
+        fe[sel] = _element_forces(ut[sel], points.grads, points.centre_grads, points.weight[sel],
+                                  points.centre_weight[sel], mu, bulk)
     return _to_nodes(points, fe, len(u))
 
 
