@@ -90,14 +90,16 @@ def _additions(body, static_vars=frozenset()):
     loops (each run-time loop is checked on its own)."""
     found = []
     for st in body:
-        target, plain = (st.target, False) if isinstance(st, ast.AugAssign) else (None, False)
+        target = st.target if isinstance(st, ast.AugAssign) else None
+        plain = False
         if isinstance(st, ast.Expr) and isinstance(st.value, ast.Call) and ast.unparse(st.value.func).endswith("atomic_add"):
             target = st.value.args[0]
         if isinstance(st, ast.Assign) and len(st.targets) == 1 and isinstance(st.targets[0], ast.Subscript) \
                 and ast.unparse(st.targets[0]) in {ast.unparse(n) for n in ast.walk(st.value)}:
             target, plain = st.targets[0], True
         if isinstance(target, ast.Subscript):
-            found.append((ast.unparse(target), static_vars - _names(target), _names(target), plain))
+            index = _names(target)
+            found.append((ast.unparse(target), static_vars - index, index, plain))
         elif isinstance(st, ast.If):
             found += _additions(st.body, static_vars) + _additions(st.orelse, static_vars)
         elif _static(st):
@@ -115,9 +117,9 @@ def repeated_additions(source: str) -> list[str]:
     product build sums them all (BENCHMARKS.md, "eleventh session"). Local variables are not
     affected."""
     hits = []
-    local: set = set()  # the function's local variables and matrices: not affected
 
-    def walk(body, depth, name):
+    def walk(body, depth, name, local):
+        """``local``: the function's local variables and matrices (not affected)."""
         for st in body:
             if isinstance(st, (ast.For, ast.While)) and not _static(st):
                 if depth >= 1:
@@ -129,16 +131,16 @@ def repeated_additions(source: str) -> list[str]:
                     hits.extend(f"{name}, line {st.lineno}: {t}" for t, missed, index, plain in adds
                                 if t.split("[")[0] not in local
                                 and (missed or texts.count(t) > 1 or (plain and not index & varying)))
-                walk(st.body, depth + 1, name)
+                walk(st.body, depth + 1, name, local)
             elif isinstance(st, (ast.For, ast.If, ast.With)):
-                walk(st.body, depth, name)
-                walk(getattr(st, "orelse", []), depth, name)
+                walk(st.body, depth, name, local)
+                walk(getattr(st, "orelse", []), depth, name, local)
 
     for fn in ast.walk(ast.parse(source)):
         decorators = " ".join(ast.unparse(d) for d in getattr(fn, "decorator_list", []))
         if isinstance(fn, ast.FunctionDef) and ("kernel" in decorators or "func" in decorators):
             local = {t.id for a in ast.walk(fn) if isinstance(a, ast.Assign) for t in a.targets if isinstance(t, ast.Name)}
-            walk(fn.body, 0 if "kernel" in decorators else 1, fn.name)  # a func runs inside a kernel's loop
+            walk(fn.body, 0 if "kernel" in decorators else 1, fn.name, local)  # a func runs inside a kernel's loop
     return hits
 
 
