@@ -22,20 +22,21 @@ Which points an element integrates on (:class:`StrainPoints`, built once per bod
 The kernel replaced a NumPy evaluation of the same sums (197 ms for the index pad's 14 005
 elements at 0.5 mm: its [E, 8, 3, 3] temporaries were memory-bound; 16 ms in the kernel;
 BENCHMARKS.md, "ninth session"). One thread per element writes its own nodal forces; their sums
-on the nodes are taken on the host in a fixed order, so a run repeats to the bit. The NumPy sums stay
-(:func:`remainder_forces_numpy`): they serve Taichi's CUDA, where the kernel's earlier form
-aborted and its present form has not run yet.
+on the nodes are taken on the host in a fixed order, so a run repeats to the bit. Where Taichi
+runs on CUDA the same sums run in torch on the GPU (:func:`remainder_forces_torch`): the kernel
+aborts there (:func:`_remainder`).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
+import torch
 
 from .. import backend
 from ..mpm.kernels import NDI, NDI2
 
-__all__ = ["StrainPoints", "strain_points", "remainder_forces", "remainder_forces_numpy"]
+__all__ = ["StrainPoints", "strain_points", "remainder_forces", "remainder_forces_torch"]
 
 _F64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
 _F64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
@@ -99,70 +100,80 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
     """out[e, a] = the remainder forces [N] of element e on its corner a, for node displacements
     u [V, 3] [m] (module docstring); inverted[0] = 1 where J ≤ 0 at a point that counts.
 
-    No local matrix lives across the (run-time) loop over points: each point reads the nodal
-    displacements from ``u`` and adds its forces to ``out``, one addition per corner and axis.
-    On Taichi 1.7.4's CUDA (H100) a local 8×3 matrix summed through that loop aborted with a
-    misaligned address, and the same kernel with the loop unrolled did not (BENCHMARKS.md,
-    "eleventh session"). This form has not run on CUDA yet, so :func:`remainder_forces` still
-    takes the NumPy sums there. (Several additions to one ``out`` entry within a point gave wrong
-    sums on the CPU at ``opt_level=0``, GAUSSTAC_COMPILE=fast: hence one per point.)"""
+    The loops over an element's 8 points, corners and axes are all unrolled (``ti.static``): the
+    body is straight-line code. At ``opt_level=0`` (GAUSSTAC_COMPILE=fast) Taichi 1.7.4 on the CPU
+    lost repeated additions to one entry inside a run-time loop nested in the parallel one
+    (BENCHMARKS.md, "eleventh session"). On Taichi's CUDA (H100, H200) this kernel aborts with a
+    misaligned address in each form tried: a run-time loop over the points summing a local 8×3
+    matrix, the same loop adding to ``out``, and this unrolled one (BENCHMARKS.md, "twelfth
+    session"); :func:`remainder_forces` takes torch there.
+    """
     mu, bulk = moduli[0], moduli[1]
     eye = ti.Matrix.identity(ti.f64, 3)
     third = ti.cast(1.0, ti.f64) / 3.0  # in float64 (a literal's type is the default, float32)
     for e in range(rule.shape[0]):
-        if rule[e] == LINEAR:
-            continue
-        # volumetric stress K ln J₀ F₀⁻ᵀ less its linearisation K tr(ε₀) I, one per element (F-bar)
-        H0 = ti.Matrix.zero(ti.f64, 3, 3)
-        for a in ti.static(range(8)):
-            for i, j in ti.static(ti.ndrange(3, 3)):
-                H0[i, j] += u[element_nodes[e, a], i] * centre_grads[a, j]
-        F0 = eye + H0
-        J0 = F0.determinant()
-        P0 = ti.Matrix.zero(ti.f64, 3, 3)
-        if J0 <= 0.0:
-            inverted[0] = 1
-        else:
-            P0 = bulk * ti.log(J0) / J0 * _cofactor(F0) - bulk * H0.trace() * eye
-        w0 = centre_weight[e]
-        for a in ti.static(range(8)):
-            for i in ti.static(range(3)):
-                out[e, a, i] = w0 * (P0[i, 0] * centre_grads[a, 0] + P0[i, 1] * centre_grads[a, 1]
-                                     + P0[i, 2] * centre_grads[a, 2])
-        for p in range(weight.shape[1]):
-            w = weight[e, p]
-            if w > 0.0:
-                H = ti.Matrix.zero(ti.f64, 3, 3)  # ∇u = Σ_a u_a ⊗ g_a
-                for a in ti.static(range(8)):
-                    for i, j in ti.static(ti.ndrange(3, 3)):
-                        H[i, j] += u[element_nodes[e, a], i] * grads[p, a, j]
-                F = eye + H
-                J = F.determinant()
-                if J <= 0.0:
-                    inverted[0] = 1
-                else:
-                    I1 = (F * F).sum()
-                    # isochoric Neo-Hookean stress less its linearisation 2μ dev ε
-                    Pk = mu * ti.pow(J, -2.0 * third) * (F - I1 * third / J * _cofactor(F)) \
-                        - mu * (H + H.transpose() - 2.0 * third * H.trace() * eye)
+        if rule[e] != LINEAR:
+            ue = ti.Matrix.zero(ti.f64, 8, 3)  # the element's nodal displacements
+            for a in ti.static(range(8)):
+                for i in ti.static(range(3)):
+                    ue[a, i] = u[element_nodes[e, a], i]
+            # volumetric stress K ln J₀ F₀⁻ᵀ less its linearisation K tr(ε₀) I, one per element (F-bar)
+            H0 = ti.Matrix.zero(ti.f64, 3, 3)
+            for a in ti.static(range(8)):
+                for i, j in ti.static(ti.ndrange(3, 3)):
+                    H0[i, j] += ue[a, i] * centre_grads[a, j]
+            F0 = eye + H0
+            J0 = F0.determinant()
+            P0 = ti.Matrix.zero(ti.f64, 3, 3)
+            if J0 <= 0.0:
+                inverted[0] = 1
+            else:
+                P0 = bulk * ti.log(J0) / J0 * _cofactor(F0) - bulk * H0.trace() * eye
+            f = ti.Matrix.zero(ti.f64, 8, 3)  # the element's nodal forces
+            w0 = centre_weight[e]
+            for a in ti.static(range(8)):
+                for i in ti.static(range(3)):
+                    f[a, i] = w0 * (P0[i, 0] * centre_grads[a, 0] + P0[i, 1] * centre_grads[a, 1]
+                                    + P0[i, 2] * centre_grads[a, 2])
+            for p in ti.static(range(8)):  # the Gauss points
+                w = weight[e, p]
+                if w > 0.0:
+                    H = ti.Matrix.zero(ti.f64, 3, 3)  # ∇u = Σ_a u_a ⊗ g_a
                     for a in ti.static(range(8)):
-                        for i in ti.static(range(3)):
-                            out[e, a, i] += w * (Pk[i, 0] * grads[p, a, 0] + Pk[i, 1] * grads[p, a, 1]
-                                                 + Pk[i, 2] * grads[p, a, 2])
+                        for i, j in ti.static(ti.ndrange(3, 3)):
+                            H[i, j] += ue[a, i] * grads[p, a, j]
+                    F = eye + H
+                    J = F.determinant()
+                    if J <= 0.0:
+                        inverted[0] = 1
+                    else:
+                        I1 = (F * F).sum()
+                        # isochoric Neo-Hookean stress less its linearisation 2μ dev ε
+                        Pk = mu * ti.pow(J, -2.0 * third) * (F - I1 * third / J * _cofactor(F)) \
+                            - mu * (H + H.transpose() - 2.0 * third * H.trace() * eye)
+                        for a in ti.static(range(8)):
+                            for i in ti.static(range(3)):
+                                f[a, i] += w * (Pk[i, 0] * grads[p, a, 0] + Pk[i, 1] * grads[p, a, 1]
+                                                + Pk[i, 2] * grads[p, a, 2])
+            for a in ti.static(range(8)):
+                for i in ti.static(range(3)):
+                    out[e, a, i] = f[a, i]
 
 
 def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
     """[V, 3] remainder forces [N] (module docstring) for node displacements ``u`` [V, 3] [m],
     shear and bulk moduli ``mu``, ``bulk`` [Pa]: the Taichi kernel where Taichi runs on the CPU;
-    on Taichi's CUDA the same sums in NumPy (:func:`remainder_forces_numpy`): the kernel's earlier
-    form aborted there with a misaligned address (Taichi 1.7.4, H100), and its present form
-    (:func:`_remainder`'s docstring) has not run there yet.
+    where it runs on CUDA, the same sums in torch on the GPU (:func:`remainder_forces_torch`),
+    because the kernel aborts there with a misaligned address (Taichi 1.7.4, H100 and H200, in
+    every form tried: :func:`_remainder`'s docstring).
 
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point that counts).
     """
     if backend.ensure_init() != "cpu":
-        return remainder_forces_numpy(points, u, mu, bulk)
+        return remainder_forces_torch(points, u, mu, bulk, device="cuda" if torch.cuda.is_available() else "cpu")
+    if points.grads.shape[:2] != (8, 8):
+        raise ValueError(f"the kernel takes 8 Gauss points of 8 corners, got grads {points.grads.shape}")
     fe = np.zeros((len(points.rule), 8, 3))
     inverted = np.zeros(1, np.int32)
     p = points
@@ -173,15 +184,20 @@ def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float
     return _to_nodes(points, fe.transpose(0, 2, 1), len(u))
 
 
-def remainder_forces_numpy(points: StrainPoints, u: np.ndarray, mu: float, bulk: float) -> np.ndarray:
-    """:func:`remainder_forces` in NumPy on the host (its [E, points, 3, 3] temporaries make it
-    about 12× slower than the kernel on 2 CPU cores)."""
-    ut = u[points.element_nodes].transpose(0, 2, 1)  # [E, 3, 8]: each element's nodal displacements
-    fe = np.zeros(ut.shape)
-    sel = points.rule == GAUSS
-    if sel.any():
-        fe[sel] = _element_forces(ut[sel], points.grads, points.centre_grads, points.weight[sel],
-                                  points.centre_weight[sel], mu, bulk)
+def remainder_forces_torch(points: StrainPoints, u: np.ndarray, mu: float, bulk: float,
+                           device: str = "cpu") -> np.ndarray:
+    """:func:`remainder_forces` in torch (float64) on ``device``; the nodal sums are taken on the
+    host, in the kernel's fixed order. On 2 CPU cores its [E, 8, 3, 3] temporaries make it
+    about 10× slower than the kernel."""
+    sel = np.flatnonzero(points.rule == GAUSS)
+    fe = np.zeros((len(points.rule), 3, 8))
+    if len(sel):
+        def t(x):
+            return torch.as_tensor(np.ascontiguousarray(x), dtype=torch.float64, device=device)
+        nodes = torch.as_tensor(points.element_nodes[sel], dtype=torch.int64, device=device)
+        ut = t(u)[nodes].transpose(1, 2)  # [E, 3, 8]: each element's nodal displacements
+        fe[sel] = _element_forces(ut, t(points.grads), t(points.centre_grads), t(points.weight[sel]),
+                                  t(points.centre_weight[sel]), mu, bulk).cpu().numpy()
     return _to_nodes(points, fe, len(u))
 
 
@@ -194,23 +210,26 @@ def _to_nodes(points: StrainPoints, fe: np.ndarray, num_nodes: int) -> np.ndarra
     return f
 
 
-def _element_forces(ut, G, G0, w, w0, mu, bulk) -> np.ndarray:
-    """[E, 3, 8] nodal forces [N] of elements with nodal displacements ``ut`` [E, 3, 8] [m]:
-    the isochoric remainder at points of shape gradients ``G`` [points, 8, 3] and volumes ``w``
-    [E, points] [m³] (0: left out, taken undeformed), the volumetric one at the centre (``G0``
-    [8, 3], volume ``w0`` [E])."""
-    eye = np.eye(3)
-    F = eye + np.matmul(ut[:, None], G[None])  # [E, points, 3, 3]
+def _element_forces(ut, G, G0, w, w0, mu, bulk):
+    """[E, 3, 8] nodal forces [N] (torch) of elements with nodal displacements ``ut`` [E, 3, 8]
+    [m]: the isochoric remainder at points of shape gradients ``G`` [points, 8, 3] and volumes
+    ``w`` [E, points] [m³] (0: left out, taken undeformed), the volumetric one at the centre
+    (``G0`` [8, 3], volume ``w0`` [E])."""
+    eye = torch.eye(3, dtype=ut.dtype, device=ut.device)
+    F = eye + ut[:, None] @ G[None]  # [E, points, 3, 3]
     F0 = eye + ut @ G0  # [E, 3, 3] at the centre
-    F[w <= 0.0] = eye
-    F0[w0 <= 0.0] = eye
-    J, J0 = np.linalg.det(F), np.linalg.det(F0)
-    if (J <= 0).any() or (J0 <= 0).any():
+    F = torch.where((w <= 0.0)[..., None, None], eye, F)
+    F0 = torch.where((w0 <= 0.0)[:, None, None], eye, F0)
+    J, J0 = torch.linalg.det(F), torch.linalg.det(F0)
+    if bool((J <= 0).any()) or bool((J0 <= 0).any()):
         raise FloatingPointError("an element is inverted (J <= 0)")
-    cof, cof0 = J[..., None, None] * np.linalg.inv(F).swapaxes(-1, -2), J0[:, None, None] * np.linalg.inv(F0).swapaxes(-1, -2)
-    I1 = np.einsum("egij,egij->eg", F, F)
+    cof = J[..., None, None] * torch.linalg.inv(F).transpose(-1, -2)
+    cof0 = J0[:, None, None] * torch.linalg.inv(F0).transpose(-1, -2)
+    I1 = (F * F).sum((-2, -1))
     H, H0 = F - eye, F0 - eye
+    trH = H.diagonal(dim1=-2, dim2=-1).sum(-1)
     P = (mu * J ** (-2.0 / 3.0))[..., None, None] * (F - (I1 / (3.0 * J))[..., None, None] * cof) \
-        - mu * (H + H.swapaxes(-1, -2) - (2.0 / 3.0) * np.trace(H, axis1=-2, axis2=-1)[..., None, None] * eye)
-    P0 = (bulk * np.log(J0) / J0)[:, None, None] * cof0 - bulk * np.trace(H0, axis1=-2, axis2=-1)[:, None, None] * eye
-    return (np.matmul(P, G.transpose(0, 2, 1)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
+        - mu * (H + H.transpose(-1, -2) - (2.0 / 3.0) * trH[..., None, None] * eye)
+    P0 = (bulk * torch.log(J0) / J0)[:, None, None] * cof0 \
+        - bulk * H0.diagonal(dim1=-2, dim2=-1).sum(-1)[:, None, None] * eye
+    return ((P @ G.transpose(1, 2)[None]) * w[:, :, None, None]).sum(1) + (P0 @ G0.T) * w0[:, None, None]
