@@ -280,14 +280,17 @@ def neo_hookean_remainder(body: VoxelBody, u: np.ndarray, E: float, nu: float, p
     return remainder_forces(strain_points(body) if points is None else points, u, mu, bulk)
 
 
-def strain_points(body: VoxelBody):
+def strain_points(body: VoxelBody, finite_share: float | None = None):
     """Where each element of ``body`` takes its finite-strain remainder
-    (:class:`~.neo_hookean.StrainPoints`; :func:`neo_hookean_remainder`)."""
+    (:class:`~.neo_hookean.StrainPoints`; :func:`neo_hookean_remainder`): cut cubes with a
+    share of material below ``finite_share`` (default :data:`CUT_FINITE_SHARE`) stay linear
+    (``math.inf``: every cut cube, the whole cubes alone finite)."""
+    finite_share = CUT_FINITE_SHARE if finite_share is None else finite_share
     from .neo_hookean import strain_points as points
 
     gauss, centre = _gauss_gradients(body.size)
     octants = None if body.fill is None else _octant_shares(body.subcells)
-    return points(body, gauss, octants, centre, CUT_FINITE_SHARE)
+    return points(body, gauss, octants, centre, finite_share)
 
 
 def _octant_shares(n: int) -> np.ndarray:

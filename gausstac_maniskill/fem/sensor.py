@@ -253,12 +253,14 @@ class EquilibriumPad:
                "result_pose": np.tile(np.eye(4), (H, 1, 1)), "has_result_pose": np.zeros(H, bool),
                "owner": np.full(S, -1, np.int64), "nodes": np.zeros((V, 3)),
                "has_nodes": np.array([False]), "counts": np.zeros(2, np.int64), "residual": np.zeros(1),
+               "cut_cells_linear": np.array([False]),
                "pose": np.tile(np.eye(4), (H, 1, 1)), "has_pose": np.zeros(H, bool)}
         for key, T in (self._pose or {}).items():
             out["pose"][index[key]], out["has_pose"][index[key]] = T, True
         if r is not None:
             out.update(force=r.force.copy(), displacement=r.displacement.copy(), gap=r.gap.copy(),
-                       counts=np.array([r.iterations, r.candidates], np.int64), residual=np.array([r.residual]))
+                       counts=np.array([r.iterations, r.candidates], np.int64), residual=np.array([r.residual]),
+                       cut_cells_linear=np.array([r.cut_cells_linear]))
             if r.state is not None:
                 out["contact_state"] = r.state.copy()
             if r.anchors is not None:
@@ -314,6 +316,8 @@ class EquilibriumPad:
             np.array(state["gap"], np.float64), int(counts[0]), int(counts[1]),
             nodes=np.array(state["nodes"], np.float64) if first("has_nodes") else None,
             residual=float(first("residual")),
+            # (states saved before it existed: the cut cubes finite)
+            cut_cells_linear=bool(first("cut_cells_linear")) if "cut_cells_linear" in state else False,
             state=np.array(state["contact_state"], np.int64),
             anchors=np.array(state["anchors"], np.float64) if frictional else None,
             pose=pose, owner=owner, keys=keys)
@@ -446,4 +450,5 @@ class EquilibriumPad:
         if self.result is None:
             return np.zeros(3)
         body = self.body
-        return np.where(body.fixed, 0.0, body.internal_forces(self.node_displacement())).sum(0)
+        forces = body.internal_forces(self.node_displacement(), cut_cells=not self.result.cut_cells_linear)
+        return np.where(body.fixed, 0.0, forces).sum(0)
