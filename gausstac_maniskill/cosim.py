@@ -88,7 +88,10 @@ class GaussTacSim:
             and 10 s for its maps' response the first time on a machine (kept under
             ``~/.cache/gausstac_maniskill``).
         fem_model: the ``"fem"`` pads' material model, ``"linear"`` (fast; small strain) or
-            ``"neo_hookean"`` (finite strain; seconds per step at the default resolution).
+            ``"neo_hookean"`` (finite strain; seconds per step at the default resolution; a
+            step whose iterations stall with the layer's cut cells finite is solved with them
+            linear, with a :class:`~gausstac_maniskill.errors.SimulationWarning`:
+            :meth:`~gausstac_maniskill.fem.QuasiStaticBody.solve`).
         fem_precompute: the ``"fem"`` pads' compliance among all their surface points computed
             when a pad's body is built (True), or each point's when it first touches (False);
             default (None): in full when it takes at most

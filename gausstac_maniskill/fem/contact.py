@@ -49,12 +49,12 @@ def _one_blas_thread():
 COLUMN_BATCH = 32
 #: Iterates the finite-strain fixed point mixes (Anderson acceleration).
 ANDERSON_DEPTH = 15
-#: the finite-strain iterations' mixing, tried in turn where the last inverted an element:
-#: undamped first (what whole cubes always needed); 0.5 carries the sphere's 1 mm press on cut
-#: cells of 0.5 mm (undamped: inverted at the 5th iteration of its second step). A mixing that
-#: stalls is not damped further: no stall on the plate's slide ever converged at a smaller
-#: mixing (BENCHMARKS.md, "tenth" and "twelfth session"); the step falls back instead
-#: (:meth:`QuasiStaticBody.solve`, ``cut_cells_linear``)
+#: the finite-strain iterations' mixing, tried in turn where the last failed: undamped first
+#: (what whole cubes always needed); 0.5 carries the sphere's 1 mm press on cut cells of 0.5 mm
+#: (undamped: inverted at the 5th iteration of its second step). Where the cut cubes' finite
+#: strain stalls, damping never cured it on the plate's slide (BENCHMARKS.md, "tenth" and
+#: "twelfth session"): the step falls back at once (:meth:`QuasiStaticBody.solve`,
+#: ``cut_cells_linear``), and the fallback damps on a stall as on an inversion
 DAMPED_MIXING = (1.0, 0.5, 0.25)
 #: finite-strain iterations without halving the smallest surface motion so far, after which the
 #: fixed point counts as stalled, while that motion is still above 100 tolerances (converging
@@ -62,6 +62,8 @@ DAMPED_MIXING = (1.0, 0.5, 0.25)
 #: 5e-5 m, 1000 tolerances: BENCHMARKS.md, "tenth" and "twelfth session"). A stalled mixing then
 #: fails in about this many iterations instead of running to ``max_iterations``
 STALL_ITERATIONS = 100
+#: the finite-strain iterations' relative tolerance (:meth:`QuasiStaticBody.solve`'s ``rtol``)
+FINITE_RTOL = 5e-4
 
 
 class _Diverged(Exception):
@@ -799,7 +801,8 @@ class QuasiStaticBody:
     # ------------------------------------------------------------------ contact
     def solve(self, sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | Indenter | Indenters,
               geometry: str = "rest", margin: float | None = None, tol: float | None = None,
-              max_iterations: int = 60, warm: ContactResult | None = None) -> ContactResult:
+              max_iterations: int = 60, warm: ContactResult | None = None,
+              rtol: float = FINITE_RTOL) -> ContactResult:
         """Equilibrium of the body pressed by rigid colliders.
 
         Args:
@@ -823,6 +826,10 @@ class QuasiStaticBody:
             margin: points with φ below it enter the problem [m] (default: one element).
             tol: convergence of the surface's motion and of the largest penetration [m]
                 (default 1e-4 of an element).
+            rtol: ``"neo_hookean"`` bodies: the iterations also stop where the surface's motion
+                per iteration is below ``rtol`` times its largest displacement (absolute and
+                relative tolerances, as nonlinear solvers take them: a deep press converges
+                to its own scale, a light touch still to ``tol``).
             max_iterations: outer iterations before :class:`SimulationError`.
             warm: the last step's result: the state to start from (``"neo_hookean"`` bodies) and
                 the points' holds on the collider (friction).
@@ -834,7 +841,7 @@ class QuasiStaticBody:
         is a contraction: the pad's strains of tens of per cent are. Where an element inverts,
         it starts again from ``warm`` with the mixing damped (:data:`DAMPED_MIXING`). Where it
         stalls, or inverts at every mixing, a body of cut cells solves the step again with the
-        cut cubes linear, the whole cubes alone finite; the result says so
+        cut cubes linear, the whole cubes alone finite (at every mixing); the result says so
         (``cut_cells_linear``), and a :class:`~gausstac_maniskill.errors.SimulationWarning`
         gives the reason. The plate's 2 mm slide on the index pad needs it from 4/3 mm on:
         there it reads within 0.2 % (Fn) and 0.1 % (Ft) of the cut cubes linear throughout,
@@ -854,7 +861,7 @@ class QuasiStaticBody:
         friction = _Friction(self, sdf, warm, tol) if getattr(sdf, "friction", 0.0) > 0 else None
         with _one_blas_thread():
             if self.model == "neo_hookean":
-                res = self._solve_finite_strain(sdf, margin, tol, max_iterations, warm, friction)
+                res = self._solve_finite_strain(sdf, margin, tol, max_iterations, warm, friction, rtol)
             else:
                 res = self._solve_linear(sdf, geometry, margin, tol, max_iterations, friction, warm)
         if friction is not None:
@@ -927,12 +934,13 @@ class QuasiStaticBody:
         u[self._free] = x
         return u.reshape(-1, 3)
 
-    def _solve_finite_strain(self, sdf, margin, tol, max_iterations, warm, friction=None) -> ContactResult:
+    def _solve_finite_strain(self, sdf, margin, tol, max_iterations, warm, friction=None, rtol=0.0) -> ContactResult:
         """The finite-strain solve, by fixed-point iterations preconditioned with the factored
         linear stiffness; where an element inverts (a step that compresses thin cut cells far
         beyond the linear stiffness) they start again from ``warm`` with the mixing damped
         (:data:`DAMPED_MIXING`); where they stall (:data:`STALL_ITERATIONS`) or invert at every
-        mixing, the same again with the cut cubes linear (:meth:`solve`)."""
+        mixing, the same again with the cut cubes linear (:meth:`solve`), which damps the
+        mixing on a stall too (the last resort)."""
         reasons = {True: [], False: []}
         # the cut cubes linear only where that changes the law (a body of cut cells)
         rules = (True, False) if (self._points(True).rule != self._points(False).rule).any() else (True,)
@@ -940,10 +948,12 @@ class QuasiStaticBody:
             for beta in DAMPED_MIXING:
                 try:
                     res = self._finite_strain_iterations(sdf, margin, tol, max_iterations, warm, friction, beta,
-                                                         cut_cells)
+                                                         cut_cells, rtol)
                 except _Stalled as err:
                     reasons[cut_cells].append(f"mixing {beta:g}: {err.args[0]}")
-                    break
+                    if cut_cells is not rules[-1]:  # straight to the fallback; the last resort damps on
+                        break
+                    continue
                 except _Diverged as err:
                     reasons[cut_cells].append(f"mixing {beta:g}: {err.args[0]}")
                     continue
@@ -961,7 +971,7 @@ class QuasiStaticBody:
                               "fem_model='linear' (small strain) and pad_solver='mpm' solve such steps")
 
     def _finite_strain_iterations(self, sdf, margin, tol, max_iterations, warm, friction, beta,
-                                  cut_cells=True) -> ContactResult:
+                                  cut_cells=True, rtol=0.0) -> ContactResult:
         body = self.body
         u = np.zeros((len(body.nodes), 3)) if warm is None or warm.nodes is None else warm.nodes.copy()
         taken = np.zeros(self.num_points, bool)
@@ -995,8 +1005,9 @@ class QuasiStaticBody:
             # the surface's motion, as in the linear solve: a node of a nearly empty cut cube,
             # held by 1e-4 of the material's stiffness, wanders by millimetres and would hold
             # up the nodes' maximum long after the surface has stopped (BENCHMARKS.md, "twelfth session")
-            moved = float(np.abs(self._interp(u_new) - us).max())
-            if moved < tol:
+            us_new = self._interp(u_new)
+            moved = float(np.abs(us_new - us).max())
+            if moved < max(tol, rtol * float(np.abs(us_new).max())):
                 u = u_new
                 break
             if moved < 0.5 * mark:
