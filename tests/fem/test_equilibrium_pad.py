@@ -106,6 +106,12 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
         other.load_flat_state({k: v for k, v in flat.items() if not k.startswith("fem0_")})
     with pytest.raises(ConfigError, match="lacks.*owner"):  # a state saved before pads met several objects
         other.load_flat_state({k: v for k, v in flat.items() if k != "fem0_owner"})
+    sim._fem[bp.INDEX].result.cut_cells_linear = True  # (the flag of a finite-strain step solved by the fallback)
+    flagged = sim.flat_state()
+    other.load_flat_state(flagged)
+    assert other._fem[bp.INDEX].result.cut_cells_linear
+    other.load_flat_state({k: v for k, v in flagged.items() if k != "fem0_cut_cells_linear"})  # saved before the flag
+    assert not other._fem[bp.INDEX].result.cut_cells_linear
 
 
 def _box_scene(halves: bool, friction: float):
