@@ -849,8 +849,9 @@ class QuasiStaticBody:
         gives the reason. The plate's 2 mm slide on the index pad needs it from 4/3 mm on:
         there it reads within 0.2 % (Fn) and 0.1 % (Ft) of the cut cubes linear throughout,
         but the sphere, whose contact lies on the curved cut surface, reads 4.3 % higher with
-        them linear (BENCHMARKS.md, "eleventh" and "twelfth session"). The next step tries
-        the cut cubes finite again.
+        them linear, and slides whose different steps fall back read up to 1.2 % apart
+        (BENCHMARKS.md, "eleventh" and "thirteenth session"). The next step tries the cut
+        cubes finite again.
         """
         if geometry not in ("rest", "deformed"):
             raise ConfigError(f"{self.name}: geometry={geometry!r} must be 'rest' or 'deformed'")
@@ -964,8 +965,10 @@ class QuasiStaticBody:
                     warnings.warn(SimulationWarning(
                         f"{self.name}: the finite-strain solve failed with the cut cubes finite "
                         f"({'; '.join(reasons[True])}); this step is solved with them linear, the whole cubes alone "
-                        f"finite (ContactResult.cut_cells_linear). Where the contact lies on the pad's curved surface "
-                        f"that reads higher: +4.3 % on the 5 mm sphere at 1 mm (BENCHMARKS.md, 'eleventh session')"))
+                        f"finite (ContactResult.cut_cells_linear). Where the contact lies on the pad's curved surface, "
+                        f"that law reads higher (+4.3 % on the 5 mm sphere at 1 mm); a slide whose steps fall back reads "
+                        f"up to 1.2 % apart from one whose other steps do (BENCHMARKS.md, 'eleventh' and 'thirteenth "
+                        f"session')"))
                 return res
         tried = "; ".join(reasons[True]) + ("; with the cut cubes linear: " + "; ".join(reasons[False])
                                             if len(rules) > 1 else "")
