@@ -786,7 +786,7 @@ class QuasiStaticBody:
         """The finite-strain remainder's integration points (built once each): with the cut cubes
         at least :data:`~.hex.CUT_FINITE_SHARE` full, or (``cut_cells=False``) the whole cubes alone."""
         if cut_cells not in self._strain_points:
-            self._strain_points[cut_cells] = strain_points(self.body) if cut_cells else strain_points(self.body, math.inf)
+            self._strain_points[cut_cells] = strain_points(self.body, None if cut_cells else math.inf)
         return self._strain_points[cut_cells]
 
     def _remainder(self, u: np.ndarray, cut_cells: bool = True) -> np.ndarray:
@@ -953,13 +953,10 @@ class QuasiStaticBody:
                 try:
                     res = self._finite_strain_iterations(sdf, margin, tol, max_iterations, warm, friction, beta,
                                                          cut_cells, rtol)
-                except _Stalled as err:
-                    reasons[cut_cells].append(f"mixing {beta:g}: {err.args[0]}")
-                    if cut_cells is not rules[-1]:  # straight to the fallback; the last resort damps on
-                        break
-                    continue
                 except _Diverged as err:
                     reasons[cut_cells].append(f"mixing {beta:g}: {err.args[0]}")
+                    if isinstance(err, _Stalled) and cut_cells is not rules[-1]:
+                        break  # straight to the fallback; the last resort damps on a stall too
                     continue
                 if not cut_cells:
                     warnings.warn(SimulationWarning(
@@ -1027,7 +1024,7 @@ class QuasiStaticBody:
                            f"(last motion {moved:.3g} m)")
         force = np.zeros((self.num_points, 3))
         force[idx] = f
-        us = self._interp(u)
+        us = us_new  # the converged surface (u is u_new)
         load = self._load(idx, f[None])[:, 0]  # free degrees of freedom, in elimination order
         fint = self.internal_forces(u, cut_cells).ravel()[self._free]
         residual = float(np.linalg.norm(fint - load) / max(np.linalg.norm(load), 1e-30))
