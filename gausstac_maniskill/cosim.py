@@ -79,8 +79,10 @@ class GaussTacSim:
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
             cube elements on the particle lattice, cut by the layer's curved surface and bond,
             no locking as ν → 0.5, no pseudo-mass), against
-            the rigid objects within reach (each surface point meets the nearest); soft objects
-            are refused. The splat camera draws
+            the rigid objects within reach (each surface point meets the nearest) and under the
+            push of soft objects (``fem_model="linear"``): each pad's link mesh is a collider of
+            the MPM world that they meet, shaped as the pad was last solved, and their contact
+            impulses on it load the pad (:meth:`add_soft_object`). The splat camera draws
             these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)
             every env solves its own, with one body per pad.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
@@ -134,6 +136,10 @@ class GaussTacSim:
         #: the pads' solver now, ``"fem"`` or ``"mpm"`` (``pad_solver="auto"`` resolved)
         self.pad_solver = pad_solver
         self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
+        # pad name -> index of the collider its link mesh is for soft objects (pad_solver="fem"),
+        # and that collider's SDF at rest with each SDF node's nearest surface point of the pad
+        self._surface_colliders: dict[str, int] = {}
+        self._surface_rest: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
         self._binning: dict[str, TaxelBinning] = {}
         self._zero_maps: dict[str, dict] = {}  # equilibrium pad -> its maps at rest (zeros), by shape
         self.pad_solve_time = 0.0  # wall time [s] of the last step's equilibrium solves (pad_solver="fem")
@@ -208,22 +214,94 @@ class GaussTacSim:
     def add_soft_object(self, name: str, positions, material: Material, **kwargs) -> None:
         """A deformable object made of MPM particles at world ``positions`` [N, 3] (m);
         ``kwargs`` go to :meth:`MPMWorld.add_group`. It is a body of its own (velocity
-        field 1, the pads' is 0): pads touch it through a frictional contact rule
-        (``settings.soft_friction``), and their contact force maps read that contact."""
+        field 1, the pads' is 0): MPM pads touch it through a frictional contact rule
+        (``settings.soft_friction``), and their contact force maps read that contact.
+
+        Pads solved at equilibrium (``pad_solver="fem"``, ``fem_model="linear"``) meet it as a
+        rigid collider each (their link mesh, friction ``settings.soft_friction``) whose SDF is
+        lowered by the pad's last solved normal displacement, so the object meets the pad
+        where the pad was pushed in, one step behind (a staggered coupling: the object's
+        push in a step loads the pad at its end, and the pad's shape from it is what the
+        object meets next). The push is the reaction to the object's particles' contact
+        impulses with that collider, each at the pad's surface point nearest the particle,
+        added to the rigid objects' contact by superposition (the pad is linear). With
+        ``pad_solver="auto"`` a soft object added before the pads touched anything turns them
+        into MPM pads (the default until this coupling is measured across the tasks)."""
         if name in self._objects or name in self._soft or name in self.pads:
             raise ConfigError(f"object {name!r} already exists")
         if self._fem and self._auto and not any(fp.result is not None for fp in self._fem.values()):
             self._to_mpm_pads()
         if self._fem:
-            why = " and have touched something already" if self._auto else ""
-            raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium (pad_solver='fem') touch rigid "
-                              f"objects only{why}; use pad_solver='mpm' for soft objects (or add them first)")
+            if self._auto:
+                raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium (pad_solver='auto' "
+                                  f"resolved to 'fem') have touched something already; pad_solver='auto' turns "
+                                  f"them into MPM pads only before that (add soft objects first), pad_solver='mpm' "
+                                  f"or 'fem' chooses")
+            models = sorted({fp.model for fp in self._fem.values()} - {"linear"})
+            if models:
+                raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium meet soft objects with "
+                                  f"fem_model='linear' only (these are {models[0]!r}); or use pad_solver='mpm'")
+            self._add_surface_colliders()
         kwargs.setdefault("field", 1)
         if isinstance(kwargs.get("link"), str):
             kwargs["link"] = self._w(kwargs["link"])
         self.world.add_group(self._w(name), positions, material, env=self.env, **kwargs)
         self._soft[name] = name
         self._update_sleep()
+
+    def _add_surface_colliders(self) -> None:
+        """Each equilibrium pad's link mesh as a rigid collider of the MPM world, moving with
+        its link, for the soft objects to meet (friction ``settings.soft_friction``): their push
+        on it, read from the particles' contact impulses, loads the pad (:meth:`_soft_load`).
+        The soft object sees the pad's surface at rest (one-way coupling of the shape): right
+        where the object is far softer than the pad, as a sponge is (``bench soft``)."""
+        from .mpm.colliders import MeshCollider
+
+        for name, pad in self.pads.items():
+            if name in self._fem and name not in self._surface_colliders:
+                T = self._link_pose[pad.spec.link]
+                mesh = pad_mesh(pad.spec, self.urdf)
+                col = MeshCollider(pose=T, friction=self.settings.soft_friction, name=f"surface of pad {name!r}",
+                                   mesh=mesh, sdf_dx=min(0.5 * pad.spacing, float(np.max(mesh.extents)) / 48.0))
+                self._surface_colliders[name] = self.world.add_collider(col, env=self.env)
+                self._surface_rest[name] = (col.sdf.copy(), None)
+
+    def _shape_surface_colliders(self) -> None:
+        """Each equilibrium pad's surface collider takes the pad's last solved shape for the
+        next step: its SDF lowered by the surface's outward normal displacement at the nearest
+        surface point, φ − u·n (the soft objects meet the pad where it was pushed in; one step
+        behind it, a staggered coupling)."""
+        for name, c in self._surface_colliders.items():
+            fp, (rest, nearest) = self._fem[name], self._surface_rest[name]
+            col = self.world.colliders[c]
+            if fp.result is None:
+                if col.sdf is not rest:
+                    self.world.set_collider_sdf(c, rest)
+                    col.sdf = rest
+                continue
+            if nearest is None:  # once per pad: the SDF nodes' nearest surface points
+                h, lo = col.sdf_dx, col.sdf_origin.astype(np.float64)
+                axes = [lo[d] + h * np.arange(rest.shape[d]) for d in range(3)]
+                nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+                nearest = fp.nearest_points(nodes)
+                self._surface_rest[name] = (rest, nearest)
+            self.world.set_collider_sdf(c, rest - fp.normal_displacement()[nearest].reshape(rest.shape))
+
+    def _soft_load(self, name: str, T: np.ndarray) -> np.ndarray | None:
+        """[S, 3] link-frame load [N] the soft objects put on equilibrium pad ``name`` in the last
+        step (the reaction to their particles' contact with its surface collider), or None."""
+        c = self._surface_colliders.get(name)
+        if c is None:
+            return None
+        xs, fs = [], []
+        for g in self._soft:
+            touch = self.world.contact_collider(self._w(g)) == c
+            if touch.any():
+                xs.append(self.world.positions(self._w(g))[touch])
+                fs.append(-self.world.contact_forces(self._w(g))[touch])  # on the pad: the opposite
+        if not xs:
+            return None
+        return self._fem[name].soft_load(np.concatenate(xs), np.concatenate(fs), T)
 
     def _to_mpm_pads(self) -> None:
         """``pad_solver="auto"`` meets a soft object: the pads, untouched so far, become MPM
@@ -274,6 +352,10 @@ class GaussTacSim:
                 x, fc = fp.contact_points(T, obj)
                 _add_contact(out, obj, np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0),
                                                        [fp.indentation(obj)]]))
+            x, fc = fp.load_points(T)  # soft objects' push (key None, as the MPM pads' other field)
+            if len(x):
+                depth = float(np.linalg.norm(fp.result.displacement[np.abs(fp.result.load).sum(1) > 0], axis=1).max())
+                _add_contact(out, None, np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0), [depth]]))
         return out
 
     def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:
@@ -320,6 +402,9 @@ class GaussTacSim:
         at once): keep every link's pose ``link_poses`` (name → checked 4x4 [m]; the renderer
         poses the whole hand), move the objects, wake or put pads to sleep."""
         self._link_pose.update(link_poses)
+        for name, c in self._surface_colliders.items():
+            self.world.set_collider_pose(c, self._link_pose[self.pads[name].spec.link])
+        self._shape_surface_colliders()
         for name, T in (object_poses or {}).items():
             self.set_object_pose(name, T)
         self._update_sleep()
@@ -360,8 +445,9 @@ class GaussTacSim:
             pts = local @ T[:3, :3].T + T[:3, 3]
             near = {obj: self.world.colliders[i] for obj, i in sorted(self._objects.items())
                     if float(signed_distance(self.world.colliders[i], pts)[0].min()) < body.body.size}
-            if near:
-                fp.solve(near, T)
+            load = self._soft_load(name, T)
+            if near or load is not None:
+                fp.solve(near, T, load)
             else:
                 fp.release()
         self.pad_solve_time = time.perf_counter() - t0

@@ -39,7 +39,7 @@ PRESS = 1.3e-3  # m
 BLOCK = dict(E=1e5, nu=0.3, density=1000.0)  # the free blocks: Pa, -, kg/m³
 
 
-def sponge_scene(field: int = 1, dx: float = 1e-3):
+def sponge_scene(field: int = 1, dx: float = 1e-3, pad_solver: str = "mpm", **sim_kwargs):
     """The index pad (link pose: 10 cm up) and the bound sponge below its sensor axis.
 
     Returns ``(sim, press, reading)``: ``press(depth)`` steps 50 ms with the holder moved
@@ -55,7 +55,8 @@ def sponge_scene(field: int = 1, dx: float = 1e-3):
     pose = np.eye(4)
     pose[2, 3] = 0.1
     spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
-    sim = GaussTacSim([spec], {INDEX: pose}, settings=default_hand_settings(dx=dx), pad_solver="mpm")
+    sim = GaussTacSim([spec], {INDEX: pose}, settings=default_hand_settings(dx=dx), pad_solver=pad_solver,
+                      **sim_kwargs)
     W = pose @ sim.pads[INDEX].sensor_frame  # sensor z: out of the pad, towards the sponge
     R = W[:3, :3]
     sx, sy, sz = SPONGE_SIZE

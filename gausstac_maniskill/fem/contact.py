@@ -549,6 +549,9 @@ class ContactResult:
         cut_cells_linear: the finite-strain solve of this step failed with the cut cubes finite
             and was solved with them linear, the whole cubes alone finite (a
             :class:`~gausstac_maniskill.errors.SimulationWarning` says so; :meth:`QuasiStaticBody.solve`).
+        load: [S, 3] force [N] at each surface point that is not a rigid collider's, given to
+            the solve (``load=``: a soft object's push, :meth:`QuasiStaticBody.solve`); None: none.
+            :attr:`force` holds the colliders' alone.
     """
 
     force: np.ndarray
@@ -564,11 +567,17 @@ class ContactResult:
     owner: np.ndarray | None = None
     keys: tuple = (None,)
     cut_cells_linear: bool = False
+    load: np.ndarray | None = None
+
+    @property
+    def surface_force(self) -> np.ndarray:
+        """[S, 3] every force [N] on each surface point: the colliders' plus the given load."""
+        return self.force if self.load is None else self.force + self.load
 
     @property
     def total_force(self) -> np.ndarray:
-        """[3] resultant force [N] on the body."""
-        return self.force.sum(0)
+        """[3] resultant force [N] on the body (colliders and load)."""
+        return self.surface_force.sum(0)
 
 
 class QuasiStaticBody:
@@ -804,7 +813,7 @@ class QuasiStaticBody:
     def solve(self, sdf: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | Indenter | Indenters,
               geometry: str = "rest", margin: float | None = None, tol: float | None = None,
               max_iterations: int = 60, warm: ContactResult | None = None,
-              rtol: float = FINITE_RTOL) -> ContactResult:
+              rtol: float = FINITE_RTOL, load: np.ndarray | None = None) -> ContactResult:
         """Equilibrium of the body pressed by rigid colliders.
 
         Args:
@@ -835,6 +844,9 @@ class QuasiStaticBody:
             max_iterations: outer iterations before :class:`SimulationError`.
             warm: the last step's result: the state to start from (``"neo_hookean"`` bodies) and
                 the points' holds on the collider (friction).
+            load: [S, 3] forces [N] on the surface points besides the colliders' (a soft
+                object's push, given), added to theirs by superposition (``"linear"`` bodies
+                only); kept in :attr:`ContactResult.load`.
 
         A ``"neo_hookean"`` body is always read at its displaced surface (finite strain), and
         solved by fixed-point iterations on the linear stiffness K: with the nonlinear
@@ -857,6 +869,12 @@ class QuasiStaticBody:
             raise ConfigError(f"{self.name}: geometry={geometry!r} must be 'rest' or 'deformed'")
         margin = self.body.size if margin is None else float(margin)
         tol = 1e-4 * self.body.size if tol is None else float(tol)
+        if load is not None:
+            load = np.asarray(load, float)
+            if self.model != "linear":
+                raise ConfigError(f"{self.name}: a given load (load=) needs the linear model, this body is {self.model!r}")
+            if load.shape != (self.num_points, 3):
+                raise ConfigError(f"{self.name}: load has shape {load.shape}, expected ({self.num_points}, 3)")
         if isinstance(sdf, (Indenter, Indenters)):
             sdf = Indenters(sdf) if isinstance(sdf, Indenter) else sdf
             sdf.assign(self.points if warm is None else self.points + warm.displacement)
@@ -867,7 +885,7 @@ class QuasiStaticBody:
             if self.model == "neo_hookean":
                 res = self._solve_finite_strain(sdf, margin, tol, max_iterations, warm, friction, rtol)
             else:
-                res = self._solve_linear(sdf, geometry, margin, tol, max_iterations, friction, warm)
+                res = self._solve_linear(sdf, geometry, margin, tol, max_iterations, friction, warm, load)
         if friction is not None:
             friction.finish(res)
         else:
@@ -893,8 +911,16 @@ class QuasiStaticBody:
         friction.idx, friction.last = idx, (idx, f)
         return f
 
-    def _solve_linear(self, sdf, geometry, margin, tol, max_iterations, friction=None, warm=None) -> ContactResult:
-        u = np.zeros((self.num_points, 3))
+    def loaded(self, load: np.ndarray) -> np.ndarray:
+        """[S, 3] displacement [m] of the surface points under ``load`` [S, 3] [N] at them (linear)."""
+        idx = np.flatnonzero(np.abs(load).sum(1) > 0)
+        return self.displacement_of(idx, load[idx]) if len(idx) else np.zeros((self.num_points, 3))
+
+    def _solve_linear(self, sdf, geometry, margin, tol, max_iterations, friction=None, warm=None,
+                      load=None) -> ContactResult:
+        # a given load moves the surface by u_load = W load; the colliders' forces add to it
+        u_load = np.zeros((self.num_points, 3)) if load is None else self.loaded(load)
+        u = u_load.copy()
         taken = np.zeros(self.num_points, bool)
         if geometry == "deformed" and warm is not None and warm.displacement.shape == u.shape:
             # read first where the last step left the surface, its loaded points in the problem:
@@ -908,12 +934,13 @@ class QuasiStaticBody:
             gap_now = phi + np.einsum("si,si->s", n, u)
             taken |= gap_now < (margin if it == 1 else tol)
             idx = np.flatnonzero(taken)
+            gap_load = phi + np.einsum("si,si->s", n, u_load)  # the gap with no collider force
             if not len(idx):
-                return ContactResult(np.zeros_like(u), u, gap_now, it, 0)
+                return ContactResult(np.zeros_like(u), u_load, gap_load, it, 0, load=load)
             nc = n[idx]
-            offset = None if friction is None else self.points[idx] - friction.hold[idx]
-            f = self._contact_forces(idx, nc, phi[idx], offset, friction)
-            u_new = self.displacement_of(idx, f)
+            offset = None if friction is None else self.points[idx] + u_load[idx] - friction.hold[idx]
+            f = self._contact_forces(idx, nc, gap_load[idx], offset, friction)
+            u_new = u_load + self.displacement_of(idx, f)
             moved = float(np.abs(u_new - u).max())
             u = u_new
             gap = phi + np.einsum("si,si->s", n, u)  # linearised at this iteration's surface
@@ -922,7 +949,7 @@ class QuasiStaticBody:
             if (geometry == "rest" or moved < tol) and gap.min() > -tol:
                 force = np.zeros_like(u)
                 force[idx] = f
-                return ContactResult(force, u, gap, it, len(idx))
+                return ContactResult(force, u, gap, it, len(idx), load=load)
         raise SimulationError(f"{self.name}: contact did not converge in {max_iterations} iterations "
                               f"(last surface motion {moved:.3g} m, deepest penetration {-gap.min():.3g} m)")
 

@@ -161,23 +161,38 @@ class EquilibriumPad:
         return self.soft[self.body.point_sources]
 
     # ------------------------------------------------------------------ solving
-    def solve(self, colliders, link_pose: np.ndarray) -> ContactResult:
+    def solve(self, colliders, link_pose: np.ndarray, load: np.ndarray | None = None) -> ContactResult:
         """Equilibrium with ``colliders`` (``{key: MPM Collider}``, each at its world pose, with
-        its friction coefficient; the key names it) and the link at world pose ``link_pose``
-        [4, 4]. Each surface point meets the collider nearest it (:class:`~.contact.Indenters`);
-        the last solution warms the next one, and a point's friction hold carries over while it
-        stays on the same collider."""
+        its friction coefficient; the key names it; may be empty where ``load`` is given) and
+        the link at world pose ``link_pose`` [4, 4]. Each surface point meets the collider
+        nearest it (:class:`~.contact.Indenters`); the last solution warms the next one, and a
+        point's friction hold carries over while it stays on the same collider. ``load``: [S, 3]
+        forces [N] on the surface points, link frame, besides the colliders' (a soft object's
+        push: :meth:`soft_load`); linear pads only."""
         t0 = time.perf_counter()
+        if load is not None and not np.any(load):
+            load = None
         indenters = {key: collider_indenter(c, link_pose) for key, c in colliders.items()}
         pose = {key: ind.pose for key, ind in indenters.items()}
         warm = self.result
-        if warm is not None and self._relative_motion(pose) <= self.hold_tolerance:
+        if (warm is not None and load is None and warm.load is None
+                and self._relative_motion(pose) <= self.hold_tolerance):
             # no collider has moved relative to the link: the equilibrium (and with friction
             # every hold: a zero increment slips nowhere) is the last one, to the solver's tolerance
             self.solve_time = time.perf_counter() - t0
             return self.result
-        self.result = self.body.solve(Indenters(indenters), geometry=self.geometry, warm=warm,
-                                      max_iterations=self.max_iterations, margin=self.margin)
+        if indenters:
+            self.result = self.body.solve(Indenters(indenters), geometry=self.geometry, warm=warm,
+                                          max_iterations=self.max_iterations, margin=self.margin, load=load)
+        elif load is not None:  # the load alone: no contact problem
+            if self.model != "linear":
+                raise ConfigError(f"EquilibriumPad({self.pad.name!r}): a given load needs model='linear'")
+            S = self.body.num_points
+            self.result = ContactResult(np.zeros((S, 3)), self.body.loaded(load), np.full(S, np.inf), 0, 0,
+                                        load=load)
+        else:
+            self.release()
+            return None
         self._pose = pose
         if self.model == "linear":
             self._check_strain()
@@ -253,14 +268,15 @@ class EquilibriumPad:
                "result_pose": np.tile(np.eye(4), (H, 1, 1)), "has_result_pose": np.zeros(H, bool),
                "owner": np.full(S, -1, np.int64), "nodes": np.zeros((V, 3)),
                "has_nodes": np.array([False]), "counts": np.zeros(2, np.int64), "residual": np.zeros(1),
-               "cut_cells_linear": np.array([False]),
+               "cut_cells_linear": np.array([False]), "load": np.zeros((S, 3)),
                "pose": np.tile(np.eye(4), (H, 1, 1)), "has_pose": np.zeros(H, bool)}
         for key, T in (self._pose or {}).items():
             out["pose"][index[key]], out["has_pose"][index[key]] = T, True
         if r is not None:
             out.update(force=r.force.copy(), displacement=r.displacement.copy(), gap=r.gap.copy(),
                        counts=np.array([r.iterations, r.candidates], np.int64), residual=np.array([r.residual]),
-                       cut_cells_linear=np.array([r.cut_cells_linear]))
+                       cut_cells_linear=np.array([r.cut_cells_linear]),
+                       load=np.zeros((S, 3)) if r.load is None else r.load.copy())
             if r.state is not None:
                 out["contact_state"] = r.state.copy()
             if r.anchors is not None:
@@ -318,6 +334,7 @@ class EquilibriumPad:
             residual=float(first("residual")),
             # (states saved before it existed: the cut cubes finite)
             cut_cells_linear=bool(first("cut_cells_linear")) if "cut_cells_linear" in state else False,
+            load=np.array(state["load"], np.float64) if "load" in state and np.any(state["load"]) else None,
             state=np.array(state["contact_state"], np.int64),
             anchors=np.array(state["anchors"], np.float64) if frictional else None,
             pose=pose, owner=owner, keys=keys)
@@ -335,7 +352,7 @@ class EquilibriumPad:
     @property
     def touching(self) -> bool:
         """Whether the last solve left any contact force on the pad."""
-        return self.result is not None and bool(np.any(self.result.force))
+        return self.result is not None and bool(np.any(self.result.surface_force))
 
     def _derived(self) -> dict:
         """The quantities computed from the last solution (node displacements, the particles'
@@ -355,8 +372,9 @@ class EquilibriumPad:
             elif res.nodes is not None:
                 d["nodes"] = res.nodes
             else:
-                idx = np.flatnonzero(np.abs(res.force).sum(1) > 0)
-                d["nodes"] = (self.body.nodal_displacement(idx, res.force[idx]) if len(idx)
+                force = res.surface_force
+                idx = np.flatnonzero(np.abs(force).sum(1) > 0)
+                d["nodes"] = (self.body.nodal_displacement(idx, force[idx]) if len(idx)
                               else np.zeros((len(self.body.body.nodes), 3)))
         return d["nodes"]
 
@@ -378,7 +396,7 @@ class EquilibriumPad:
         derived = self.body.derived
         if key not in derived:
             derived[key] = PadMaps(self.pad, self.body, binning, self.point_particles)
-        return derived[key].maps(self.result.force)
+        return derived[key].maps(self.result.surface_force)
 
     def _local_particles(self):
         """The particles' positions, F, Cauchy stresses and contact forces in the link frame
@@ -397,7 +415,7 @@ class EquilibriumPad:
                 cubes = body.body.first(len(self.soft))  # element e is soft particle e's cube (pad_body)
                 local[self.soft] += u[cubes.element_nodes].mean(1)
                 F[self.soft], sigma[self.soft] = centre_state(cubes, u, body.E, body.nu, self.model)
-                np.add.at(force, self.point_particles, self.result.force)
+                np.add.at(force, self.point_particles, self.result.surface_force)
             d["particles"] = (local, F, sigma, force)
         return d["particles"]
 
@@ -438,6 +456,43 @@ class EquilibriumPad:
             return 0.0
         idx = self._loaded(key)
         return float(np.linalg.norm(self.result.displacement[idx], axis=1).max()) if len(idx) else 0.0
+
+    def soft_load(self, positions: np.ndarray, forces: np.ndarray, link_pose: np.ndarray) -> np.ndarray:
+        """[S, 3] link-frame load [N] on the surface points from forces [m, 3] N (world frame)
+        that soft bodies exert at world ``positions`` [m, 3] m on the pad's surface (for
+        :meth:`solve`'s ``load``): each force goes to the surface point nearest to where it acts."""
+        T = np.asarray(link_pose, float)
+        R, t = T[:3, :3], T[:3, 3]
+        load = np.zeros((self.body.num_points, 3))
+        if len(positions):
+            np.add.at(load, self.nearest_points((np.asarray(positions, float) - t) @ R), np.asarray(forces, float) @ R)
+        return load
+
+    def nearest_points(self, local: np.ndarray) -> np.ndarray:
+        """[m] the body's surface point nearest to each link-frame point ``local`` [m, 3] m (at rest)."""
+        from scipy.spatial import cKDTree
+
+        derived = self.body.derived
+        if "point_tree" not in derived:  # the rest surface points, searched once per body
+            derived["point_tree"] = cKDTree(self.body.points)
+        return derived["point_tree"].query(local)[1]
+
+    def normal_displacement(self) -> np.ndarray:
+        """[S] the last solution's displacement [m] of each surface point along its outward
+        normal (negative: pushed in; zeros at rest)."""
+        if self.result is None:
+            return np.zeros(self.body.num_points)
+        return np.einsum("si,si->s", self.result.displacement, self.pad.normal[self.point_particles])
+
+    def load_points(self, link_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The surface points of the last solve's given load (:meth:`soft_load`), world frame:
+        their displaced positions [m, 3] m and the forces [m, 3] N on the pad there."""
+        r = self.result
+        if r is None or r.load is None:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        T = np.asarray(link_pose, float)
+        idx = np.flatnonzero(np.abs(r.load).sum(1) > 0)
+        return (self.body.points[idx] + r.displacement[idx]) @ T[:3, :3].T + T[:3, 3], r.load[idx] @ T[:3, :3].T
 
     def stress_force(self) -> np.ndarray:
         """Total contact force [3] N on the pad read from its stress, link frame: the sum of the

@@ -176,6 +176,7 @@ class MPMWorld:
         self._grid_cap = 0
         self._dirty = True
         self._awake_changed = False  # groups woke or slept since the last push (the active lists are old)
+        self._sdf_stale = False  # a mesh collider's SDF changed since the last upload (set_collider_sdf)
         self.rebuilds = 0  # full rebuilds of the device arrays from the host (structural changes)
         self._vmax = 0.0
         self._col_impulse = np.zeros((0, 6))
@@ -647,6 +648,21 @@ class MPMWorld:
         c = self.colliders[index]
         c.pose = as_pose_matrix(pose, f"pose of collider {index} ({c.name or type(c).__name__})")
 
+    def set_collider_sdf(self, index: int, sdf) -> None:
+        """New signed distances [m] on mesh collider ``index``'s SDF grid (the same grid:
+        :attr:`MeshCollider.sdf`'s shape), for a surface that deforms (a pad solved at
+        equilibrium, seen by soft objects); they take effect at the next step."""
+        if not 0 <= index < len(self.colliders):
+            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
+        c = self.colliders[index]
+        if not isinstance(c, MeshCollider):
+            raise ConfigError(f"set_collider_sdf: collider {index} ({c.name or type(c).__name__}) is not a MeshCollider")
+        sdf = np.asarray(sdf, np.float32)
+        if sdf.shape != c.sdf.shape:
+            raise ConfigError(f"set_collider_sdf: collider {index} ({c.name}) samples {c.sdf.shape}, got {sdf.shape}")
+        c.sdf = sdf
+        self._sdf_stale = True
+
     def set_awake(self, name: str, awake: bool) -> None:
         """Put a group to sleep (it costs nothing and is not changed) or wake it.
 
@@ -1052,6 +1068,11 @@ class MPMWorld:
                   self._cellp)
         return int(box[3] * box[4] * box[5])
 
+    def _sdf_values(self) -> np.ndarray:
+        """Every mesh collider's SDF samples, one after another (``sdf_info`` holds the offsets)."""
+        parts = [c.sdf.ravel() for c in self.colliders if isinstance(c, MeshCollider)]
+        return np.concatenate(parts) if parts else np.zeros(1, np.float32)
+
     def _upload_consts(self) -> None:
         """Scene constants of the kernels (kernels.DX ...): spacing, gravity, damping rate,
         reach, margin, friction between the two velocity fields, bond mode; and per env the
@@ -1160,6 +1181,9 @@ class MPMWorld:
         if not self._dirty:
             if self._awake_changed:
                 self._refresh_active()
+            if self._sdf_stale:
+                self._dev["sdf"].from_numpy(self._sdf_values())
+                self._sdf_stale = False
             return
         self.rebuilds += 1
         self._pull()
@@ -1227,18 +1251,18 @@ class MPMWorld:
         prm = np.zeros((nc, 4), np.float32)
         friction = np.zeros((nc, 2), np.float32)  # (μ, 1 if sticky)
         info = np.zeros((nc, 4), np.int32)
-        sdf_parts, offset = [], 0
+        offset = 0
         for i, c in enumerate(self.colliders):
             kinds[i], prm[i], friction[i] = c.kind, c.params(), (c.friction, float(c.sticky))
             if isinstance(c, MeshCollider):
                 info[i] = (offset, *c.sdf.shape)
-                sdf_parts.append(c.sdf.ravel())
                 offset += c.sdf.size
         upload("col_kind", kinds, ti.i32)
         upload("col_prm", prm, ti.f32)
         upload("col_friction", friction, ti.f32)
         upload("sdf_info", info, ti.i32)
-        upload("sdf", np.concatenate(sdf_parts) if sdf_parts else np.zeros(1, np.float32), ti.f32)
+        upload("sdf", self._sdf_values(), ti.f32)
+        self._sdf_stale = False
         d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
         d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
         d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))

@@ -282,9 +282,10 @@ def test_fem_pad_bad_input():
     with pytest.raises(ConfigError, match="pad_surface='mesh'"):
         GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem", pad_surface="particles")
     with pytest.warns(Warning):
-        sim = GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem")
-    with pytest.raises(ConfigError, match="rigid objects only"):
+        sim = GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem", fem_model="neo_hookean")
+    with pytest.raises(ConfigError, match="fem_model='linear' only.*'neo_hookean'"):
         sim.add_soft_object("sponge", np.zeros((8, 3)) + [0, 0, 0.2], bp.index_spec().material)
+    assert not sim._surface_colliders and not sim.world.colliders  # nothing added by the refusal
     rest = sim.flat_state()  # at rest, before any solve: no body assembled for it
     assert not rest["fem0_solved"][0] and sim._fem[bp.INDEX]._body is None
     from gausstac_maniskill.fem.sensor import EquilibriumPad
@@ -325,6 +326,64 @@ def test_default_pads_are_at_equilibrium_until_a_soft_object_comes():
         sim.add_soft_object("block", g + [0, 0, 0.2], mat)
     with pytest.warns(Warning, match="spans only"):
         assert GaussTacSim(*args, settings=settings, pad_surface="particles").pad_solver == "mpm"
+
+
+def _sponge_distance_to_pad(sim, pad_name: str, sponge: np.ndarray) -> float:
+    """Smallest distance [m] of the ``sponge`` particles [N, 3] (world) outside the pad's deformed
+    surface, along the nearest surface point's outward normal (negative: inside the pad)."""
+    from scipy.spatial import cKDTree
+
+    fp = sim._fem[pad_name]
+    T = sim._link_pose[fp.pad.spec.link]
+    body = fp.body
+    surface = body.points + (0.0 if fp.result is None else fp.result.displacement)
+    local = (sponge - T[:3, 3]) @ T[:3, :3]
+    near = cKDTree(surface).query(local)[1]
+    return float(np.einsum("si,si->s", local - surface[near], fp.pad.normal[fp.point_particles][near]).min())
+
+
+def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
+    """Physics: an equilibrium pad pressed by an MPM sponge bound to a holder (``bench soft``'s
+    scene, here at dx = 2 mm) reads in its force map the sponge's own stress force (virtual work
+    over the sponge: a reading independent of the contact impulses) within 6 %, and no sponge
+    particle passes into the pad's deformed surface. Guards: the pad's surface collider is
+    lowered where the pad was pushed in (the shape coupling is wired), the link receives the push
+    (the soft row, key None), a held step from a saved state is bit-exact, and the pad is exactly
+    at rest, its collider at its rest shape, once the sponge has been pulled away."""
+    from gausstac_maniskill.bench import soft
+
+    with pytest.warns(Warning, match="spans only"):
+        sim, press, reading = soft.sponge_scene(1, DX, "fem")
+    for k in range(5):
+        maps = press(soft.PRESS * min(1.0, (k + 1) / 3))[soft.INDEX]
+    in_map, on_pad, on_sponge = reading()
+    assert on_sponge > 0.3 and in_map == pytest.approx(on_sponge, rel=0.06)
+    assert float(maps["force"].min()) >= 0.0 and float(maps["depth"].max()) > 0.0
+    sponge = sim.world.positions("sponge").astype(np.float64)
+    assert _sponge_distance_to_pad(sim, soft.INDEX, sponge) > 0.0  # nothing passes through the pad
+    contacts = sim.link_contacts(soft.INDEX)
+    assert list(contacts) == [None]
+    R = sim._link_pose[soft.INDEX][:3, :3] @ sim.pads[soft.INDEX].sensor_frame[:3, :3]
+    np.testing.assert_allclose(-(R.T @ sim.link_wrench(soft.INDEX)[0])[2], in_map, rtol=1e-5)  # pushed in: -z
+
+    saved = sim.state_dict()
+    c = sim._surface_colliders[soft.INDEX]
+    rest = sim._surface_rest[soft.INDEX][0]
+    pushed_in = -float(sim._fem[soft.INDEX].normal_displacement().min())
+    held = press(soft.PRESS)[soft.INDEX]  # the sponge met the pad as this step began: its collider lowered as much
+    assert float((sim.world.colliders[c].sdf - rest).max()) == pytest.approx(pushed_in, rel=1e-4)
+    sim.load_state_dict(saved)
+    again = press(soft.PRESS)[soft.INDEX]
+    for k in held:
+        np.testing.assert_array_equal(again[k].cpu().numpy(), held[k].cpu().numpy())
+
+    for _ in range(3):  # the holder pulled 3 mm back: the sponge leaves the pad
+        maps = press(-3e-3)[soft.INDEX]
+    assert sim._fem[soft.INDEX].result is None
+    for k in ("depth", "shear", "force", "pressure"):
+        assert float(maps[k].abs().max()) == 0.0
+    press(-3e-3)  # (the collider takes the rest shape before the step after the release)
+    assert sim.world.colliders[c].sdf is rest
 
 
 def test_centre_state_neo_hookean_linearises_to_the_linear_stress():

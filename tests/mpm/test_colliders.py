@@ -72,3 +72,29 @@ def test_mesh_collider_press_matches_analytic_sphere():
         forces.append(world.collider_wrench(c)[0][2])
     assert forces[0] > 0
     assert abs(forces[1] / forces[0] - 1) < 0.08, forces
+
+
+def test_mesh_collider_sdf_replaced_moves_its_surface():
+    """MPMWorld.set_collider_sdf: a mesh sphere of radius 4 mm whose SDF is raised by 0.2 mm
+    presses the block as a mesh sphere of radius 3.8 mm does (the same surface), and a
+    wrong grid or a collider without one is refused by name."""
+    from gausstac_maniskill.errors import ConfigError
+
+    forces = []
+    for radius, raise_by in ((4e-3, 2e-4), (3.8e-3, 0.0)):
+        world = pad_world(dx=1e-3, damping=2000.0)
+        col = MeshCollider(mesh=trimesh.creation.icosphere(3, radius=radius), pose=make_pose([0, 0, 4e-3]),
+                           sdf_dx=0.3e-3, friction=0.0, name="ball")
+        c = world.add_collider(col)
+        world.set_collider_sdf(c, col.sdf + raise_by)
+        dt = 20 * world.settings.cfl * world.settings.dx / world.wave_speed()
+        for k in range(40):
+            world.set_collider_pose(c, make_pose([0, 0, 4e-3 - 0.8e-3 * min(1.0, (k + 1) / 20)]))
+            world.step(dt)
+        forces.append(world.collider_wrench(c)[0][2])
+    assert forces[1] > 0 and forces[0] == pytest.approx(forces[1], rel=0.02)
+    with pytest.raises(ConfigError, match="ball.*samples"):
+        world.set_collider_sdf(c, np.zeros((2, 2, 2)))
+    other = world.add_collider(Sphere(radius=1e-3, pose=make_pose([0, 0, 0.05])))
+    with pytest.raises(ConfigError, match="not a MeshCollider"):
+        world.set_collider_sdf(other, np.zeros((2, 2, 2)))
