@@ -267,13 +267,14 @@ class GaussTacSim:
                 self._surface_rest[name] = (col.sdf.copy(), None)
 
     def _shape_surface_colliders(self) -> None:
-        """Each equilibrium pad's surface collider takes the pad's last solved shape for the
-        next step: its SDF lowered by the surface's outward normal displacement at the nearest
-        surface point, φ − u·n (the soft objects meet the pad where it was pushed in; one step
-        behind it, a staggered coupling)."""
+        """Each equilibrium pad's surface collider takes the pad's shape for the next step: its
+        SDF lowered by the surface's outward normal offset at the nearest surface point, φ − s
+        (the soft objects meet the pad where it was pushed in; s follows the last solved shape,
+        relaxed: :meth:`~gausstac_maniskill.fem.sensor.EquilibriumPad.relax_surface`)."""
         for name, c in self._surface_colliders.items():
             fp, (rest, nearest) = self._fem[name], self._surface_rest[name]
             col = self.world.colliders[c]
+            offset = fp.relax_surface()
             if fp.result is None:
                 if col.sdf is not rest:
                     self.world.set_collider_sdf(c, rest)
@@ -285,7 +286,7 @@ class GaussTacSim:
                 nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
                 nearest = fp.nearest_points(nodes)
                 self._surface_rest[name] = (rest, nearest)
-            self.world.set_collider_sdf(c, rest - fp.normal_displacement()[nearest].reshape(rest.shape))
+            self.world.set_collider_sdf(c, rest - offset[nearest].reshape(rest.shape))
 
     def _soft_load(self, name: str, T: np.ndarray) -> np.ndarray | None:
         """[S, 3] link-frame load [N] the soft objects put on equilibrium pad ``name`` in the last

@@ -191,7 +191,8 @@ class GaussTacEnv(BaseEnv):
             ``"mpm"`` in one with a soft object (the sponge tasks); :attr:`pad_solver_used`
             says which. ``"fem"``: each env's pads solved at equilibrium after every MPM step
             (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`; no pseudo-mass, no time
-            step, rigid objects only: a task with a soft object raises a ``ConfigError``);
+            step; a soft object meets each pad's surface, shaped as the pad was last solved,
+            and loads it: :meth:`~gausstac_maniskill.cosim.GaussTacSim.add_soft_object`);
             its normal forces within 4.3 % of its finest grid on the product pad at the default
             ``mpm_dx`` (the sphere's sliding friction force +5.7 %),
             about 10× faster than the MPM pads (BENCHMARKS.md, issue 10). Its linear model

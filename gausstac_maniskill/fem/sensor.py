@@ -47,6 +47,10 @@ BODY_CACHE = 4
 #: Surface motion, as a fraction of the layer's thickness, beyond which a linear pad says its
 #: forces are not physical (the tasks' experts stay under 25 %; random actions reach 160 %).
 LINEAR_LIMIT = 0.5
+#: Smallest relaxation factor of the shape soft objects meet (:meth:`EquilibriumPad.relax_surface`):
+#: 1 / (1 + κ) for κ, the object's stiffness over the pad's at the contact, up to 19.
+MIN_SURFACE_RELAX = 0.05
+_SURFACE_KEYS = ("surface_offset", "surface_change", "surface_solved")  # flat_state's keys of the coupling
 _BODIES: OrderedDict = OrderedDict()
 _NODES: dict = {}  # nodes of each pad geometry's body (EquilibriumPad.shape), by _body_key
 
@@ -117,6 +121,9 @@ class EquilibriumPad:
         self._maps_key: tuple = (None, None)  # (binning, its key in the body's derived data), see tactile_maps
         #: outer iterations of a solve before it gives up (the finite-strain fixed point takes up to ~200)
         self.max_iterations = 60 if model == "linear" else 400
+        # the shape soft objects meet (relax_surface): the normal offset [S] m of the surface they
+        # met in the last step, its change from the step before, the pad's solved shape then, κ
+        self._surface: tuple = (None, None, None, 0.0)
         #: [m] points this close to the collider enter a solve's first iteration; the others join
         #: when they would penetrate. 0: only those touching already (the same equilibrium for
         #: fewer compliance columns: 122 instead of 178 over the sphere's press and slide, 542
@@ -269,9 +276,14 @@ class EquilibriumPad:
                "owner": np.full(S, -1, np.int64), "nodes": np.zeros((V, 3)),
                "has_nodes": np.array([False]), "counts": np.zeros(2, np.int64), "residual": np.zeros(1),
                "cut_cells_linear": np.array([False]), "load": np.zeros((S, 3)),
+               "surface_offset": np.zeros(S), "surface_change": np.zeros(S), "surface_solved": np.zeros(S),
+               "surface_has": np.zeros(3, bool), "surface_kappa": np.array([self._surface[3]]),
                "pose": np.tile(np.eye(4), (H, 1, 1)), "has_pose": np.zeros(H, bool)}
         for key, T in (self._pose or {}).items():
             out["pose"][index[key]], out["has_pose"][index[key]] = T, True
+        for i, (key, value) in enumerate(zip(_SURFACE_KEYS, self._surface[:3])):
+            if value is not None:
+                out[key], out["surface_has"][i] = value.copy(), True
         if r is not None:
             out.update(force=r.force.copy(), displacement=r.displacement.copy(), gap=r.gap.copy(),
                        counts=np.array([r.iterations, r.candidates], np.int64), residual=np.array([r.residual]),
@@ -309,6 +321,11 @@ class EquilibriumPad:
             return np.asarray(state[key]).ravel()[0]
 
         self.release()
+        self._surface = (None, None, None, 0.0)
+        if "surface_has" in state:  # (states saved before soft objects met these pads: none)
+            has = np.asarray(state["surface_has"], bool)
+            self._surface = tuple(np.array(state[key], np.float64) if h else None
+                                  for key, h in zip(_SURFACE_KEYS, has)) + (float(first("surface_kappa")),)
         has_pose = np.asarray(state["has_pose"], bool)
         if has_pose.any():
             self._pose = {holders[h]: np.array(state["pose"][h], np.float64) for h in np.flatnonzero(has_pose)}
@@ -341,13 +358,14 @@ class EquilibriumPad:
 
     def state(self) -> dict:
         """A copy of what the next solve starts from (restore with :meth:`load_state`)."""
-        return copy.deepcopy({"result": self.result, "pose": self._pose})
+        return copy.deepcopy({"result": self.result, "pose": self._pose, "surface": self._surface})
 
     def load_state(self, state: dict) -> None:
         """Restore a :meth:`state` of this pad."""
         self.release()
         s = copy.deepcopy(state)
         self.result, self._pose = s["result"], s["pose"]
+        self._surface = s.get("surface", (None, None, None, 0.0))
 
     @property
     def touching(self) -> bool:
@@ -493,6 +511,36 @@ class EquilibriumPad:
         T = np.asarray(link_pose, float)
         idx = np.flatnonzero(np.abs(r.load).sum(1) > 0)
         return (self.body.points[idx] + r.displacement[idx]) @ T[:3, :3].T + T[:3, 3], r.load[idx] @ T[:3, :3].T
+
+    def relax_surface(self) -> np.ndarray | None:
+        """[S] the outward normal offset [m] of the surface that soft objects meet in the next step
+        (the pad's surface collider, :meth:`~gausstac_maniskill.cosim.GaussTacSim.add_soft_object`).
+
+        The object's push in a step loads the pad, whose solved shape u is what the object meets
+        next: a staggered (Dirichlet–Neumann) coupling. Where the object is as stiff as the pad,
+        the shape it meets and the shape solved from it swing about the balance for good (κ ≈ 1:
+        the solved shape falls by κ times what the met one rose), and grow where it is stiffer. The
+        shape it meets is therefore relaxed, s ← s + ω (u − s) with ω = 1 / (1 + κ), which puts a
+        fixed contact at its balance in one step; κ = −Δu·Δs / Δs·Δs is read from the last two
+        steps' changes (Δs the met shape's, Δu the solved one's). An object that moves moves both
+        the same way (κ ≤ 0: ω = 1, no lag); κ is kept from step to step while the met shape
+        hardly changes. At rest (no solution) it is the rest shape (None), and κ starts again
+        from 0. Call it once per step: it advances the coupling."""
+        if self.result is None:
+            self._surface = (None, None, None, 0.0)
+            return None
+        offset, change, solved, kappa = self._surface
+        u = self.normal_displacement()
+        if offset is None:
+            offset = np.zeros_like(u)
+        if change is not None and solved is not None:
+            d = float(change @ change)
+            if d > self.hold_tolerance ** 2 * len(u):  # the met shape changed beyond the solve's tolerance
+                kappa = max(0.0, -float((u - solved) @ change) / d)
+        relax = max(MIN_SURFACE_RELAX, 1.0 / (1.0 + kappa))
+        step = relax * (u - offset)
+        self._surface = (offset + step, step, u, kappa)
+        return offset + step
 
     def stress_force(self) -> np.ndarray:
         """Total contact force [3] N on the pad read from its stress, link frame: the sum of the
