@@ -262,9 +262,9 @@ class GaussTacSim:
                 T = self._link_pose[pad.spec.link]
                 mesh = pad_mesh(pad.spec, self.urdf)
                 col = MeshCollider(pose=T, friction=self.settings.soft_friction, name=f"surface of pad {name!r}",
-                                   mesh=mesh, sdf_dx=min(0.5 * pad.spacing, float(np.max(mesh.extents)) / 48.0))
+                                   mesh=mesh, sdf_dx=min(pad.spacing, float(np.max(mesh.extents)) / 48.0))
                 self._surface_colliders[name] = self.world.add_collider(col, env=self.env)
-                self._surface_rest[name] = (col.sdf.copy(), None)
+                self._surface_rest[name] = (col.sdf, None)  # (read-only, shared)
 
     def _shape_surface_colliders(self) -> None:
         """Each equilibrium pad's surface collider takes the pad's shape for the next step: its

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_dir", "array_digest", "compliance_key", "surface_compliance", "readout_responses",
+__all__ = ["cache_dir", "array_digest", "cached_array", "compliance_key", "surface_compliance", "readout_responses",
            "estimated_bytes"]
 
 #: Bump when the stored layout or the way W is computed changes: old files are then ignored.
@@ -91,7 +91,7 @@ def surface_compliance(body, workers: int | None = None, progress: bool = True, 
         flat *= np.float32(0.5)
         return flat
 
-    scaled = _cached(body, f"compliance-{compliance_key(body)}", (3 * S, 3 * S), compute, cache)
+    scaled = cached_array(body.name, f"compliance-{compliance_key(body)}", (3 * S, 3 * S), compute, cache)
     scaled /= np.float32(body.E)
     return scaled
 
@@ -117,7 +117,7 @@ def readout_responses(body, A, workers: int | None = None, progress: bool = True
                          f"{body.name}: response of {R} {what}{_once(cache)}")
         return out.reshape(R, 3 * S)
 
-    return _cached(body, f"readout-{compliance_key(body)}-{key}", (R, 3 * S), compute, cache)
+    return cached_array(body.name, f"readout-{compliance_key(body)}-{key}", (R, 3 * S), compute, cache)
 
 
 def _once(cache: bool) -> str:
@@ -125,9 +125,10 @@ def _once(cache: bool) -> str:
     return " (once; cached)" if cache and cache_dir() is not None else ""
 
 
-def _cached(body, stem: str, shape: tuple, compute, cache: bool) -> np.ndarray:
+def cached_array(name: str, stem: str, shape: tuple, compute, cache: bool = True) -> np.ndarray:
     """The float32 array ``shape`` kept under :func:`cache_dir` as ``stem``.npy, or ``compute()``
-    (then kept there). A file that cannot be used is computed again, with a warning naming it."""
+    (then kept there). A file that cannot be used is computed again, with a warning naming it
+    (and ``name``, what it belongs to)."""
     folder = cache_dir() if cache else None
     path = None if folder is None else folder / f"{stem}.npy"
     if path is not None and path.exists():
@@ -137,11 +138,11 @@ def _cached(body, stem: str, shape: tuple, compute, cache: bool) -> np.ndarray:
                 raise ValueError(f"holds {out.dtype} {out.shape}, expected float32 {shape} finite")
             return out
         except (OSError, ValueError) as err:
-            warnings.warn(f"{body.name}: the cached {path} cannot be used ({err}); computing it again",
+            warnings.warn(f"{name}: the cached {path} cannot be used ({err}); computing it again",
                           stacklevel=3)
     out = compute()
     if path is not None:
-        _store(out, path, body.name)
+        _store(out, path, name)
     return out
 
 

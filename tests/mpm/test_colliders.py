@@ -53,6 +53,8 @@ def test_mesh_sdf_matches_sphere_inside_sampled_box():
     outward = (n @ POSE[:3, :3]) * 1.0
     cos = (outward * LOCAL[sel]).sum(1) / r[sel]
     assert np.median(cos) > 0.99
+    again = MeshCollider(mesh=mesh, pose=np.eye(4), sdf_dx=1e-3)  # the same mesh and grid: sampled once
+    assert again.sdf is col.sdf and not col.sdf.flags.writeable
 
 
 def test_mesh_collider_press_matches_analytic_sphere():
