@@ -640,7 +640,7 @@ class GaussTacSim:
 
     def pad_contact_forces(self, pad: str) -> np.ndarray:
         """[N, 3] world contact force [N] on each of ``pad``'s particles in the last step (from
-        rigid objects; zero where none)."""
+        rigid objects, and for a pad at equilibrium soft objects too; zero where none)."""
         name = self._pad(pad).name
         if name in self._fem:
             return self._fem[name].particle_state(self._link_pose[self.pads[name].spec.link])[3]

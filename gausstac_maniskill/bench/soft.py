@@ -87,6 +87,42 @@ def sponge_scene(field: int = 1, dx: float = 1e-3, pad_solver: str = "mpm", **si
     return sim, press, reading
 
 
+def rigid_pad_reference(size: float, friction: float = 0.5) -> float:
+    """The sponge scene's held force [N] with the pad rigid (its link mesh as the indenter) and
+    the sponge a linear elastic body of cube elements of edge ``size`` [m] (:mod:`..fem`; the
+    bond at BOND, Coulomb ``friction``, the contact read at the deformed surface): an
+    independent solver's value of what the sponge pushes with when the pad does not yield.
+    The pads that do yield read below it, by their share of the compression."""
+    from ..fem.contact import Indenters, QuasiStaticBody
+    from ..fem.hex import voxel_body
+    from ..fem.pad import collider_indenter
+    from ..mpm.colliders import MeshCollider
+    from ..tactile import allegro_pad_specs, build_pad, pad_mesh
+    from ..transforms import make_pose
+    from ..urdf import default_hand_urdf
+
+    spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
+    mesh = pad_mesh(spec, default_hand_urdf())
+    pose = np.eye(4)
+    pose[2, 3] = 0.1
+    W = pose @ build_pad(spec, mesh, 5e-4, 1e-3).sensor_frame  # the scene's sensor frame (any spacing)
+    n = np.round(np.array(SPONGE_SIZE) / size).astype(int)
+    ijk = np.stack(np.meshgrid(*[np.arange(k) for k in n], indexing="ij"), -1).reshape(-1, 3)
+    origin = np.array([-SPONGE_SIZE[0] / 2, -SPONGE_SIZE[1] / 2, 0.0])
+    body = voxel_body(ijk, origin, size)
+    face = np.flatnonzero(ijk[:, 2] == 0)
+    bonded = (origin + body.nodes * size)[:, 2] >= BOND - 1e-9  # the far 1 mm, held by the holder
+    sponge = QuasiStaticBody(body, SPONGE["E"], SPONGE["nu"], bonded,
+                             origin + (ijk[face] + [0.5, 0.5, 0.0]) * size, face, name="sponge")
+    collider = MeshCollider(pose=pose, mesh=mesh, sdf_dx=2.5e-4, friction=friction)  # SDF within ~1 µm here
+    res = None
+    for depth in (0.5e-3, 1e-3, PRESS):  # the press in steps, each warming the next (friction holds)
+        frame = make_pose(W[:3, 3] + W[:3, 2] * (CLEARANCE - depth), W[:3, :3])
+        res = sponge.solve(Indenters(collider_indenter(collider, frame)), geometry="deformed", warm=res,
+                           max_iterations=200)
+    return float(res.total_force[2])
+
+
 def closest_approach(a: np.ndarray, b: np.ndarray) -> float:
     """Smallest distance [m] between a point of ``a`` [N, 3] and one of ``b`` [M, 3]."""
     from scipy.spatial import cKDTree
@@ -153,6 +189,8 @@ def format_tables(sponges: list[dict], blocks: list[dict]) -> str:
                    f"{r['pad_stress']:.3f} | {r['sponge_stress']:.3f} | "
                    f"{r['map'] / r['sponge_stress'] - 1:+.1%} | {r['pad_stress'] / r['sponge_stress'] - 1:+.1%} | "
                    f"{r['closest']:.2f} | {r['step_ms']:.0f} |")
+    if not blocks:
+        return "\n".join(out)
     out += ["", "Two free blocks colliding (dx = 1 mm, 12 steps of 1 ms)", "",
             "| block b in | closing speed [m/s] | closest approach [spacings] | restitution | "
             "momentum change / block momentum |", "|---|---|---|---|---|"]
@@ -171,6 +209,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pad-solvers", nargs="+", default=["mpm", "fem"], choices=["mpm", "fem"],
                     help="the pads the sponge meets (the MPM's also with the sponge in the pads' field, at 1 mm)")
     ap.add_argument("--no-blocks", action="store_true", help="skip the free blocks")
+    ap.add_argument("--reference", type=float, nargs="*", default=[],
+                    help="element sizes [m] of the rigid-pad reference (rigid_pad_reference), e.g. 1e-3 5e-4 3.3333e-4")
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
@@ -191,6 +231,10 @@ def main(argv: list[str] | None = None) -> int:
             blocks.append(dict(collide(job[1], job[2]), field=job[1]))
     text = (f"on {arch} ({os.cpu_count()} cores), total {time.perf_counter() - t0:.0f} s\n\n"
             + format_tables(sponges, blocks))
+    if args.reference:
+        rows = [f"| {size * 1e3:.3g} | {rigid_pad_reference(size):.4f} |" for size in args.reference]
+        text += ("\n\nThe sponge against the pad made rigid, solved at equilibrium (linear elastic cube elements, "
+                 "μ = 0.5)\n\n| element [mm] | held force [N] |\n|---|---|\n" + "\n".join(rows))
     print(text)
     write_report(args.out, "soft.md", text)
     return 0
