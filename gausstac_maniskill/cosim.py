@@ -252,9 +252,8 @@ class GaussTacSim:
     def _add_surface_colliders(self) -> None:
         """Each equilibrium pad's link mesh as a rigid collider of the MPM world, moving with
         its link, for the soft objects to meet (friction ``settings.soft_friction``): their push
-        on it, read from the particles' contact impulses, loads the pad (:meth:`_soft_load`).
-        The soft object sees the pad's surface at rest (one-way coupling of the shape): right
-        where the object is far softer than the pad, as a sponge is (``bench soft``)."""
+        on it, read from the particles' contact impulses, loads the pad (:meth:`_soft_load`), and
+        the collider takes the pad's shape before each step (:meth:`_shape_surface_colliders`)."""
         from .mpm.colliders import MeshCollider
 
         for name, pad in self.pads.items():
