@@ -137,9 +137,9 @@ class GaussTacSim:
         self.pad_solver = pad_solver
         self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
         # pad name -> index of the collider its link mesh is for soft objects (pad_solver="fem"),
-        # and that collider's SDF at rest with each SDF node's nearest surface point of the pad
+        # and that collider's SDF at rest
         self._surface_colliders: dict[str, int] = {}
-        self._surface_rest: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
+        self._surface_rest: dict[str, np.ndarray] = {}
         self._binning: dict[str, TaxelBinning] = {}
         self._zero_maps: dict[str, dict] = {}  # equilibrium pad -> its maps at rest (zeros), by shape
         self.pad_solve_time = 0.0  # wall time [s] of the last step's equilibrium solves (pad_solver="fem")
@@ -263,7 +263,7 @@ class GaussTacSim:
                 col = MeshCollider(pose=T, friction=self.settings.soft_friction, name=f"surface of pad {name!r}",
                                    mesh=mesh, sdf_dx=min(pad.spacing, float(np.max(mesh.extents)) / 48.0))
                 self._surface_colliders[name] = self.world.add_collider(col, env=self.env)
-                self._surface_rest[name] = (col.sdf, None)  # (read-only, shared)
+                self._surface_rest[name] = col.sdf  # (read-only, shared)
 
     def _shape_surface_colliders(self) -> None:
         """Each equilibrium pad's surface collider takes the pad's shape for the next step: its
@@ -271,20 +271,14 @@ class GaussTacSim:
         (the soft objects meet the pad where it was pushed in; s follows the last solved shape,
         relaxed: :meth:`~gausstac_maniskill.fem.sensor.EquilibriumPad.relax_surface`)."""
         for name, c in self._surface_colliders.items():
-            fp, (rest, nearest) = self._fem[name], self._surface_rest[name]
+            fp, rest = self._fem[name], self._surface_rest[name]
             col = self.world.colliders[c]
             offset = fp.relax_surface()
             if fp.result is None:
                 if col.sdf is not rest:
                     self.world.set_collider_sdf(c, rest)
-                    col.sdf = rest
                 continue
-            if nearest is None:  # once per pad: the SDF nodes' nearest surface points
-                h, lo = col.sdf_dx, col.sdf_origin.astype(np.float64)
-                axes = [lo[d] + h * np.arange(rest.shape[d]) for d in range(3)]
-                nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-                nearest = fp.nearest_points(nodes)
-                self._surface_rest[name] = (rest, nearest)
+            nearest = fp.grid_nearest_points(col.sdf_origin, col.sdf_dx, rest.shape)
             self.world.set_collider_sdf(c, rest - offset[nearest].reshape(rest.shape))
 
     def _soft_load(self, name: str, T: np.ndarray) -> np.ndarray | None:
@@ -354,8 +348,8 @@ class GaussTacSim:
                                                        [fp.indentation(obj)]]))
             x, fc = fp.load_points(T)  # soft objects' push (key None, as the MPM pads' other field)
             if len(x):
-                depth = float(np.linalg.norm(fp.result.displacement[np.abs(fp.result.load).sum(1) > 0], axis=1).max())
-                _add_contact(out, None, np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0), [depth]]))
+                _add_contact(out, None, np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0),
+                                                        [fp.load_indentation()]]))
         return out
 
     def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:

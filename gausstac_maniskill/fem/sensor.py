@@ -456,6 +456,20 @@ class EquilibriumPad:
             loaded &= res.owner == (res.keys.index(key) if key in res.keys else -1)
         return np.flatnonzero(loaded)
 
+    def _given(self) -> np.ndarray:
+        """The surface points the last solve's given load (:meth:`soft_load`) acts on."""
+        r = self.result
+        return np.zeros(0, np.int64) if r is None or r.load is None else np.flatnonzero(np.abs(r.load).sum(1) > 0)
+
+    def _world_points(self, idx: np.ndarray, force: np.ndarray, link_pose: np.ndarray):
+        """Surface points ``idx`` displaced, and ``force`` [S, 3] there, in the world frame."""
+        T = np.asarray(link_pose, float)
+        return (self.body.points[idx] + self.result.displacement[idx]) @ T[:3, :3].T + T[:3, 3], force[idx] @ T[:3, :3].T
+
+    def _depth(self, idx: np.ndarray) -> float:
+        """Largest displacement [m] of surface points ``idx`` (0 for none)."""
+        return float(np.linalg.norm(self.result.displacement[idx], axis=1).max()) if len(idx) else 0.0
+
     def contact_points(self, link_pose: np.ndarray, key=None) -> tuple[np.ndarray, np.ndarray]:
         """The loaded contact points of the last solve (those on collider ``key`` only, if
         given), world frame: their displaced positions [m, 3] m and the forces [m, 3] N the
@@ -463,17 +477,12 @@ class EquilibriumPad:
         the collider receives the opposite forces."""
         if self.result is None:
             return np.zeros((0, 3)), np.zeros((0, 3))
-        T, res = np.asarray(link_pose, float), self.result
-        idx = self._loaded(key)
-        return (self.body.points[idx] + res.displacement[idx]) @ T[:3, :3].T + T[:3, 3], res.force[idx] @ T[:3, :3].T
+        return self._world_points(self._loaded(key), self.result.force, link_pose)
 
     def indentation(self, key=None) -> float:
         """Largest displacement [m] of a loaded contact point (on collider ``key`` only, if
         given; 0 when nothing touches)."""
-        if self.result is None:
-            return 0.0
-        idx = self._loaded(key)
-        return float(np.linalg.norm(self.result.displacement[idx], axis=1).max()) if len(idx) else 0.0
+        return 0.0 if self.result is None else self._depth(self._loaded(key))
 
     def soft_load(self, positions: np.ndarray, forces: np.ndarray, link_pose: np.ndarray) -> np.ndarray:
         """[S, 3] link-frame load [N] on the surface points from forces [m, 3] N (world frame)
@@ -495,6 +504,17 @@ class EquilibriumPad:
             derived["point_tree"] = cKDTree(self.body.points)
         return derived["point_tree"].query(local)[1]
 
+    def grid_nearest_points(self, origin, spacing: float, shape) -> np.ndarray:
+        """[nx·ny·nz] the surface point nearest each node of the link-frame grid ``origin`` +
+        ``spacing``·ijk of ``shape`` (a surface collider's SDF grid), computed once per body and grid."""
+        key = ("grid_nearest", tuple(np.asarray(origin, np.float64)), float(spacing), tuple(shape))
+        derived = self.body.derived
+        if key not in derived:
+            lo = np.asarray(origin, np.float64)
+            axes = [lo[d] + spacing * np.arange(shape[d]) for d in range(3)]
+            derived[key] = self.nearest_points(np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3))
+        return derived[key]
+
     def normal_displacement(self) -> np.ndarray:
         """[S] the last solution's displacement [m] of each surface point along its outward
         normal (negative: pushed in; zeros at rest)."""
@@ -505,12 +525,14 @@ class EquilibriumPad:
     def load_points(self, link_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The surface points of the last solve's given load (:meth:`soft_load`), world frame:
         their displaced positions [m, 3] m and the forces [m, 3] N on the pad there."""
-        r = self.result
-        if r is None or r.load is None:
+        idx = self._given()
+        if not len(idx):
             return np.zeros((0, 3)), np.zeros((0, 3))
-        T = np.asarray(link_pose, float)
-        idx = np.flatnonzero(np.abs(r.load).sum(1) > 0)
-        return (self.body.points[idx] + r.displacement[idx]) @ T[:3, :3].T + T[:3, 3], r.load[idx] @ T[:3, :3].T
+        return self._world_points(idx, self.result.load, link_pose)
+
+    def load_indentation(self) -> float:
+        """Largest displacement [m] of a point under the last solve's given load (0 without one)."""
+        return self._depth(self._given())
 
     def relax_surface(self) -> np.ndarray | None:
         """[S] the outward normal offset [m] of the surface that soft objects meet in the next step

@@ -550,8 +550,7 @@ class MPMWorld:
     def collider_wrench(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Mean reaction (force [N], torque [N·m] about the collider origin) that
         collider ``index`` received from the particles during the last control step."""
-        if not 0 <= index < len(self.colliders):
-            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
+        self._collider(index)
         J = self._col_impulse[index] / self._last_dt_ctrl if len(self._col_impulse) else np.zeros(6)
         return J[:3].copy(), J[3:].copy()
 
@@ -634,27 +633,28 @@ class MPMWorld:
             raise ConfigError(f"set_link_poses: expected shape {(len(idx), 4, 4)}, got {arr.shape}")
         self._link_next[idx] = as_pose_matrices(arr, "set_link_poses poses")
 
+    def _collider(self, index: int) -> Collider:
+        """Collider ``index`` (a clear error where there is none)."""
+        if not 0 <= index < len(self.colliders):
+            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
+        return self.colliders[index]
+
     def collider_start_pose(self, index: int) -> np.ndarray:
         """World pose (4x4) of collider ``index`` at the end of the last step, where the next
         step moves it from (its target is ``colliders[index].pose``)."""
-        if not 0 <= index < len(self.colliders):
-            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
+        self._collider(index)
         return self._col_prev[index].copy()
 
     def set_collider_pose(self, index: int, pose) -> None:
         """Target world pose (4x4) of collider ``index`` at the end of the next control step."""
-        if not 0 <= index < len(self.colliders):
-            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
-        c = self.colliders[index]
+        c = self._collider(index)
         c.pose = as_pose_matrix(pose, f"pose of collider {index} ({c.name or type(c).__name__})")
 
     def set_collider_sdf(self, index: int, sdf) -> None:
         """New signed distances [m] on mesh collider ``index``'s SDF grid (the same grid:
         :attr:`MeshCollider.sdf`'s shape), for a surface that deforms (a pad solved at
         equilibrium, seen by soft objects); they take effect at the next step."""
-        if not 0 <= index < len(self.colliders):
-            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
-        c = self.colliders[index]
+        c = self._collider(index)
         if not isinstance(c, MeshCollider):
             raise ConfigError(f"set_collider_sdf: collider {index} ({c.name or type(c).__name__}) is not a MeshCollider")
         sdf = np.asarray(sdf, np.float32)

@@ -368,7 +368,7 @@ def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
 
     saved = sim.state_dict()
     c = sim._surface_colliders[soft.INDEX]
-    rest = sim._surface_rest[soft.INDEX][0]
+    rest = sim._surface_rest[soft.INDEX]
     pushed_in = -float(sim._fem[soft.INDEX].normal_displacement().min())
     held = press(soft.PRESS)[soft.INDEX]
     met = -float(sim._fem[soft.INDEX]._surface[0].min())  # the shape the sponge met in that step (relaxed)
