@@ -72,8 +72,9 @@ class GaussTacSim:
             instead of a world of its own (:class:`~gausstac_maniskill.batch.BatchedCosim`
             does this); its links and groups are named ``env{env}/<name>`` there. A scene in
             a shared world does not step it (the batch does): use the batch's ``step``.
-        pad_solver: ``"auto"`` (default): ``"fem"``, until a soft object is added (before the
-            pads touched anything): then ``"mpm"``; :attr:`pad_solver` says which.
+        pad_solver: ``"auto"`` (default): ``"fem"`` (with ``fem_model="neo_hookean"``: ``"mpm"``
+            once a soft object is added before the pads touched anything; ``pad_surface=
+            "particles"``: ``"mpm"``); :attr:`pad_solver` says which.
             ``"mpm"``: the pads are MPM particles relaxed with a pseudo-mass,
             in contact with rigid and soft objects. ``"fem"``: each awake pad is solved at
             equilibrium after every step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`:
@@ -129,7 +130,8 @@ class GaussTacSim:
         if pad_solver == "fem" and pad_surface != "mesh":
             raise ConfigError("GaussTacSim(pad_solver='fem') needs pad_surface='mesh' "
                               "(the equilibrium pads are touched on the link mesh)")
-        #: "auto": the pads turn to the MPM's if a soft object is added before they touch anything
+        #: "auto": finite-strain pads (fem_model="neo_hookean") turn to the MPM's if a soft object
+        #: is added before they touch anything
         self._auto = pad_solver == "auto"
         if self._auto:
             pad_solver = "fem" if pad_surface == "mesh" else "mpm"
@@ -225,22 +227,19 @@ class GaussTacSim:
         object meets next). The push is the reaction to the object's particles' contact
         impulses with that collider, each at the pad's surface point nearest the particle,
         added to the rigid objects' contact by superposition (the pad is linear). With
-        ``pad_solver="auto"`` a soft object added before the pads touched anything turns them
-        into MPM pads (the default until this coupling is measured across the tasks)."""
+        ``pad_solver="auto"`` the pads stay at equilibrium (``fem_model="neo_hookean"``: a soft
+        object added before they touched anything turns them into MPM pads)."""
         if name in self._objects or name in self._soft or name in self.pads:
             raise ConfigError(f"object {name!r} already exists")
-        if self._fem and self._auto and not any(fp.result is not None for fp in self._fem.values()):
+        models = sorted({fp.model for fp in self._fem.values()} - {"linear"})
+        if models and self._auto and not any(fp.result is not None for fp in self._fem.values()):
             self._to_mpm_pads()
+        elif models:
+            raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium meet soft objects with "
+                              f"fem_model='linear' only (these are {models[0]!r}"
+                              f"{' and have touched something already' if self._auto else ''}); "
+                              f"use fem_model='linear' or pad_solver='mpm'")
         if self._fem:
-            if self._auto:
-                raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium (pad_solver='auto' "
-                                  f"resolved to 'fem') have touched something already; pad_solver='auto' turns "
-                                  f"them into MPM pads only before that (add soft objects first), pad_solver='mpm' "
-                                  f"or 'fem' chooses")
-            models = sorted({fp.model for fp in self._fem.values()} - {"linear"})
-            if models:
-                raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium meet soft objects with "
-                                  f"fem_model='linear' only (these are {models[0]!r}); or use pad_solver='mpm'")
             self._add_surface_colliders()
         kwargs.setdefault("field", 1)
         if isinstance(kwargs.get("link"), str):
@@ -298,8 +297,9 @@ class GaussTacSim:
         return self._fem[name].soft_load(np.concatenate(xs), np.concatenate(fs), T)
 
     def _to_mpm_pads(self) -> None:
-        """``pad_solver="auto"`` meets a soft object: the pads, untouched so far, become MPM
-        particles (the world held them asleep at rest; they wake when an object nears)."""
+        """``pad_solver="auto"`` with ``fem_model="neo_hookean"`` meets a soft object: the pads,
+        untouched so far, become MPM particles (the world held them asleep at rest; they wake
+        when an object nears)."""
         for name in self._fem:
             self._awake[name] = False  # as the world holds its group
         self._fem.clear()

@@ -187,9 +187,8 @@ class GaussTacEnv(BaseEnv):
             below :data:`PAD_REACTION_MIN_FREQ`. ``False`` (default): the hand is driven
             kinematically as far as the pads are concerned (the rigid cores still stop a
             finger), and the pads crush against their cores when a finger presses hard.
-        pad_solver: ``"auto"`` (default): ``"fem"`` in a task whose objects are all rigid,
-            ``"mpm"`` in one with a soft object (the sponge tasks); :attr:`pad_solver_used`
-            says which. ``"fem"``: each env's pads solved at equilibrium after every MPM step
+        pad_solver: ``"auto"`` (default): ``"fem"``, except ``"mpm"`` in a task with a soft object
+            (the sponge tasks) when ``fem_model="neo_hookean"``; :attr:`pad_solver_used` says which. ``"fem"``: each env's pads solved at equilibrium after every MPM step
             (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`; no pseudo-mass, no time
             step; a soft object meets each pad's surface, shaped as the pad was last solved,
             and loads it: :meth:`~gausstac_maniskill.cosim.GaussTacSim.add_soft_object`);
@@ -516,7 +515,8 @@ class GaussTacEnv(BaseEnv):
             # was built and measured with (a held pad's larger one jolted a pinched cube)
             settings = dataclasses.replace(settings, hold_scaling=1.0)
         #: the pads' solver in this scene: ``pad_solver``, with "auto" resolved
-        self.pad_solver_used = self.pad_solver if self.pad_solver != "auto" else "mpm" if self._soft else "fem"
+        self.pad_solver_used = self.pad_solver if self.pad_solver != "auto" else \
+            "mpm" if self._soft and self.fem_model != "linear" else "fem"
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
                                    urdf=agent.pad_urdf(), settings=settings,
                                    sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver_used,

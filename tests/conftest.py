@@ -52,10 +52,16 @@ def pytest_runtest_setup(item):
 
 @pytest.fixture(scope="session", autouse=True)
 def compliance_cache(tmp_path_factory):
-    """The equilibrium pads' compliance cache in a directory of this session's own: no test
-    reads what an earlier run (or the user) left in ``~/.cache``."""
+    """The equilibrium pads' compliance cache in a directory of this run's own: no test reads
+    what an earlier run (or the user) left in ``~/.cache``. The run's pytest-xdist workers share
+    it (their temporary folders' common parent; the cache writes each file atomically), so a
+    pad shape's compliance is computed once per run, not once per worker."""
     old = os.environ.get("GAUSSTAC_CACHE_DIR")
-    os.environ["GAUSSTAC_CACHE_DIR"] = str(tmp_path_factory.mktemp("gausstac-cache"))
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder = shared / "gausstac-cache"
+    folder.mkdir(exist_ok=True)
+    os.environ["GAUSSTAC_CACHE_DIR"] = str(folder)
     yield
     if old is None:
         os.environ.pop("GAUSSTAC_CACHE_DIR", None)

@@ -253,3 +253,42 @@ def test_batched_pads_at_equilibrium_read_what_each_scene_alone_reads(setup):
     flat = batch.scenes[0].flat_state()
     alone.load_flat_state(flat)
     np.testing.assert_array_equal(alone.flat_state()["fem0_force"], flat["fem0_force"])
+
+
+def test_batched_pads_at_equilibrium_meet_their_own_envs_soft_object(setup):
+    """The default pads (pad_solver="auto": at equilibrium) and a soft block in every env of a
+    batch: each env's pad surface is a collider of its own env, loaded by its own block. Env 0's
+    index pad pressed 0.8 mm into its block reads what the same scene alone reads (the world's
+    sums run over both envs: float32 rounding apart); env 1's block, 5 cm off, leaves its pad at
+    zero."""
+    from gausstac_maniskill.config import Material
+    from gausstac_maniskill.mpm import box_particles
+
+    names, poses, _, _ = setup
+    settings = default_hand_settings(dx=2e-3)
+    specs = [s for s in allegro_pad_specs() if s.link == INDEX]
+    i = names.index(INDEX)
+    with pytest.warns(Warning):  # 2 mm: a coarse pad, for speed
+        batch = BatchedCosim(specs, names, poses[:2], settings=settings)
+        alone = GaussTacSim(specs, dict(zip(names, poses[0])), settings=settings)
+    foam = Material(E=2e4, nu=0.3, density=1000.0)
+    h = settings.particle_spacing
+    local = box_particles(np.array([-4e-3, -4e-3, 0.0]), np.array([4e-3, 4e-3, 4e-3]), h)
+    for b, scene in enumerate([*batch.scenes, alone]):
+        W = poses[b if b < 2 else 0][i] @ scene.pads[INDEX].sensor_frame
+        base = W[:3, 3] + W[:3, 2] * (0.3e-3 + (0.05 if b == 1 else 0.0))
+        scene.add_link("table", np.eye(4))
+        scene.add_soft_object("block", local @ W[:3, :3].T + base, foam, link="table", kinematic=local[:, 2] > 3e-3)
+        assert scene.pad_solver == "fem"
+    W0 = poses[0][i] @ alone.pads[INDEX].sensor_frame
+    for k in range(3):
+        P = poses[:2].copy()
+        P[:, i] = make_pose(W0[:3, 2] * 0.8e-3 * (k + 1) / 3) @ P[:, i]  # the pad link towards its block
+        maps = batch.step(P, DT)[INDEX]
+        ref = alone.step(dict(zip(names, P[0])), DT)[INDEX]
+        assert alone.world.last_step.substeps == batch.world.last_step.substeps
+    assert float(ref["force"].sum()) > 0.05
+    for key in ("depth", "shear", "force", "pressure"):
+        tol = 1e-3 * float(ref[key].abs().max()) + 1e-12
+        np.testing.assert_allclose(maps[key][0].cpu().numpy(), ref[key].cpu().numpy(), rtol=0, atol=tol, err_msg=key)
+        assert float(maps[key][1].abs().max()) == 0.0

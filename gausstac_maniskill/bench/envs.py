@@ -15,7 +15,7 @@ Rows:
   ``--sweep-tasks``) also runs at finer MPM grids (``--dx``), where the "outcome" column is
   the force error at the end (speed vs accuracy), with each of ``--pad-solvers`` (``fem``:
   the pads solved at equilibrium, ``GaussTacEnv(pad_solver="fem")``, its time in the MPM
-  column; ``auto``: the tasks' default, fem for rigid objects and the MPM's with a soft one);
+  column; ``auto``: the tasks' default, fem with the linear model);
 * the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
   CPU machine: rigid meshes only, no pad deformation), made in the same process and stepped
   in turn with the splat run, so that both see the same machine load (the "camera side by

@@ -294,36 +294,47 @@ def test_fem_pad_bad_input():
         EquilibriumPad(sim.pads[bp.INDEX], model="hooke")
 
 
-def test_default_pads_are_at_equilibrium_until_a_soft_object_comes():
-    """GaussTacSim's default (pad_solver="auto"): the pads solved at equilibrium; a soft object
-    added before they touched anything turns them into MPM pads (which then meet it); one added
-    after is refused with what to do. pad_surface="particles" (the equilibrium pads' contact is
-    on the mesh) resolves to the MPM pads."""
+def test_default_pads_stay_at_equilibrium_with_soft_objects():
+    """GaussTacSim's default (pad_solver="auto"): the pads solved at equilibrium, also when a soft
+    object comes (before or after they touched something: each pad's surface becomes a collider
+    of the MPM world). Finite-strain pads (fem_model="neo_hookean") meet soft objects only as
+    MPM pads: a soft object added before they touched anything turns them into those; one
+    added after is refused with what to do. pad_surface="particles" (the equilibrium pads'
+    contact is on the mesh) resolves to the MPM pads."""
     from gausstac_maniskill.bench import pad as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
 
     args = ([bp.index_spec()], {bp.INDEX: bp.LINK_POSE})
     settings = default_hand_settings(dx=DX)
     mat = bp.index_spec().material
-    with pytest.warns(Warning, match="spans only"):
-        soft = GaussTacSim(*args, settings=settings)
-    assert soft.pad_solver == "fem" and bp.INDEX in soft._fem
-    W = bp.LINK_POSE @ soft.pads[bp.INDEX].sensor_frame
     # a 6 × 6 × 3 mm block of the pad's material touching the pad face (particles 0.5 mm apart)
     g = np.stack(np.meshgrid(np.arange(-3e-3, 3e-3, 5e-4), np.arange(-3e-3, 3e-3, 5e-4), np.arange(2.5e-4, 3e-3, 5e-4),
                              indexing="ij"), -1).reshape(-1, 3)
-    soft.add_soft_object("block", g @ W[:3, :3].T + W[:3, 3] + W[:3, 2] * 1e-4, mat)
-    assert soft.pad_solver == "mpm" and not soft._fem
-    soft.step({bp.INDEX: bp.LINK_POSE}, 0.01)
-    assert soft.is_awake(bp.INDEX)  # an MPM pad, woken by the block beside it
+    far = g + [0, 0, 0.2]
+    for touched in (False, True):
+        with pytest.warns(Warning, match="spans only"):
+            sim = GaussTacSim(*args, settings=settings)
+        W = bp.LINK_POSE @ sim.pads[bp.INDEX].sensor_frame
+        block = g @ W[:3, :3].T + W[:3, 3] + W[:3, 2] * 1e-4
+        if touched:
+            sim.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
+            sim.step({bp.INDEX: bp.LINK_POSE}, 0.05)
+            assert sim._fem[bp.INDEX].touching
+        sim.add_soft_object("block", far if touched else block, mat)
+        assert sim.pad_solver == "fem" and bp.INDEX in sim._fem and bp.INDEX in sim._surface_colliders
 
-    with pytest.warns(Warning, match="spans only"):
-        sim = GaussTacSim(*args, settings=settings)
-    sim.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
-    sim.step({bp.INDEX: bp.LINK_POSE}, 0.05)
-    assert sim._fem[bp.INDEX].touching
-    with pytest.raises(ConfigError, match="touched something already.*pad_solver='mpm'"):
-        sim.add_soft_object("block", g + [0, 0, 0.2], mat)
+    with pytest.warns(Warning):
+        nh = GaussTacSim(*args, settings=settings, fem_model="neo_hookean")
+    nh.add_soft_object("block", block, mat)
+    assert nh.pad_solver == "mpm" and not nh._fem
+    nh.step({bp.INDEX: bp.LINK_POSE}, 0.01)
+    assert nh.is_awake(bp.INDEX)  # an MPM pad, woken by the block beside it
+    with pytest.warns(Warning):
+        nh = GaussTacSim(*args, settings=settings, fem_model="neo_hookean")
+    nh.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
+    nh.step({bp.INDEX: bp.LINK_POSE}, 0.05)
+    with pytest.raises(ConfigError, match="'neo_hookean' and have touched something already.*pad_solver='mpm'"):
+        nh.add_soft_object("block", far, mat)
     with pytest.warns(Warning, match="spans only"):
         assert GaussTacSim(*args, settings=settings, pad_surface="particles").pad_solver == "mpm"
 
