@@ -18,7 +18,7 @@ test: setup
 	GAUSSTAC_COMPILE=fast GAUSSTAC_CPU_PIN=0 $(PY) -m pytest -m "not slow" -q -n 2 --dist loadfile
 
 bench: setup
-	$(PY) -m pytest -m slow -q || [ $$? -eq 5 ]   # exit 5: no test is marked slow yet
+	$(PY) -m pytest -m slow -q || [ $$? -eq 5 ]   # exit 5: no test selected (none marked slow)
 	$(PY) -m gausstac_maniskill.bench hertz --grid-contact
 	$(PY) -m gausstac_maniskill.bench splat
 	$(PY) -m gausstac_maniskill.bench hand
