@@ -188,7 +188,8 @@ class GaussTacEnv(BaseEnv):
             kinematically as far as the pads are concerned (the rigid cores still stop a
             finger), and the pads crush against their cores when a finger presses hard.
         pad_solver: ``"auto"`` (default): ``"fem"``, except ``"mpm"`` in a task with a soft object
-            (the sponge tasks) when ``fem_model="neo_hookean"``; :attr:`pad_solver_used` says which. ``"fem"``: each env's pads solved at equilibrium after every MPM step
+            (the sponge tasks) when ``fem_model="neo_hookean"``; :attr:`pad_solver_used` says which.
+            ``"fem"``: each env's pads solved at equilibrium after every MPM step
             (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`; no pseudo-mass, no time
             step; a soft object meets each pad's surface, shaped as the pad was last solved,
             and loads it: :meth:`~gausstac_maniskill.cosim.GaussTacSim.add_soft_object`);
