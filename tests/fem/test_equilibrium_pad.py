@@ -359,7 +359,7 @@ def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
     over the sponge: a reading independent of the contact impulses) within 6 %, and no sponge
     particle passes into the pad's deformed surface. Guards: the pad's surface collider is
     lowered where the pad was pushed in (the shape coupling is wired), the link receives the push
-    (the soft row, key None), a held step from a saved state is bit-exact, and the pad is exactly
+    (the soft row, key None), a held step from a saved state is bit-exact (on CUDA to float32 rounding), and the pad is exactly
     at rest, its collider at its rest shape, once the sponge has been pulled away."""
     from gausstac_maniskill.bench import soft
 
@@ -387,8 +387,9 @@ def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
     assert met == pytest.approx(pushed_in, rel=0.02)  # held: the shape solved the step before
     sim.load_state_dict(saved)
     again = press(soft.PRESS)[soft.INDEX]
-    for k in held:
-        np.testing.assert_array_equal(again[k].cpu().numpy(), held[k].cpu().numpy())
+    for k in held:  # bit-exact on the CPU; CUDA's atomic scatter sums in a run-dependent order
+        tol = 0.0 if sim.world.bit_reproducible else 1e-5 * float(held[k].abs().max())
+        np.testing.assert_allclose(again[k].cpu().numpy(), held[k].cpu().numpy(), rtol=0, atol=tol, err_msg=k)
 
     for _ in range(3):  # the holder pulled 3 mm back: the sponge leaves the pad
         maps = press(-3e-3)[soft.INDEX]
