@@ -515,12 +515,9 @@ class GaussTacEnv(BaseEnv):
             # the pads' reaction moves SAPIEN bodies: their pseudo-mass stays what the coupling
             # was built and measured with (a held pad's larger one jolted a pinched cube)
             settings = dataclasses.replace(settings, hold_scaling=1.0)
-        #: the pads' solver in this scene: ``pad_solver``, with "auto" resolved
-        self.pad_solver_used = self.pad_solver if self.pad_solver != "auto" else \
-            "mpm" if self._soft and self.fem_model != "linear" else "fem"
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
                                    urdf=agent.pad_urdf(), settings=settings,
-                                   sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver_used,
+                                   sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver,
                                    fem_model=self.fem_model, fem_precompute=self.fem_precompute)
         self.cosims = self._batch.scenes
         for name, obj in self._rigid.items():
@@ -542,6 +539,9 @@ class GaussTacEnv(BaseEnv):
                                      {n: o.gaussians for n, o in self._rigid.items() if o.gaussians is not None},
                                      hand_lod=hand_lod, closed_links=closed)
                 self._add_captured_layers(sim, b)
+        #: the pads' solver in this scene, ``"fem"`` or ``"mpm"``: ``pad_solver`` with "auto" resolved
+        #: by :meth:`GaussTacSim.add_soft_object <gausstac_maniskill.cosim.GaussTacSim.add_soft_object>`
+        self.pad_solver_used = self.cosims[0].pad_solver
         self._wrench = {n: np.zeros((self.num_envs, 6)) for n, o in self._rigid.items() if o.two_way}
         self._contacts = np.zeros((self.num_envs, len(self._pad_links) if self.pad_reaction else 0,
                                    len(self._rigid) + 1, 7))

@@ -130,6 +130,23 @@ def test_press_cube_with_pads_at_equilibrium():
         _make("GaussTac-PressCube-v1", pad_solver="implicit")
 
 
+def test_finite_strain_pads_meet_the_sponge_as_mpm_pads():
+    """pad_solver="auto" with fem_model="neo_hookean" in a task with a soft object: the pads
+    become MPM pads (GaussTacSim.add_soft_object decides, and pad_solver_used reports what it
+    decided); pad_solver="fem" with it is refused, naming both ways out. Guards the wiring, not
+    physics."""
+    with pytest.warns(Warning, match="spans only"):
+        env = _make("GaussTac-SqueezeSponge-v1", mpm_dx=2e-3, fem_model="neo_hookean")
+        try:
+            env.reset(seed=0)
+            assert env.unwrapped.pad_solver_used == "mpm"
+            assert all(sim.pad_solver == "mpm" for sim in env.unwrapped.cosims)
+        finally:
+            env.close()
+        with pytest.raises(ConfigError, match="fem_model='linear' or pad_solver='mpm'"):
+            _make("GaussTac-SqueezeSponge-v1", mpm_dx=2e-3, pad_solver="fem", fem_model="neo_hookean").reset(seed=0)
+
+
 def test_squeeze_sponge_with_pads_at_equilibrium():
     """The default pads (pad_solver="auto") with a soft object are solved at equilibrium:
     SqueezeSponge's expert squeezes the MPM sponge to its target compression against the index
