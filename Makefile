@@ -15,7 +15,7 @@ demo: setup
 # 14 s instead of 109 s to compile the pad's kernels on a fresh machine (bench compile).
 # GAUSSTAC_CPU_PIN=0: the two test processes share the cores, so their Taichi workers stay unpinned.
 test: setup
-	GAUSSTAC_COMPILE=fast GAUSSTAC_CPU_PIN=0 $(PY) -m pytest -m "not slow" -q -n 2 --dist loadfile
+	GAUSSTAC_COMPILE=fast GAUSSTAC_CPU_PIN=0 $(PY) -m pytest -m "not slow" -q -n 2 --dist loadfile --durations=25
 
 bench: setup
 	$(PY) -m pytest -m slow -q || [ $$? -eq 5 ]   # exit 5: no test selected (none marked slow)
