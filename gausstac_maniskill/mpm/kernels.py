@@ -734,6 +734,16 @@ def report_stress(nh_only: ti.template(), fbar: ti.template(), cellp: ti.templat
 
 
 @ti.func
+def beyond_bound(col_frames: ti.template(), col_bound: ti.template(), c, x, reach):
+    """World point x lies more than ``reach`` [m] beyond collider c's bounding sphere (radius
+    ``col_bound[c]`` about its origin at the substep's end): nothing of c is within ``reach``, and
+    its signed distance there exceeds ``reach`` (a mesh's SDF too: its grid lies inside the sphere
+    and is positive on its border), so it need not be evaluated."""
+    t1 = ti.Vector([col_frames[c, 21], col_frames[c, 22], col_frames[c, 23]])  # (kinematics.frame_at)
+    return (x - t1).norm() - col_bound[c] > reach
+
+
+@ti.func
 def contact_scatter(order: ti.template(), slab_start: ti.template(),
         n_slabs: ti.template(), x: ti.template(), kind: ti.template(), mass: ti.template(),
         radius: ti.template(), impulse: ti.template(), contact_id: ti.template(),
@@ -745,7 +755,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         sdf: ti.template(), sdf_info: ti.template(),
         max_push: ti.template(), reach: ti.template(), group: ti.template(), group_copy: ti.template(),
         ncell: ti.template(), two_field: ti.template(), atomic: ti.template(), anchor: ti.template(),
-        group_env: ti.template(), col_env: ti.template()):
+        group_env: ti.template(), col_env: ti.template(), col_bound: ti.template()):
     """Particle-detected contact, applied as momentum on the grid (of the particle's field).
 
     For each dynamic particle near a collider, its free velocity v* is gathered
@@ -788,7 +798,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                     env = group_env[group[p]]  # a particle touches only its own env's colliders
                     near = False
                     for c in range(n_col):
-                        if col_env[c] == env:
+                        if col_env[c] == env and not beyond_bound(col_frames, col_bound, c, x[p], radius[p] + reach):
                             phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info, c, x[p],
                                                             dt)
                             if phi - radius[p] < reach:
@@ -804,8 +814,8 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                                                         + base[2] + k]
                         vp = v0
                         for c in range(n_col):
-                            if col_env[c] != env:
-                                continue
+                            if col_env[c] != env or beyond_bound(col_frames, col_bound, c, x[p] + dt * vp, radius[p]):
+                                continue  # (not this env's, or too far to touch)
                             phi, nrm, vc = collider_contact(col_kind, col_prm, col_frames, sdf, sdf_info,
                                                             c, x[p] + dt * vp, dt)
                             gap = phi - radius[p]
@@ -1266,7 +1276,8 @@ Scene = ti.types.argpack(
     env_relax=NDF,  # per env: relaxation rate ζ [1/s] of its quasi-static nodes (the largest of its awake groups)
     link_frames=NDF2, walls=NDF2,  # kinematics frame rows of links; slip walls (axis, position, side)
     col_kind=NDI, col_prm=NDF2, col_frames=NDF2, col_friction=NDF2,  # colliders; friction rows (μ, 1 if sticky)
-    sdf=NDF, sdf_info=NDI2, col_impulse=NDF2, col_env=NDI)  # ... and each collider's env
+    sdf=NDF, sdf_info=NDI2, col_impulse=NDF2, col_env=NDI,  # ... and each collider's env
+    col_bound=NDF)  # ... and the radius [m] of a sphere about its origin that holds it (contact_scatter)
 Order = ti.types.argpack(
     order=NDI, slab_start=NDI,  # awake particles sorted by slab, first index of each slab
     active_box=NDI)  # the active box of the substep (BOX layout), written by prepare
@@ -1481,7 +1492,7 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
                         P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp,
                         n_col, S.col_kind, S.col_prm, S.col_frames, S.col_friction, S.sdf, S.sdf_info,
                         max_push, reach, P.group, S.group_copy, ncell, two_field, atomic, P.anchor, S.group_env,
-                        S.col_env)
+                        S.col_env, S.col_bound)
         contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls,
                       n_walls)
         # the contact moved free nodes near the bond: the ghosts follow

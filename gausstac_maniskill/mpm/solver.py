@@ -1260,6 +1260,7 @@ class MPMWorld:
         upload("col_kind", kinds, ti.i32)
         upload("col_prm", prm, ti.f32)
         upload("col_friction", friction, ti.f32)
+        upload("col_bound", np.array([_collider_bound(c) for c in self.colliders] or [0.0], np.float32), ti.f32)
         upload("sdf_info", info, ti.i32)
         upload("sdf", self._sdf_values(), ti.f32)
         self._sdf_stale = False
@@ -1330,7 +1331,7 @@ class MPMWorld:
         pk["S"] = K.Scene(**{k: d[k] for k in (
             "counts", "consts", "mat_table", "group_qs", "group_frames", "group_field", "group_env", "group_copy",
             "env_relax", "link_frames", "walls", "col_kind", "col_prm", "col_frames", "col_friction", "sdf",
-            "sdf_info", "col_impulse", "col_env")})
+            "sdf_info", "col_impulse", "col_env", "col_bound")})
         pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
 
     def _upload_poses(self) -> None:
@@ -1549,6 +1550,17 @@ def _env_index(env, where: str) -> int:
     if isinstance(env, bool) or not isinstance(env, (int, np.integer)) or env < 0:
         raise ConfigError(f"{where}: env={env!r} must be an integer >= 0 (the env of a batched world)")
     return int(env)
+
+
+def _collider_bound(c: Collider) -> float:
+    """Radius [m] of a sphere about collider ``c``'s origin that holds all of it, capped for float32
+    (a half-space has none): for a mesh, its SDF grid's box, which holds the surface in any of
+    the shapes :meth:`MPMWorld.set_collider_sdf` gives it (kernels.beyond_bound)."""
+    if isinstance(c, MeshCollider):
+        lo = np.asarray(c.params()[:3], np.float64)
+        hi = lo + c.params()[3] * (np.asarray(c.sdf.shape, np.float64) - 1.0)
+        return float(np.linalg.norm(np.maximum(np.abs(lo), np.abs(hi))))
+    return min(_collider_radius(c), 1e30)
 
 
 def _collider_radius(c: Collider) -> float:

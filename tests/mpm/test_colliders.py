@@ -100,3 +100,49 @@ def test_mesh_collider_sdf_replaced_moves_its_surface():
     other = world.add_collider(Sphere(radius=1e-3, pose=make_pose([0, 0, 0.05])))
     with pytest.raises(ConfigError, match="not a MeshCollider"):
         world.set_collider_sdf(other, np.zeros((2, 2, 2)))
+
+
+def test_a_colliders_bounding_sphere_holds_all_of_it():
+    """solver._collider_bound: no point of a collider lies outside the sphere of that radius
+    about its origin, so its signed distance anywhere is at least the distance to that sphere
+    (what kernels.beyond_bound relies on to skip it); a half-space has no bound."""
+    from gausstac_maniskill.mpm.solver import _collider_bound
+
+    for c in (Sphere(radius=3e-3, pose=POSE), Box(half_extents=(1e-3, 2e-3, 3e-3), pose=POSE),
+              Capsule(radius=1e-3, half_length=2e-3, pose=POSE),
+              MeshCollider(mesh=trimesh.creation.box((4e-3, 6e-3, 2e-3)), pose=POSE, sdf_dx=0.3e-3),
+              MeshCollider(mesh=trimesh.creation.icosphere(2, radius=5e-3), pose=POSE)):
+        r = _collider_bound(c)
+        phi, _ = signed_distance(c, PTS)
+        beyond = np.linalg.norm(PTS - POSE[:3, 3], axis=1) - r
+        assert 0 < r < 0.02 and np.all(phi >= beyond - 1e-6), type(c).__name__
+    assert _collider_bound(HalfSpace()) >= 1e30
+
+
+def test_contact_skips_far_colliders_without_changing_the_step(monkeypatch):
+    """A block pressed and dragged by a mesh sphere, beside a box, a capsule and a mesh collider
+    a few cells away, steps bit-exactly as when no collider is ever skipped (every bound
+    infinite). Compares the code with itself: it guards that the skip (kernels.beyond_bound)
+    changes nothing; the time it saves is in BENCHMARKS.md."""
+    from gausstac_maniskill.mpm import solver
+
+    def run():
+        world = pad_world(dx=1e-3, damping=2000.0)
+        c = world.add_collider(MeshCollider(mesh=trimesh.creation.icosphere(3, radius=4e-3),
+                                            pose=make_pose([0, 0, 4e-3]), sdf_dx=0.3e-3, friction=0.5))
+        world.add_collider(Box(half_extents=(2e-3, 2e-3, 2e-3), pose=make_pose([0.008, 0, 2.5e-3])))
+        world.add_collider(Capsule(radius=1e-3, half_length=3e-3, pose=make_pose([-0.007, 0.004, 1.5e-3])))
+        world.add_collider(MeshCollider(mesh=trimesh.creation.box((3e-3, 3e-3, 3e-3)),
+                                        pose=make_pose([0, -0.009, 2.2e-3]), friction=1.0))
+        dt = 20 * world.settings.cfl * world.settings.dx / world.wave_speed()
+        for k in range(16):
+            world.set_collider_pose(c, make_pose([0.1e-3 * max(0, k - 8), 0, 4e-3 - 0.8e-3 * min(1.0, (k + 1) / 8)]))
+            world.step(dt)
+        return world.positions("pad"), world.collider_wrench(c)[0]
+
+    x, f = run()
+    monkeypatch.setattr(solver, "_collider_bound", lambda collider: 1e30)
+    x_all, f_all = run()
+    assert f[2] > 0
+    np.testing.assert_array_equal(x, x_all)
+    np.testing.assert_array_equal(f, f_all)
