@@ -7,8 +7,11 @@ export PYTHONUNBUFFERED := 1
 setup:
 	@bash scripts/setup.sh
 
+# make demo compiles with GAUSSTAC_COMPILE=fast unless told otherwise (GAUSSTAC_COMPILE= make demo: the
+# product build): on a fresh 2-core machine its part 1 takes 3.5 min instead of 10 (BENCHMARKS.md,
+# sixteenth session), its steps 1.2x as long once compiled
 demo: setup
-	$(PY) -m gausstac_maniskill.cli demo
+	GAUSSTAC_COMPILE=$${GAUSSTAC_COMPILE-fast} $(PY) -m gausstac_maniskill.cli demo
 
 # Two workers, one test file each at a time: a test process keeps one core busy (Python,
 # SAPIEN, Taichi compiling). GAUSSTAC_COMPILE=fast: Taichi skips its whole-kernel CSE,

@@ -16,7 +16,7 @@ subexpression elimination (``opt_level >= 1``). ``bench compile`` (index pad, 5 
 2-core CPU; ``BENCHMARKS.md``): the first step takes 158 s with Taichi's defaults, 109 s
 with the CFG pass off and 14 s with ``opt_level=0`` as well; the compiled steps take 1.03,
 1 and 1.20 times as long. The CFG pass is off here. ``GAUSSTAC_COMPILE`` chooses another
-build: ``fast`` also sets ``opt_level=0`` (``make test`` uses it) and ``taichi`` keeps
+build: ``fast`` also sets ``opt_level=0`` (``make test`` and ``make demo`` use it) and ``taichi`` keeps
 Taichi's own defaults. Builds differ by float rounding only (at most 0.35 µm in the pad's
 positions after 7 steps pressing it 1 mm).
 """
