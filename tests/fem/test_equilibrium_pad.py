@@ -359,8 +359,9 @@ def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
     over the sponge: a reading independent of the contact impulses) within 6 %, and no sponge
     particle passes into the pad's deformed surface. Guards: the pad's surface collider is
     lowered where the pad was pushed in (the shape coupling is wired), the link receives the push
-    (the soft row, key None), a held step from a saved state is bit-exact (on CUDA to float32 rounding), and the pad is exactly
-    at rest, its collider at its rest shape, once the sponge has been pulled away."""
+    (the soft row, key None), a held step from a saved state is bit-exact (on CUDA to float32
+    rounding), and the pad is exactly at rest, its collider at its rest shape, once the sponge
+    has been pulled away."""
     from gausstac_maniskill.bench import soft
 
     with pytest.warns(Warning, match="spans only"):
