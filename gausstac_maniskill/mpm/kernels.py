@@ -1375,15 +1375,16 @@ Placement = ti.types.argpack(  # what prepare reads and writes
 
 @ti.kernel
 def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
-            atomic: ti.template()) -> ti.types.vector(BOX, ti.i32):
+            atomic: ti.template()) -> ti.i64:
     """Interpolate link, group and collider frames for the substep [alpha0, alpha1] of the
     control step, move kinematic particles, find the active box, sort particles into slabs
     (with ``atomic`` scatter no sort is needed: the order is the active list, and the
     serial counting sort would cost a GPU more than the whole substep).
 
-    Writes the box to ``W.active_box`` (BOX layout) for :func:`advance` and returns it
-    (the host sizes the grid); the number of slabs is -1 if it would exceed SLAB_CAP
-    (nothing is sorted then).
+    Writes the box to ``W.active_box`` (BOX layout) for :func:`advance` and returns its number
+    of cells (the host sizes the grid), or -1 where the number of slabs would exceed SLAB_CAP
+    (nothing is sorted then; the box's slab count is -1). One scalar, not the box: a returned
+    vector costs the host more than the rest of the launch's Python.
     """
     n = W.counts[N_ACTIVE]
     inv_dx = 1.0 / W.consts[DX]
@@ -1422,7 +1423,8 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
     out = ti.Vector([o[0], o[1], o[2], dims[0], dims[1], dims[2], n_slabs, axis])
     for i in ti.static(range(BOX)):
         W.active_box[i] = out[i]
-    return out
+    cells = ti.cast(dims[0], ti.i64) * dims[1] * dims[2]
+    return ti.select(n_slabs < 0, ti.cast(-1, ti.i64), cells)
 
 
 @ti.kernel

@@ -66,6 +66,7 @@ import taichi as ti
 from .. import backend
 from ..config import Material, SolverSettings, _finite
 from ..errors import ConfigError, SimulationError, SimulationWarning
+from ..kernel_launch import CachedKernel
 from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix, turn_angle
 from . import kernels as K
 from .rows import forget_contact, move_rigidly, put_at_rest
@@ -87,6 +88,8 @@ def _release_packs() -> None:
         world._pack.clear()
 
 
+# the two kernels of every substep, launched without Taichi's per-call key look-up (kernel_launch.py)
+_prepare_kernel, _advance_kernel = CachedKernel(K.prepare), CachedKernel(K.advance)
 _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor")
 
 
@@ -837,10 +840,11 @@ class MPMWorld:
         d["pair_impulse"].fill(0.0)
         self._stale = set(_STATE_FIELDS)  # from here on the device holds the newer state
         cells = 0
+        flags = self._advance_flags()
         for k in range(n_sub):
             if self._n_active == 0:
                 break
-            cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub)
+            cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub, flags)
         self._check_health()
         if self._cellp and self._n_active and int(d["cell_count"].to_numpy()[1]):
             raise SimulationError(
@@ -949,20 +953,19 @@ class MPMWorld:
             self.rest_group(g.name)
 
     # ------------------------------------------------------------------ internals
-    def _prepare(self, a0: float, a1: float, dt: float):
+    def _prepare(self, a0: float, a1: float, dt: float) -> int:
         """Frames, kinematic particles and the slab sort for the substep [a0, a1] of the
-        control step; returns the active box (see :func:`kernels.prepare`)."""
+        control step; returns the active box's number of cells (see :func:`kernels.prepare`)."""
         s = self.settings
-        box = K.prepare(self._pack["placement"], a0, a1, dt, self._atomic)
-        ox, oy, oz, nx, ny, nz, n_slabs, _axis = (int(b) for b in box)
-        ncell = nx * ny * nz
-        if ncell > s.max_grid_cells or n_slabs < 0:
+        ncell = int(_prepare_kernel(self._pack["placement"], a0, a1, dt, self._atomic))
+        if ncell > s.max_grid_cells or ncell < 0:
+            ox, oy, oz, nx, ny, nz = (int(b) for b in self._dev["box"].to_numpy()[:6])
             raise SimulationError(self._explode_message(np.array([ox, oy, oz]) + s.grid_margin,
                                                         np.array([ox + nx, oy + ny, oz + nz]) - s.grid_margin - 3))
         need = ncell * (2 if self._two_fields else 1) * self.num_envs
         if need > self._grid_cap:
             self._alloc_grid(int(min(need * 1.5, 2 * s.max_grid_cells)))
-        return box
+        return ncell
 
     def _world_pack(self):
         """The kernels' argument pack (kernels.World) over the current device arrays."""
@@ -1061,12 +1064,17 @@ class MPMWorld:
         cells = [cell_pressure(m, s.pressure) for m in self.materials]
         return bool(s.fbar) and not all(cells), (int(s.pressure_iterations) if any(cells) else 0)
 
-    def _substep(self, a0: float, a1: float, dt: float) -> int:
-        box = self._prepare(a0, a1, dt)
+    def _advance_flags(self) -> tuple:
+        """:func:`kernels.advance`'s compile-time switches for this world, in its order after dt."""
         mode = 0 if not self.colliders else (1 if self.contact == "particle" else 2)
-        K.advance(self._world_pack(), dt, self._fbar, mode, self._nh_only(), self._two_fields, self._atomic,
-                  self._cellp)
-        return int(box[3] * box[4] * box[5])
+        return self._fbar, mode, self._nh_only(), self._two_fields, self._atomic, self._cellp
+
+    def _substep(self, a0: float, a1: float, dt: float, flags: tuple) -> int:
+        """One substep [a0, a1] of the control step, ``dt`` seconds long (``flags``:
+        :meth:`_advance_flags`); returns its active box's number of cells."""
+        ncell = self._prepare(a0, a1, dt)
+        _advance_kernel(self._world_pack(), dt, *flags)
+        return ncell
 
     def _sdf_values(self) -> np.ndarray:
         """Every mesh collider's SDF samples, one after another (``sdf_info`` holds the offsets)."""

@@ -1,0 +1,80 @@
+"""CachedKernel (kernel_launch.py): a kernel launched without Taichi's per-call key look-up.
+
+These compare the cached launch with Taichi's own call of the same kernel: they guard the
+caching (same results, the look-up skipped only while the same argpacks come back, Taichi's
+type check kept for every new pack), not any physics."""
+import numpy as np
+import pytest
+import taichi as ti
+
+from gausstac_maniskill.kernel_launch import CachedKernel
+
+Pack = ti.types.argpack(x=ti.types.ndarray(dtype=ti.f32, ndim=1), n=ti.types.ndarray(dtype=ti.i32, ndim=1))
+
+
+@ti.kernel
+def scale_add(p: Pack, a: ti.f32, twice: ti.template()) -> ti.f32:
+    total = 0.0
+    for i in range(p.n[0]):
+        v = p.x[i] * a
+        if ti.static(twice):
+            v *= 2.0
+        p.x[i] = v
+        total += v
+    return total
+
+
+@ti.kernel
+def takes_an_ndarray(x: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+    for i in x:
+        x[i] += 1.0
+
+
+def _pack(values):
+    x = ti.ndarray(ti.f32, len(values))
+    x.from_numpy(np.asarray(values, np.float32))
+    n = ti.ndarray(ti.i32, 1)
+    n.from_numpy(np.array([len(values)], np.int32))
+    return Pack(x=x, n=n)
+
+
+class _Counting:
+    """Counts the calls that take Taichi's ordinary path (look-up included)."""
+
+    def __init__(self, kernel):
+        self.kernel, self.calls = kernel, 0
+        self.__name__ = kernel.__name__
+
+    def __call__(self, *args):
+        self.calls += 1
+        return self.kernel(*args)
+
+
+def test_cached_launch_matches_taichis_call_and_skips_the_look_up():
+    cached = CachedKernel(scale_add)
+    ordinary = _Counting(scale_add)
+    cached.kernel = ordinary
+    mine, ref = _pack([1.0, 2.0, 3.0]), _pack([1.0, 2.0, 3.0])
+    for a, twice in [(0.5, False), (3.0, False), (2.0, True), (0.25, True), (1.5, False)]:
+        got = cached(mine, a, twice)
+        want = scale_add(ref, a, twice)
+        assert got == want
+        assert np.array_equal(mine.x.to_numpy(), ref.x.to_numpy())
+    # the ordinary path once per template value (False, True); the other three calls launched directly
+    assert ordinary.calls == 2
+    other = _pack([4.0])  # a new pack: checked by the ordinary path again
+    assert cached(other, 1.0, False) == pytest.approx(4.0)
+    assert ordinary.calls == 3
+
+
+def test_a_new_pack_of_the_wrong_type_is_still_refused():
+    cached = CachedKernel(scale_add)
+    cached(_pack([1.0]), 1.0, False)
+    bad = Pack(x=ti.ndarray(ti.i32, 1), n=ti.ndarray(ti.i32, 1))  # Taichi does not check this here
+    with pytest.raises(Exception, match="(?i)type|dtype|match"):
+        cached(bad, 1.0, False)
+
+
+def test_kernels_whose_key_depends_on_an_ndarray_argument_are_refused():
+    with pytest.raises(TypeError, match="'x'"):
+        CachedKernel(takes_an_ndarray)
