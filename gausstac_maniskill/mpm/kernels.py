@@ -33,6 +33,7 @@ order: not bit-reproducible).
 
 import taichi as ti
 
+from ..kernel_launch import cached_kernel
 from . import materials as mat
 from .colliders import collider_contact
 from .kinematics import frame_at, pose_at, quat_to_mat, write_frames
@@ -1157,6 +1158,7 @@ def pressure_solve(G: ti.template(), S: ti.template(), geo, dt, inv_dx, iters: t
             G.grid_v[idx] = G.grid_v[idx] - dt * G.grid_t[idx]
 
 
+@cached_kernel
 @ti.kernel
 def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link: NDI, group: NDI,
                  group_qs: NDI, group_touched: NDI, twist_change: NDF2):
@@ -1187,6 +1189,7 @@ def follow_links(active: NDI, n: ti.i32, v: NDV, C: NDM, x: NDV, kind: NDI, link
             C[p] += ti.Matrix([[0.0, -dw[2], dw[1]], [dw[2], 0.0, -dw[0]], [-dw[1], dw[0], 0.0]])
 
 
+@cached_kernel
 @ti.kernel
 def reset_contact(active: NDI, n: ti.i32, impulse: NDV, contact_id: NDI):
     for ii in range(n):
@@ -1195,6 +1198,7 @@ def reset_contact(active: NDI, n: ti.i32, impulse: NDV, contact_id: NDI):
         contact_id[p] = -1
 
 
+@cached_kernel
 @ti.kernel
 def chunk_health(active: NDI, n: ti.i32, x: NDV, v: NDV, F: NDM, kind: NDI, nchunk: ti.i32,
                  first_bad: NDI, vmax: NDF):
@@ -1240,9 +1244,10 @@ def energies(active: NDI, n: ti.i32, v: NDV, F: NDM, Jp: NDF, kind: NDI, matid: 
 # colliders, constants; and the particle order) for `advance`, `Placement` for
 # `prepare`. Taichi 1.7 allows one pack per kernel and 64 scalar elements per launch
 # (ndarrays count one each), so counts and constants live in small arrays. It spends
-# ~7 µs per ndarray on the Python side per launch, so each pack holds only what its
-# kernel reads. A substep is two launches: `prepare` (the host reads the active box
-# back to size the grid) and `advance`.
+# ~7 µs per ndarray on the Python side per launch (to look up the compiled variant, which
+# @cached_kernel skips while the same packs come back, and to set the arguments), so each
+# pack holds only what its kernel reads. A substep is two launches: `prepare` (the host reads
+# the active box's size back to size the grid) and `advance`.
 
 NDV2 = ti.types.ndarray(dtype=ti.math.vec2, ndim=1)
 BOX = 8  # active box layout: origin xyz, dims xyz (nodes), number of slabs, slab axis
@@ -1289,6 +1294,7 @@ Reduction = ti.types.argpack(  # what reduce_contact reads and sums into
     col_sums=NDF2, pair_sums=NDF2)  # per collider: -J, moment; per (link, slot): J, moment, depth
 
 
+@cached_kernel
 @ti.kernel
 def group_drift(P: Particles, active: NDI, n: ti.i32, link_poses: NDF2, dt: ti.f32, out: NDF):
     """out[g] = the largest speed [m/s] of a dynamic particle of group g relative to its
@@ -1311,6 +1317,7 @@ def fill_mass(P: Particles, start: ti.i32, stop: ti.i32, mass: ti.f32):
         P.mass[p] = mass
 
 
+@cached_kernel
 @ti.kernel
 def torn_particles(P: Particles, X0: NDV, active: NDI, n: ti.i32, link_poses: NDF2, group_tear: NDF, torn: NDI):
     """torn[g] += the number of group g's dynamic particles farther than ``group_tear[g]`` [m]
@@ -1325,6 +1332,7 @@ def torn_particles(P: Particles, X0: NDV, active: NDI, n: ti.i32, link_poses: ND
                 ti.atomic_add(torn[g], 1)
 
 
+@cached_kernel
 @ti.kernel
 def reduce_contact(P: Particles, X0: NDV, active: NDI, sums: Reduction, n_env: ti.i32, n_slot: ti.i32):
     """Sum the per-particle contact impulses of the control step (deterministic: the envs in
@@ -1373,6 +1381,7 @@ Placement = ti.types.argpack(  # what prepare reads and writes
     bounds=NDI2, slab_of=NDI, cursor=NDI, order=NDI, slab_start=NDI, active_box=NDI)  # slab sort
 
 
+@cached_kernel
 @ti.kernel
 def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
             atomic: ti.template()) -> ti.i64:
@@ -1427,6 +1436,7 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
     return ti.select(n_slabs < 0, ti.cast(-1, ti.i64), cells)
 
 
+@cached_kernel
 @ti.kernel
 def advance(W: World, dt: ti.f32, fbar: ti.template(), contact_mode: ti.template(), nh_only: ti.template(),
             two_field: ti.template(), atomic: ti.template(), cellp: ti.template()):
@@ -1505,6 +1515,7 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
         S.group_copy, S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id, cellp)
 
 
+@cached_kernel
 @ti.kernel
 def fbar_update(W: World, nh_only: ti.template(), two_field: ti.template(), atomic: ti.template(),
                 fbar: ti.template(), cellp: ti.template()):

@@ -66,7 +66,6 @@ import taichi as ti
 from .. import backend
 from ..config import Material, SolverSettings, _finite
 from ..errors import ConfigError, SimulationError, SimulationWarning
-from ..kernel_launch import CachedKernel
 from ..transforms import as_pose_matrices, as_pose_matrix, matrix_to_quat, quat_to_matrix, turn_angle
 from . import kernels as K
 from .rows import forget_contact, move_rigidly, put_at_rest
@@ -88,8 +87,6 @@ def _release_packs() -> None:
         world._pack.clear()
 
 
-# the two kernels of every substep, launched without Taichi's per-call key look-up (kernel_launch.py)
-_prepare_kernel, _advance_kernel = CachedKernel(K.prepare), CachedKernel(K.advance)
 _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor")
 
 
@@ -957,7 +954,7 @@ class MPMWorld:
         """Frames, kinematic particles and the slab sort for the substep [a0, a1] of the
         control step; returns the active box's number of cells (see :func:`kernels.prepare`)."""
         s = self.settings
-        ncell = int(_prepare_kernel(self._pack["placement"], a0, a1, dt, self._atomic))
+        ncell = int(K.prepare(self._pack["placement"], a0, a1, dt, self._atomic))
         if ncell > s.max_grid_cells or ncell < 0:
             ox, oy, oz, nx, ny, nz = (int(b) for b in self._dev["box"].to_numpy()[:6])
             raise SimulationError(self._explode_message(np.array([ox, oy, oz]) + s.grid_margin,
@@ -1073,7 +1070,7 @@ class MPMWorld:
         """One substep [a0, a1] of the control step, ``dt`` seconds long (``flags``:
         :meth:`_advance_flags`); returns its active box's number of cells."""
         ncell = self._prepare(a0, a1, dt)
-        _advance_kernel(self._world_pack(), dt, *flags)
+        K.advance(self._world_pack(), dt, *flags)
         return ncell
 
     def _sdf_values(self) -> np.ndarray:

@@ -24,11 +24,12 @@ def test_layer_is_bonded_at_its_bond_surface(offset):
     assert nodes - 1.0 > 1.5 * abs(surface - 1.0), f"nodes {nodes:.3f} h, surface {surface:.3f} h"
 
 
-def _press_error(nu, fbar):
+def _press_error(nu, fbar, half_width=None):
     """Relative force error of a sphere pressed 0.4 mm into the bonded 4 mm layer (a/h = 0.5,
-    the benchmark's bond position) against the numerical bonded-layer solution."""
+    the benchmark's bond position) against the numerical bonded-layer solution; ``half_width``
+    [m] of the simulated quarter layer (default the benchmark's, a + 4h = 18 mm)."""
     d = 0.1 * H
-    row = tl.run_point((0.5 * H) ** 2 / d, d, H, DX, nu, fbar=fbar)
+    row = tl.run_point((0.5 * H) ** 2 / d, d, H, DX, nu, fbar=fbar, half_width=half_width)
     assert np.isfinite(row["F_sim"]) and row["F_sim"] > 0
     return row["F_sim"] / row["F_layer"] - 1.0
 
@@ -37,9 +38,13 @@ def test_fbar_removes_volumetric_locking_at_nu_0499():
     """ν = 0.499, a/h = 0.5 at 4 cells, bond at its surface: plain MLS-MPM locks (measured
     +107 % against the bonded-layer solution; +9.4 % at ν = 0.45); with F-bar it is +11.4 %
     (+2.7 % at ν = 0.45: F-bar leaves ~9 points of locking at ν = 0.499, see BENCHMARKS.md).
-    The plain run is here so that the test shows the locking it guards against."""
-    locked = _press_error(0.499, fbar=False)
-    fixed = _press_error(0.499, fbar=True)
+    The plain run is here so that the test shows the locking it guards against.
+
+    Run on a 12 mm quarter layer (a + 2.5h; 6912 particles instead of 15 552): the truncated
+    layer reads +105.6 % plain and +10.7 % with F-bar (2026-11-28, at 10 mm +103.7 % and +9.9 %),
+    the benchmark's 18 mm one the figures above."""
+    locked = _press_error(0.499, fbar=False, half_width=12e-3)
+    fixed = _press_error(0.499, fbar=True, half_width=12e-3)
     assert locked > 0.5, f"plain MPM at nu=0.499: {100 * locked:+.1f} % (expected to lock)"
     assert abs(fixed) < 0.15, f"F-bar at nu=0.499: {100 * fixed:+.1f} %"
     assert abs(fixed) < locked / 5
