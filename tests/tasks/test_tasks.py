@@ -143,8 +143,9 @@ def test_finite_strain_pads_meet_the_sponge_as_mpm_pads():
             assert all(sim.pad_solver == "mpm" for sim in env.unwrapped.cosims)
         finally:
             env.close()
+        # refused while gym.make builds the env's scene (add_soft_object): no env is left to close
         with pytest.raises(ConfigError, match="fem_model='linear' or pad_solver='mpm'"):
-            _make("GaussTac-SqueezeSponge-v1", mpm_dx=2e-3, pad_solver="fem", fem_model="neo_hookean").reset(seed=0)
+            _make("GaussTac-SqueezeSponge-v1", mpm_dx=2e-3, pad_solver="fem", fem_model="neo_hookean")
 
 
 def test_squeeze_sponge_with_pads_at_equilibrium():
