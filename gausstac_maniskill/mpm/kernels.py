@@ -1392,8 +1392,9 @@ def prepare(W: Placement, alpha0: ti.f32, alpha1: ti.f32, dt: ti.f32,
 
     Writes the box to ``W.active_box`` (BOX layout) for :func:`advance` and returns its number
     of cells (the host sizes the grid), or -1 where the number of slabs would exceed SLAB_CAP
-    (nothing is sorted then; the box's slab count is -1). One scalar, not the box: a returned
-    vector costs the host more than the rest of the launch's Python.
+    (nothing is sorted then; the box's slab count is -1). One scalar, not the box: Taichi
+    builds a returned vector in Python (~0.25 ms per call under cProfile), a scalar it reads
+    in one call.
     """
     n = W.counts[N_ACTIVE]
     inv_dx = 1.0 / W.consts[DX]
