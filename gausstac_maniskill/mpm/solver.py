@@ -861,9 +861,8 @@ class MPMWorld:
         if self._patched and self._n_active:
             self._note_patch_contact()
         if self._n_active and self.contact == "particle":
-            K.reduce_contact(self._pack["P"], d["X0"], d["active"], K.Reduction(
-                env_rows=d["env_rows"], col_slot=d["col_slot"], col_ends=d["col_pose"], link_ends=d["link_pose"],
-                col_sums=d["col_impulse"], pair_sums=d["pair_impulse"]), self.num_envs, self._pair_impulse.shape[1])
+            K.reduce_contact(self._pack["P"], d["X0"], d["active"], self._pack["R"], self.num_envs,
+                             self._pair_impulse.shape[1])
         self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
         n_slot = self._pair_impulse.shape[1]
         pairs = d["pair_impulse"].to_numpy().astype(np.float64)
@@ -1321,7 +1320,8 @@ class MPMWorld:
 
     def _build_packs(self) -> None:
         """Group the device arrays into the kernels' argument packs (kernels.Particles, Scene,
-        Order, Placement; the Grid pack is built with the grid in _alloc_grid)."""
+        Order, Placement, Reduction; the Grid pack is built with the grid in _alloc_grid). Built
+        once per rebuild of the arrays: a kernel_launch.CachedKernel re-checks a new pack."""
         d, pk = self._dev, self._pack
         pk["W"] = None  # World is assembled on first use (_world_pack)
         if self._n:
@@ -1338,6 +1338,8 @@ class MPMWorld:
             "env_relax", "link_frames", "walls", "col_kind", "col_prm", "col_frames", "col_friction", "sdf",
             "sdf_info", "col_impulse", "col_env", "col_bound")})
         pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
+        pk["R"] = K.Reduction(env_rows=d["env_rows"], col_slot=d["col_slot"], col_ends=d["col_pose"],
+                              link_ends=d["link_pose"], col_sums=d["col_impulse"], pair_sums=d["pair_impulse"])
 
     def _upload_poses(self) -> None:
         """The step's pose rows (kinematics.py: start position, quaternion, end position,
