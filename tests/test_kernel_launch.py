@@ -105,3 +105,37 @@ def test_the_switch_and_kernels_whose_key_depends_on_an_argument_of_no_fixed_typ
     finally:
         kernel_launch.ENABLED = True
     assert ordinary.calls == 2
+
+
+_AFTER_RESET = """
+import taichi as ti
+from gausstac_maniskill.kernel_launch import CachedKernel
+P = ti.types.argpack(x=ti.types.ndarray(dtype=ti.f32, ndim=1))
+@ti.kernel
+def inc(p: P, a: ti.f32):
+    for i in p.x:
+        p.x[i] += a
+k = CachedKernel(inc)
+for _ in range(2):
+    ti.init(arch=ti.cpu, log_level=ti.ERROR)
+    x = ti.ndarray(ti.f32, 3)
+    pack = P(x=x)
+    k(pack, 1.0)
+    k(pack, 2.0)
+    print(x.to_numpy().tolist())
+    del pack, x
+    ti.reset()
+"""
+
+
+def test_a_cached_kernel_survives_a_taichi_reset(tmp_path):
+    """After ti.reset the compiled variant is gone: the next call compiles again (in a child
+    process: the test session's Taichi must not be reset)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "after_reset.py"  # Taichi reads a kernel's source from its file
+    script.write_text(_AFTER_RESET)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert [line for line in out.stdout.splitlines() if line.startswith("[3")] == ["[3.0, 3.0, 3.0]"] * 2
