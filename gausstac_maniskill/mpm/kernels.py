@@ -740,7 +740,7 @@ def beyond_bound(col_frames: ti.template(), col_bound: ti.template(), c, x, reac
     ``col_bound[c]`` about its origin at the substep's end): nothing of c is within ``reach``, and
     its signed distance there exceeds ``reach`` (a mesh's SDF too: its grid lies inside the sphere
     and is positive on its border), so it need not be evaluated."""
-    t1 = ti.Vector([col_frames[c, 21], col_frames[c, 22], col_frames[c, 23]])  # (kinematics.frame_at)
+    _R0, _t0, _R1, t1 = frame_at(col_frames, c)
     return (x - t1).norm() - col_bound[c] > reach
 
 
