@@ -18,6 +18,7 @@ points it reaches (or all of W at once, :mod:`.compliance`).
 """
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass
@@ -674,14 +675,14 @@ class QuasiStaticBody:
         :meth:`precompute_compliance`)."""
         return self.num_points if self._compliance is not None else len(self._columns)
 
-    def precompute_compliance(self, workers: int | None = None, progress: bool = True, cache: bool = True) -> None:
+    def precompute_compliance(self, progress: bool = True, cache: bool = True) -> None:
         """Compute (or load from the disk cache) the compliance among all surface points now,
         so that contact solves need no sparse solve for it: :func:`~.compliance.surface_compliance`
-        (float32, 36 S² bytes; about 75 s on one core for 2000 points, the first time)."""
+        (float32, 36 S² bytes; about 20 s on 2 cores for the index pad's 1 994 points, the first time)."""
         from .compliance import surface_compliance
 
         if self._compliance is None:
-            self._compliance = surface_compliance(self, workers=workers, progress=progress, cache=cache)
+            self._compliance = surface_compliance(self, progress=progress, cache=cache)
             self._columns = {}
 
     # ------------------------------------------------------------------ linear algebra
@@ -718,6 +719,29 @@ class QuasiStaticBody:
         ``loads`` [num_free, C] (dense or sparse; N): one multi-right-hand-side solve."""
         loads = loads.toarray() if hasattr(loads, "toarray") else np.asarray(loads, float)
         return self._at_points(self._lu.solve(loads)).transpose(2, 0, 1)
+
+    def inverse_between(self, P, Q=None, bar=None) -> np.ndarray:
+        """Pᵀ K⁻¹ Q [p, q] float64 for load sets ``P`` [num_free, p] and ``Q`` [num_free, q] (sparse;
+        None: P, the result then symmetric) on the free degrees of freedom (as :meth:`point_loads`
+        and :meth:`dofs_to_free` give them): all their solves at once, by the stiffness's Cholesky
+        factor taken lattice plane by lattice plane (:mod:`.plane_cholesky`, dense BLAS 3 on every
+        core; SuperLU's factor is not needed). ``bar``: a tqdm bar advanced once per plane."""
+        from .plane_cholesky import inverse_between
+
+        free = self._free
+        return inverse_between(self._K[free][:, free], self._planes, P, Q, bar=bar, name=self.name)
+
+    @functools.cached_property
+    def _planes(self) -> np.ndarray:
+        """[num_free] the lattice plane of each free degree of freedom (:func:`~.plane_cholesky.lattice_planes`)."""
+        from .plane_cholesky import lattice_planes
+
+        return lattice_planes(self.body.nodes[self._free // 3])[0]
+
+    @property
+    def num_planes(self) -> int:
+        """Lattice planes :meth:`inverse_between` works through (its progress bar's total)."""
+        return int(self._planes.max()) + 1
 
     def dofs_to_free(self, A) -> "scipy.sparse.csc_matrix":
         """[num_free, R]: the transpose of a readout ``A`` [R, 3V] (sparse; node-major degrees

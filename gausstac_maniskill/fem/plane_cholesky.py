@@ -1,0 +1,226 @@
+"""Pᵀ K⁻¹ Q for a lattice body's stiffness K, by a Cholesky factor taken plane by plane.
+
+A Q1 cube element couples only nodes one lattice step apart. Numbered plane by plane along one
+lattice axis, a lattice body's unknowns give a block-tridiagonal K (block i: the unknowns in
+plane i), whose Cholesky factor K = L Lᵀ is block-bidiagonal:
+
+    L_ii Lᵢᵢᵀ = K_ii − L_i,i−1 L_i,i−1ᵀ,     L_i,i−1 = K_i,i−1 L_i−1,i−1⁻ᵀ
+
+with dense blocks (they fill in). On a thin pad the planes across its length are small (the
+index pad at 0.5 mm elements: 45 planes of about 1 040 unknowns), so the blocks are dense
+matrices that BLAS 3 works on at full speed, on every core.
+
+Pᵀ K⁻¹ Q = (L⁻¹P)ᵀ (L⁻¹Q) needs only forward substitution, Y_i = L_ii⁻¹ (P_i − L_i,i−1 Y_i−1),
+and each plane adds its Y_iᵀ Y_i to the product. The factor is used as it is computed: nothing
+beyond two planes is kept. A load column is zero before its first plane, and so is its forward
+solution: the columns are taken in the order of their first plane, and plane i works only on
+those begun by then (on average half of them).
+
+The planes before the middle one are swept from the first, those after it from the last, and
+the middle plane comes last (a twisted factorization): a column meets only the planes between
+its own and the middle, and each half's product is a quarter of the whole.
+
+On 2 cores this computes the index pad's compliance among its 1 994 surface points (5 982 load
+columns, 46 743 unknowns) in 22 s, where SuperLU's column-by-column solves in two worker
+processes took 114 s, and its maps' response (1 024 readouts) in 18 s instead of 26
+(BENCHMARKS.md, eighteenth session).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+__all__ = ["lattice_planes", "inverse_between"]
+
+
+def lattice_planes(coordinates: np.ndarray) -> tuple[np.ndarray, int]:
+    """The plane of each unknown along the lattice axis that gives the smallest planes.
+
+    Args:
+        coordinates: [n, 3] int, the lattice coordinates of each unknown's node.
+
+    Returns:
+        (plane [n] int, numbered 0… without gaps, along the chosen axis; that axis).
+
+    The cost of :func:`inverse_between` grows as Σ bᵢ² over the planes' sizes bᵢ (the blocks'
+    products with the load columns); the axis with the smallest sum is chosen.
+    """
+    coordinates = np.asarray(coordinates, np.int64)
+    best = None
+    for axis in range(3):
+        values, plane = np.unique(coordinates[:, axis], return_inverse=True)
+        cost = float((np.bincount(plane).astype(float) ** 2).sum())
+        if best is None or cost < best[0]:
+            best = (cost, plane.ravel(), axis)
+    return best[1], best[2]
+
+
+def _usable_cpus() -> int:
+    """The CPUs this process may run on (BLAS's threads while no Taichi kernel runs)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def _first_plane(M, plane: np.ndarray, count: int) -> np.ndarray:
+    """[columns] the first plane (of ``count``) each column of sparse ``M`` is nonzero in;
+    ``count`` where none (rows of ``plane`` ≥ ``count`` do not count)."""
+    first = np.full(M.shape[1], count, np.int64)
+    nonempty = np.diff(M.indptr) > 0
+    if nonempty.any():
+        first[nonempty] = np.minimum.reduceat(plane[M.indices], M.indptr[:-1][nonempty])
+    return np.minimum(first, count)
+
+
+class _Loads:
+    """A load set [n, k] (sparse CSC) as one sweep meets it: its columns in the order of their
+    first plane of the sweep, the columns begun by each plane, and the last plane's forward solution."""
+
+    def __init__(self, M, plane: np.ndarray, count: int):
+        first = _first_plane(M, plane, count)
+        self.order = np.argsort(first, kind="stable")  # the sweep's column j is M's column order[j]
+        self.begun = np.searchsorted(first[self.order], np.arange(count), side="right")  # columns begun by plane i
+        self.rows = M[:, self.order].tocsr()
+        self.Y = np.zeros((0, 0))  # the last plane's forward solution, on the columns begun by then
+
+    def advance(self, i: int, rows: np.ndarray, L: np.ndarray, C: np.ndarray | None) -> np.ndarray:
+        """Y_i = L_ii⁻¹ (M_i − C Y_i−1) on the columns begun by plane i (``rows``), where ``L``
+        is L_ii and ``C`` is L_i,i−1 (None for the first plane)."""
+        import scipy.linalg as la
+
+        c = int(self.begun[i])
+        Y = self.rows[rows][:, :c].toarray()
+        last = self.Y.shape[1]
+        if C is not None and last:
+            Y[:, :last] -= C @ self.Y
+        self.Y = la.solve_triangular(L, Y, lower=True, check_finite=False) if c else Y
+        return self.Y
+
+    @property
+    def columns(self) -> np.ndarray:
+        """M's columns that the last forward solution holds, in its order."""
+        return self.order[:self.Y.shape[1]]
+
+
+def _chol(A: np.ndarray, name: str, where: str) -> np.ndarray:
+    import scipy.linalg as la
+
+    try:
+        return la.cholesky(A, lower=True, check_finite=False)
+    except la.LinAlgError:
+        raise ValueError(f"{name}: the stiffness is not positive definite ({where}: a part of the body "
+                         "held by nothing?)") from None
+
+
+def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
+    """Factor and forward-substitute along ``rows`` (the unknowns of each plane, in the sweep's
+    order; ``plane`` [n] numbers them so, and ≥ len(rows) off the sweep), summing (L⁻¹P)ᵀ(L⁻¹Q)
+    over them.
+
+    Returns:
+        (that sum [cp, cq] on the cp columns of P and cq of Q begun along the sweep, in the
+        sweep's column order; P's and Q's :class:`_Loads`, holding that order and the last
+        plane's forward solution; the last L_ii).
+    """
+    import scipy.linalg as la
+
+    count = len(rows)
+    p_loads = _Loads(P, plane, count)
+    q_loads = p_loads if Q is None else _Loads(Q, plane, count)
+    out = np.zeros((int(p_loads.begun[-1]), int(q_loads.begun[-1]))) if count else np.zeros((0, 0))
+    L = C = None
+    for i, r in enumerate(rows):
+        A = K[r][:, r].toarray()
+        if i:
+            # L_i,i−1 = K_i,i−1 L_i−1,i−1⁻ᵀ: its transpose is L_i−1,i−1⁻¹ K_i−1,i
+            C = la.solve_triangular(L, K[rows[i - 1]][:, r].toarray(), lower=True, check_finite=False).T
+            A -= C @ C.T  # this plane's Schur complement
+        L = _chol(A, name, f"plane {i} of a sweep of {count}")
+        Yp = p_loads.advance(i, r, L, C)
+        Yq = Yp if Q is None else q_loads.advance(i, r, L, C)
+        cp, cq = Yp.shape[1], Yq.shape[1]
+        if Q is None and cp:  # the lower triangle only (dsyrk); mirrored at the end
+            out[:cp, :cp] += la.blas.dsyrk(1.0, Yp, trans=1, lower=1)
+        elif cp and cq:
+            out[:cp, :cq] += Yp.T @ Yq
+        if bar is not None:
+            bar.update(1)
+    if Q is None:
+        out = _mirrored(out)
+    return out, p_loads, q_loads, L
+
+
+def _mirrored(lower: np.ndarray) -> np.ndarray:
+    """The symmetric matrix whose lower triangle ``lower`` holds (its upper one zero, as dsyrk
+    leaves it)."""
+    out = lower + lower.T
+    out[np.diag_indices_from(out)] *= 0.5
+    return out
+
+
+def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body") -> np.ndarray:
+    """Pᵀ K⁻¹ Q [p, q] float64 (the module's twisted sweep; on every CPU BLAS may use).
+
+    Args:
+        K: [n, n] sparse, symmetric positive definite, coupling only unknowns in the same or
+            adjacent planes (a Q1 lattice body's stiffness on its free unknowns).
+        plane: [n] int, each unknown's plane (:func:`lattice_planes`).
+        P: [n, p] sparse load columns; Q: [n, q] sparse, or None for P (the result is then
+            symmetric, and computed as such: half the products).
+        bar: a progress bar (tqdm) advanced by one per plane.
+        name: what K belongs to, for error messages.
+
+    Raises:
+        ValueError: K couples planes that are not adjacent, or is not positive definite (a part
+            of the body held by nothing).
+    """
+    import scipy.linalg as la
+    import scipy.sparse as sp
+    from threadpoolctl import threadpool_limits
+
+    K = sp.csr_matrix(K, dtype=np.float64)
+    plane = np.asarray(plane, np.int64)
+    n = K.shape[0]
+    if K.shape != (n, n) or plane.shape != (n,) or P.shape[0] != n or (Q is not None and Q.shape[0] != n):
+        raise ValueError(f"{name}: K {K.shape}, plane {plane.shape} and the loads do not match")
+    coo = K.tocoo()
+    if len(coo.row) and np.abs(plane[coo.row] - plane[coo.col]).max() > 1:
+        raise ValueError(f"{name}: the stiffness couples unknowns more than one plane apart")
+    P = sp.csc_matrix(P, dtype=np.float64)
+    Q = None if Q is None else sp.csc_matrix(Q, dtype=np.float64)
+    out = np.zeros((P.shape[1], P.shape[1] if Q is None else Q.shape[1]))
+    if n == 0:
+        return out
+    count = int(plane.max()) + 1
+    rows = np.split(np.argsort(plane, kind="stable"), np.cumsum(np.bincount(plane, minlength=count))[:-1])
+    mid = count // 2
+    with threadpool_limits(limits=_usable_cpus(), user_api="blas"):
+        # the two halves, each swept toward the middle plane (its planes numbered from its far end)
+        before = _sweep(K, rows[:mid], P, Q, np.where(plane < mid, plane, count), name, bar)
+        after = _sweep(K, rows[:mid:-1], P, Q, np.where(plane > mid, count - 1 - plane, count), name, bar)
+        # the middle plane, coupled to the last plane of each half
+        r = rows[mid]
+        A = K[r][:, r].toarray()
+        Yp = P[r].toarray()
+        Yq = None if Q is None else Q[r].toarray()
+        for (part, p_loads, q_loads, L), side in ((before, rows[mid - 1] if mid else None),
+                                                  (after, rows[mid + 1] if mid + 1 < count else None)):
+            if side is None:  # a half with no plane
+                continue
+            out[np.ix_(p_loads.order[:part.shape[0]], q_loads.order[:part.shape[1]])] += part
+            C = la.solve_triangular(L, K[side][:, r].toarray(), lower=True, check_finite=False).T
+            A -= C @ C.T
+            Yp[:, p_loads.columns] -= C @ p_loads.Y
+            if Q is not None:
+                Yq[:, q_loads.columns] -= C @ q_loads.Y
+        L = _chol(A, name, "the middle plane")
+        Yp = la.solve_triangular(L, Yp, lower=True, check_finite=False)
+        if Q is None:
+            out += _mirrored(la.blas.dsyrk(1.0, Yp, trans=1, lower=1))
+        else:
+            out += Yp.T @ la.solve_triangular(L, Yq, lower=True, check_finite=False)
+        if bar is not None:
+            bar.update(1)
+    return out

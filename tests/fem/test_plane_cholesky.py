@@ -1,0 +1,77 @@
+"""Pᵀ K⁻¹ Q by the plane-by-plane Cholesky factor (fem/plane_cholesky.py).
+
+Linear algebra, not physics: each result is checked against a dense solve of the same matrix
+(NumPy's LAPACK), an independent route. The physics of the compliance it serves is tested in
+test_contact.py and test_equilibrium_pad.py."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from gausstac_maniskill.fem import layer_body
+from gausstac_maniskill.fem.plane_cholesky import inverse_between, lattice_planes
+
+
+def _dense(K, P, Q):
+    return P.toarray().T @ np.linalg.solve(K.toarray(), Q.toarray())
+
+
+def _chain(sizes, seed=0):
+    """A random symmetric positive definite block-tridiagonal K with planes of ``sizes``."""
+    rng = np.random.default_rng(seed)
+    plane = np.repeat(np.arange(len(sizes)), sizes)
+    n = len(plane)
+    A = rng.normal(size=(n, n)) * (np.abs(plane[:, None] - plane[None, :]) <= 1)
+    K = A @ A.T * (np.abs(plane[:, None] - plane[None, :]) <= 1) + n * np.eye(n)  # diagonally dominant
+    return sp.csr_matrix(K), plane
+
+
+def test_body_loads_match_a_dense_solve():
+    body = layer_body(2e-3, 4e-3, 1e-3, 0.3e6, 0.49)  # several planes each way
+    rng = np.random.default_rng(1)
+    n = body.num_free
+    P = body.point_loads(np.arange(body.num_points))
+    Q = sp.random(n, 7, density=0.05, random_state=rng, format="csc")  # loads spread over many planes
+    Q = Q @ sp.diags([1.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0])  # column 3: no load
+    K = body._K[body._free][:, body._free]
+    W = body.inverse_between(P)
+    ref = _dense(K, P, P)
+    assert body.num_planes > 2
+    np.testing.assert_allclose(W, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    assert np.array_equal(W, W.T)
+    M = body.inverse_between(Q, P)
+    ref = _dense(K, Q, P)
+    np.testing.assert_allclose(M, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    assert not M[3].any()
+
+
+@pytest.mark.parametrize("sizes", [(5,), (4, 6), (3, 5, 4), (2, 3, 4, 5, 6, 7, 3)])
+def test_any_number_of_planes(sizes):
+    K, plane = _chain(sizes)
+    rng = np.random.default_rng(2)
+    P = sp.random(len(plane), 6, density=0.3, random_state=rng, format="csc")
+    Q = sp.random(len(plane), 4, density=0.3, random_state=rng, format="csc")
+    for a, b in ((P, None), (P, Q)):
+        ref = _dense(K, a, a if b is None else b)
+        np.testing.assert_allclose(inverse_between(K, plane, a, b), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+def test_bad_matrices_are_refused_by_name():
+    K, plane = _chain((3, 3, 3))
+    P = sp.identity(9, format="csc")
+    far = K.tolil()
+    far[0, 8] = far[8, 0] = 0.1  # couples planes 0 and 2
+    with pytest.raises(ValueError, match="pad: the stiffness couples unknowns more than one plane apart"):
+        inverse_between(far.tocsr(), plane, P, name="pad")
+    singular = K.tolil()
+    singular[4, :] = 0.0
+    singular[:, 4] = 0.0  # an unknown held by nothing
+    with pytest.raises(ValueError, match="pad: the stiffness is not positive definite"):
+        inverse_between(singular.tocsr(), plane, P, name="pad")
+
+
+def test_planes_run_along_the_axis_of_the_smallest_planes():
+    grid = np.stack(np.meshgrid(np.arange(2), np.arange(3), np.arange(10), indexing="ij"), -1).reshape(-1, 3)
+    plane, axis = lattice_planes(grid)
+    assert axis == 2 and np.array_equal(plane, grid[:, 2])
+    plane, axis = lattice_planes(grid + [0, 0, 5])  # numbered from 0, whatever the origin
+    assert axis == 2 and plane.min() == 0 and plane.max() == 9
