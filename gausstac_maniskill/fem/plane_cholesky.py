@@ -113,6 +113,32 @@ def _chol(A: np.ndarray, name: str, where: str) -> np.ndarray:
                          "held by nothing?)") from None
 
 
+#: Columns of the right factor per product in :func:`_add_product` (and the blocks of :func:`_symmetrise`).
+PRODUCT_BLOCK = 4096
+
+
+def _add_product(out: np.ndarray, Yp: np.ndarray, Yq: np.ndarray) -> None:
+    """out += Ypᵀ Yq, by blocks of :data:`PRODUCT_BLOCK` columns of Yq. NumPy hands Yᵀ Y on one
+    buffer to BLAS's dsyrk, which crashed (segmentation fault) beyond 16 384 columns here (NumPy
+    2.4.6, OpenBLAS 0.3.31: 1 200 × 16 500 crashes, × 14 000 does not); the blocks stay far below
+    that, and keep the product's temporary small."""
+    for j in range(0, Yq.shape[1], PRODUCT_BLOCK):
+        block = Yq[:, j:j + PRODUCT_BLOCK]
+        if Yp.shape[1] and block.shape[1]:
+            out[:, j:j + block.shape[1]] += Yp.T @ block
+
+
+def _symmetrise(out: np.ndarray) -> None:
+    """out ← (out + outᵀ) / 2 in place, block by block (no second matrix of its size)."""
+    m = out.shape[0]
+    for i in range(0, m, PRODUCT_BLOCK):
+        for j in range(i, m, PRODUCT_BLOCK):
+            a, b = out[i:i + PRODUCT_BLOCK, j:j + PRODUCT_BLOCK], out[j:j + PRODUCT_BLOCK, i:i + PRODUCT_BLOCK]
+            mean = 0.5 * (a + b.T)
+            a[...] = mean
+            b[...] = mean.T
+
+
 def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
     """Factor and forward-substitute along ``rows`` (the unknowns of each plane, in the sweep's
     order; ``plane`` [n] numbers them so, and ≥ len(rows) off the sweep), summing (L⁻¹P)ᵀ(L⁻¹Q)
@@ -141,9 +167,7 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
         G = None if C is None else L_inv @ C
         Yp = p_loads.advance(i, r, L_inv, G)
         Yq = Yp if Q is None else q_loads.advance(i, r, L_inv, G)
-        cp, cq = Yp.shape[1], Yq.shape[1]
-        if cp and cq:  # a general product even for Yᵀ Y: OpenBLAS's dsyrk ran at a third of dgemm's speed
-            out[:cp, :cq] += Yp.T @ Yq
+        _add_product(out[:Yp.shape[1], :Yq.shape[1]], Yp, Yq)
         if bar is not None:
             bar.update(1)
     return out, p_loads, q_loads, L
@@ -186,30 +210,34 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
     rows = np.split(np.argsort(plane, kind="stable"), np.cumsum(np.bincount(plane, minlength=count))[:-1])
     mid = count // 2
     with threadpool_limits(limits=_usable_cpus(), user_api="blas"):
-        # the two halves, each swept toward the middle plane (its planes numbered from its far end)
-        before = _sweep(K, rows[:mid], P, Q, np.where(plane < mid, plane, count), name, bar)
-        after = _sweep(K, rows[:mid:-1], P, Q, np.where(plane > mid, count - 1 - plane, count), name, bar)
+        # the two halves, each swept toward the middle plane (its planes numbered from its far end);
+        # each half's product goes into the result at once (its buffer is then freed)
+        halves = []
+        for planes, numbering, side in ((rows[:mid], np.where(plane < mid, plane, count), mid - 1),
+                                        (rows[:mid:-1], np.where(plane > mid, count - 1 - plane, count), mid + 1)):
+            if not len(planes):  # a half with no plane
+                continue
+            part, p_loads, q_loads, L = _sweep(K, planes, P, Q, numbering, name, bar)
+            out[np.ix_(p_loads.order[:part.shape[0]], q_loads.order[:part.shape[1]])] += part
+            del part
+            halves.append((p_loads, q_loads, L, rows[side]))
         # the middle plane, coupled to the last plane of each half
         r = rows[mid]
         A = K[r][:, r].toarray()
         Yp = P[r].toarray()
         Yq = None if Q is None else Q[r].toarray()
-        for (part, p_loads, q_loads, L), side in ((before, rows[mid - 1] if mid else None),
-                                                  (after, rows[mid + 1] if mid + 1 < count else None)):
-            if side is None:  # a half with no plane
-                continue
-            out[np.ix_(p_loads.order[:part.shape[0]], q_loads.order[:part.shape[1]])] += part
+        for p_loads, q_loads, L, side in halves:
             C = la.solve_triangular(L, K[side][:, r].toarray(), lower=True, check_finite=False).T
             A -= C @ C.T
             Yp[:, p_loads.columns] -= C @ p_loads.Y
             if Q is not None:
                 Yq[:, q_loads.columns] -= C @ q_loads.Y
+        del halves
         L = _chol(A, name, "the middle plane")
         Yp = la.solve_triangular(L, Yp, lower=True, check_finite=False)
-        out += Yp.T @ (Yp if Q is None else la.solve_triangular(L, Yq, lower=True, check_finite=False))
+        _add_product(out, Yp, Yp if Q is None else la.solve_triangular(L, Yq, lower=True, check_finite=False))
         if bar is not None:
             bar.update(1)
     if Q is None:  # symmetric to rounding as computed; exactly so
-        out += out.T
-        out *= 0.5
+        _symmetrise(out)
     return out
