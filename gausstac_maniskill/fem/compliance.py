@@ -9,8 +9,8 @@ point it reaches the first time.
 W = Nᵀ K⁻¹ N for the point loads N [num_free, 3S]: 3S solves, all taken at once by the body's
 stiffness factored lattice plane by lattice plane (:meth:`~.contact.QuasiStaticBody.inverse_between`,
 dense BLAS 3 on every core). At the index pad's 0.5 mm elements (S = 1994 points, 46 743
-unknowns) that is about 20 s on 2 cores, where SuperLU's column-by-column solves took about
-75 s per core. :func:`surface_compliance` shows a progress bar and stores E·W in float32 (36 S²
+unknowns) that is about 20 s on 2 cores, where SuperLU's column-by-column solves in two worker
+processes took 114 s on the same host. :func:`surface_compliance` shows a progress bar and stores E·W in float32 (36 S²
 bytes: 143 MB for that pad) under :func:`cache_dir`, keyed by the body's elements, bond, points
 and ν: later runs, and other pads of the same shape, load it in a fraction of a second. The cache
 holds derived data only: a file that cannot be read is computed again (with a warning naming
@@ -89,8 +89,8 @@ def readout_responses(body, A, progress: bool = True, cache: bool = True, what: 
     """[R, 3S] float32: the response of R readouts r = A u, linear in ``body``'s nodal
     displacements u (``A`` [R, 3V] sparse, node-major degrees of freedom), to a unit force [N]
     at each surface point along each axis (columns ordered (point, axis), as W's): r = M f for
-    point forces f [3S]. M = A K⁻¹ N (K symmetric), all of it at once as
-    :func:`surface_compliance` computes W. Cached on
+    point forces f [3S]. M = A K⁻¹ N, all of it at once as :func:`surface_compliance` computes
+    W. Cached on
     disk as :func:`surface_compliance`, keyed by the body, its Young's modulus and the bytes of A;
     ``what`` names them on the progress bar."""
     import scipy.sparse as sp

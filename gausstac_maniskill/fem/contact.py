@@ -644,8 +644,9 @@ class QuasiStaticBody:
     @property
     def _lu(self):
         """K's sparse LU on the free degrees of freedom (SuperLU), factored the first time a
-        solve needs it: about 0.5 GB and 3 s for the index pad at 0.5 mm elements. A linear pad
-        whose compliance and map responses come from the disk cache never factors."""
+        solve needs it: about 0.5 GB and 3 s for the index pad at 0.5 mm elements (10 s on
+        2026-11-29's host). The compliance and the maps' response do not need it
+        (:meth:`inverse_between`): a linear pad that only presses and reads its maps never factors."""
         if self._factor is None:
             import scipy.sparse.linalg as sla
 

@@ -41,8 +41,8 @@ PRECOMPUTE_BYTES = 256 * 2 ** 20
 #: scene rebuilt at every reset (a task's) finds its pads' factors and compliances again instead
 #: of assembling them anew (1 s per pad at the default resolution). Each holds its compliance
 #: (143 MB at the default resolution), its maps' responses (25 MB) and, once something needs a
-#: solve of the whole body (the camera drawing the pad deformed, the finite-strain model, a
-#: compliance not yet on disk), its factor (~0.5 GB). :func:`forget_bodies` lets them go.
+#: solve of the whole body (the camera drawing the pad deformed, the finite-strain model, the
+#: columns of a pad solved point by point), its factor (~0.5 GB). :func:`forget_bodies` lets them go.
 BODY_CACHE = 4
 #: Surface motion, as a fraction of the layer's thickness, beyond which a linear pad says its
 #: forces are not physical (the tasks' experts stay under 25 %; random actions reach 160 %).
@@ -140,8 +140,8 @@ class EquilibriumPad:
 
     @property
     def body(self):
-        """The pad's :class:`~.contact.QuasiStaticBody`, assembled and factored on first use
-        (and its compliance computed or loaded, see ``precompute``)."""
+        """The pad's :class:`~.contact.QuasiStaticBody`, assembled on first use (and its
+        compliance computed or loaded, see ``precompute``; its factor comes when a solve needs it)."""
         if self._source is not None:
             return self._source.body
         if self._body is None:
