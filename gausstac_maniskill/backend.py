@@ -31,7 +31,8 @@ import taichi as ti
 
 from .cpu_pinning import pin_taichi_workers, thread_ids
 
-__all__ = ["BackendError", "init", "ensure_init", "current_arch", "torch_device", "is_initialized", "before_shutdown"]
+__all__ = ["BackendError", "init", "ensure_init", "current_arch", "torch_device", "is_initialized", "before_shutdown",
+           "cpu_share", "cpu_threads"]
 
 _VALID = ("cpu", "cuda", "auto")
 _BUILDS = ("", "fast", "taichi")  # GAUSSTAC_COMPILE: the product build, make test's, Taichi's defaults
@@ -146,7 +147,7 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
                     "backend arch='cuda' was requested but no working CUDA device was "
                     "found (Taichi could not start its CUDA backend). Use arch='cpu' or "
                     "arch='auto', or set GAUSSTAC_ARCH=cpu.")
-        cpu_threads = int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
+        cpu_threads = cpu_share()
         kwargs = dict(arch=ti.cpu, default_fp=ti.f32, random_seed=seed, debug=debug,
                       log_level=ti.WARN, **opts)
         if cpu_threads:
@@ -159,6 +160,24 @@ def init(arch: str = "auto", *, seed: int = 0, debug: bool = False) -> str:
 
 
 atexit.register(_shutdown)  # at import: it then runs after whatever registers later (LIFO)
+
+
+def cpu_share() -> int | None:
+    """This process's share of the CPU in threads, ``GAUSSTAC_CPU_THREADS`` (a collection worker
+    sets it: :mod:`~gausstac_maniskill.collect`); None where not set."""
+    return int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
+
+
+def cpu_threads() -> int:
+    """Threads this process's host work may run on at once (BLAS's, between Taichi kernels):
+    :func:`cpu_share` where set, else every CPU of its affinity set."""
+    share = cpu_share()
+    if share:
+        return share
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
 
 
 def ensure_init() -> str:

@@ -27,8 +27,6 @@ processes took 114 s, and its maps' response (1 024 readouts) in 18 s instead of
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 __all__ = ["lattice_planes", "inverse_between"]
@@ -54,14 +52,6 @@ def lattice_planes(coordinates: np.ndarray) -> tuple[np.ndarray, int]:
         if best is None or cost < best[0]:
             best = (cost, plane.ravel(), axis)
     return best[1], best[2]
-
-
-def _usable_cpus() -> int:
-    """The CPUs this process may run on (BLAS's threads while no Taichi kernel runs)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
 
 
 def _first_plane(M, plane: np.ndarray, count: int) -> np.ndarray:
@@ -174,7 +164,8 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
 
 
 def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body") -> np.ndarray:
-    """Pᵀ K⁻¹ Q [p, q] float64 (the module's twisted sweep; on every CPU BLAS may use).
+    """Pᵀ K⁻¹ Q [p, q] float64 (the module's twisted sweep; BLAS on
+    :func:`~gausstac_maniskill.backend.cpu_threads` threads: this process's share of the CPU).
 
     Args:
         K: [n, n] sparse, symmetric positive definite, coupling only unknowns in the same or
@@ -193,6 +184,8 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
     import scipy.sparse as sp
     from threadpoolctl import threadpool_limits
 
+    from ..backend import cpu_threads
+
     K = sp.csr_matrix(K, dtype=np.float64)
     plane = np.asarray(plane, np.int64)
     n = K.shape[0]
@@ -209,7 +202,7 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
     count = int(plane.max()) + 1
     rows = np.split(np.argsort(plane, kind="stable"), np.cumsum(np.bincount(plane, minlength=count))[:-1])
     mid = count // 2
-    with threadpool_limits(limits=_usable_cpus(), user_api="blas"):
+    with threadpool_limits(limits=cpu_threads(), user_api="blas"):
         # the two halves, each swept toward the middle plane (its planes numbered from its far end);
         # each half's product goes into the result at once (its buffer is then freed)
         halves = []

@@ -78,3 +78,30 @@ def test_planes_run_along_the_axis_of_the_smallest_planes():
     assert axis == 2 and np.array_equal(plane, grid[:, 2])
     plane, axis = lattice_planes(grid + [0, 0, 5])  # numbered from 0, whatever the origin
     assert axis == 2 and plane.min() == 0 and plane.max() == 9
+
+
+def test_blas_threads_follow_the_process_share(monkeypatch):
+    """A collection worker's share of the CPU (GAUSSTAC_CPU_THREADS) bounds BLAS's threads in
+    the sweep; without it, every CPU of the process's affinity set."""
+    from threadpoolctl import threadpool_info
+
+    from gausstac_maniskill import backend
+    from gausstac_maniskill.fem import plane_cholesky
+
+    seen = []
+    real = plane_cholesky._add_product
+
+    def spy(out, Yp, Yq):
+        seen.append(max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"))
+        real(out, Yp, Yq)
+
+    monkeypatch.setattr(plane_cholesky, "_add_product", spy)
+    K, plane = _chain((3, 4, 3))
+    P = sp.identity(10, format="csc")
+    monkeypatch.setenv("GAUSSTAC_CPU_THREADS", "1")
+    inverse_between(K, plane, P)
+    assert seen and set(seen) == {1}
+    monkeypatch.delenv("GAUSSTAC_CPU_THREADS")
+    seen.clear()
+    inverse_between(K, plane, P)
+    assert set(seen) == {backend.cpu_threads()} and backend.cpu_share() is None
