@@ -137,7 +137,7 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
     Returns:
         (that sum [cp, cq] on the cp columns of P and cq of Q begun along the sweep, in the
         sweep's column order; P's and Q's :class:`_Loads`, holding that order and the last
-        plane's forward solution; the last L_ii).
+        plane's forward solution; the last L_ii⁻¹).
     """
     import scipy.linalg as la
 
@@ -145,12 +145,12 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
     p_loads = _Loads(P, plane, count)
     q_loads = p_loads if Q is None else _Loads(Q, plane, count)
     out = np.zeros((int(p_loads.begun[-1]), int(q_loads.begun[-1]))) if count else np.zeros((0, 0))
-    L = C = None
+    L_inv = C = None
     for i, r in enumerate(rows):
         A = K[r][:, r].toarray()
         if i:
             # L_i,i−1 = K_i,i−1 L_i−1,i−1⁻ᵀ: its transpose is L_i−1,i−1⁻¹ K_i−1,i
-            C = la.solve_triangular(L, K[rows[i - 1]][:, r].toarray(), lower=True, check_finite=False).T
+            C = (L_inv @ K[rows[i - 1]][:, r].toarray()).T
             A -= C @ C.T  # this plane's Schur complement
         L = _chol(A, name, f"plane {i} of a sweep of {count}")
         L_inv = la.lapack.dtrtri(L, lower=1)[0]
@@ -160,7 +160,7 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
         _add_product(out[:Yp.shape[1], :Yq.shape[1]], Yp, Yq)
         if bar is not None:
             bar.update(1)
-    return out, p_loads, q_loads, L
+    return out, p_loads, q_loads, L_inv
 
 
 def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body") -> np.ndarray:
@@ -210,17 +210,17 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
                                         (rows[:mid:-1], np.where(plane > mid, count - 1 - plane, count), mid + 1)):
             if not len(planes):  # a half with no plane
                 continue
-            part, p_loads, q_loads, L = _sweep(K, planes, P, Q, numbering, name, bar)
+            part, p_loads, q_loads, L_inv = _sweep(K, planes, P, Q, numbering, name, bar)
             out[np.ix_(p_loads.order[:part.shape[0]], q_loads.order[:part.shape[1]])] += part
             del part
-            halves.append((p_loads, q_loads, L, rows[side]))
+            halves.append((p_loads, q_loads, L_inv, rows[side]))
         # the middle plane, coupled to the last plane of each half
         r = rows[mid]
         A = K[r][:, r].toarray()
         Yp = P[r].toarray()
         Yq = None if Q is None else Q[r].toarray()
-        for p_loads, q_loads, L, side in halves:
-            C = la.solve_triangular(L, K[side][:, r].toarray(), lower=True, check_finite=False).T
+        for p_loads, q_loads, L_inv, side in halves:
+            C = (L_inv @ K[side][:, r].toarray()).T
             A -= C @ C.T
             Yp[:, p_loads.columns] -= C @ p_loads.Y
             if Q is not None:
