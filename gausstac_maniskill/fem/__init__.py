@@ -13,7 +13,9 @@ shape never changes, so its stiffness matrix is assembled and factored once:
   Curnier's equations) on the points near them, with the body's compliance at those points
   computed once and kept.
 * :mod:`.compliance` — that compliance among all surface points, and any linear readout's
-  response to point forces, solved once (in worker processes) and kept on disk.
+  response to point forces, computed once and kept on disk.
+* :mod:`.plane_cholesky` — Pᵀ K⁻¹ Q for those: the stiffness factored lattice plane by lattice
+  plane, all the solves at once in dense BLAS 3.
 * :mod:`.maps` — a linear pad's tactile maps as one matrix times its contact forces.
 * :mod:`.pad`, :mod:`.sensor` — the product's pads as such bodies, read as the MPM's pads are.
 """
