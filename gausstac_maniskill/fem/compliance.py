@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ConfigError
+
 __all__ = ["cache_dir", "array_digest", "cached_array", "compliance_key", "surface_compliance", "readout_responses",
            "estimated_bytes"]
 
@@ -149,15 +151,43 @@ def _store(scaled: np.ndarray, path: Path, name: str) -> None:
         tmp.unlink(missing_ok=True)
 
 
+#: Memory [bytes] per entry of Pᵀ K⁻¹ Q that computing it takes at its peak: the float32 result
+#: and one half's float64 sum (about a quarter of the entries for W), with room for the planes.
+PEAK_BYTES_PER_ENTRY = 7
+
+
+def available_memory() -> int | None:
+    """Memory [bytes] this machine has available now (Linux's MemAvailable), None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 def _between(body, P, Q, scale: float, progress: bool, desc: str) -> np.ndarray:
     """``scale`` × Pᵀ K⁻¹ Q as float32 (:meth:`~.contact.QuasiStaticBody.inverse_between`), with a
-    progress bar."""
+    progress bar; ``desc`` names it there and in the error.
+
+    Raises:
+        ConfigError: this machine has not the memory it takes (:data:`PEAK_BYTES_PER_ENTRY`).
+    """
     from tqdm.auto import tqdm
 
+    need = PEAK_BYTES_PER_ENTRY * P.shape[1] * (P.shape[1] if Q is None else Q.shape[1])
+    have = available_memory()
+    if have is not None and need > have:
+        raise ConfigError(
+            f"{desc}: needs about {need / 2 ** 30:.1f} GiB of memory while it is computed, and this machine has "
+            f"{have / 2 ** 30:.1f} GiB available. Leave the pad's compliance to be solved point by point "
+            f"(fem_precompute=False, the default above fem.sensor.PRECOMPUTE_BYTES), or use a coarser grid.")
     with tqdm(total=body.num_planes, desc=desc, unit="plane", disable=not progress, leave=False) as bar:
-        out = body.inverse_between(P, Q, bar=bar)
-    out *= scale
-    return out.astype(np.float32)
+        out = body.inverse_between(P, Q, bar=bar, dtype=np.float32)
+    out *= np.float32(scale)
+    return out
 
 
 def estimated_bytes(num_points: int) -> int:

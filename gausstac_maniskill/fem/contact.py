@@ -721,8 +721,8 @@ class QuasiStaticBody:
         loads = loads.toarray() if hasattr(loads, "toarray") else np.asarray(loads, float)
         return self._at_points(self._lu.solve(loads)).transpose(2, 0, 1)
 
-    def inverse_between(self, P, Q=None, bar=None) -> np.ndarray:
-        """Pᵀ K⁻¹ Q [p, q] float64 for load sets ``P`` [num_free, p] and ``Q`` [num_free, q] (sparse;
+    def inverse_between(self, P, Q=None, bar=None, dtype=np.float64) -> np.ndarray:
+        """Pᵀ K⁻¹ Q [p, q] (of ``dtype``) for load sets ``P`` [num_free, p] and ``Q`` [num_free, q] (sparse;
         None: P, the result then symmetric) on the free degrees of freedom (as :meth:`point_loads`
         and :meth:`dofs_to_free` give them): all their solves at once, by the stiffness's Cholesky
         factor taken lattice plane by lattice plane (:mod:`.plane_cholesky`, dense BLAS 3 on every
@@ -730,7 +730,7 @@ class QuasiStaticBody:
         from .plane_cholesky import inverse_between
 
         free = self._free
-        return inverse_between(self._K[free][:, free], self._planes, P, Q, bar=bar, name=self.name)
+        return inverse_between(self._K[free][:, free], self._planes, P, Q, bar=bar, name=self.name, dtype=dtype)
 
     @functools.cached_property
     def _planes(self) -> np.ndarray:

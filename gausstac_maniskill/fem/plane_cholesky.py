@@ -163,8 +163,8 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
     return out, p_loads, q_loads, L_inv
 
 
-def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body") -> np.ndarray:
-    """Pᵀ K⁻¹ Q [p, q] float64 (the module's twisted sweep; BLAS on
+def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body", dtype=np.float64) -> np.ndarray:
+    """Pᵀ K⁻¹ Q [p, q] of ``dtype`` (the module's twisted sweep; BLAS on
     :func:`~gausstac_maniskill.backend.cpu_threads` threads: this process's share of the CPU).
 
     Args:
@@ -175,6 +175,8 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
             symmetric: its two triangles are averaged).
         bar: a progress bar (tqdm) advanced by one per plane.
         name: what K belongs to, for error messages.
+        dtype: the result's; float32 halves its memory (each half's sum is kept in float64 and
+            rounded once into it, the middle plane's product block by block).
 
     Raises:
         ValueError: K couples planes that are not adjacent, or is not positive definite (a part
@@ -196,7 +198,7 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
         raise ValueError(f"{name}: the stiffness couples unknowns more than one plane apart")
     P = sp.csc_matrix(P, dtype=np.float64)
     Q = None if Q is None else sp.csc_matrix(Q, dtype=np.float64)
-    out = np.zeros((P.shape[1], P.shape[1] if Q is None else Q.shape[1]))
+    out = np.zeros((P.shape[1], P.shape[1] if Q is None else Q.shape[1]), dtype)
     if n == 0:
         return out
     count = int(plane.max()) + 1

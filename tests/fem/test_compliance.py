@@ -102,3 +102,19 @@ def test_readout_response_is_the_compliance_row_and_keyed_on_E(tmp_path, monkeyp
     stiffer = _layer(E=0.6e6)
     np.testing.assert_allclose(compliance.readout_responses(stiffer, A, progress=False), 0.5 * M, rtol=1e-6)
     assert len([f for f in os.listdir(tmp_path) if f.startswith("readout-")]) == 2
+
+
+def test_a_compliance_beyond_the_memory_at_hand_is_refused_by_name(monkeypatch):
+    """Asked for a compliance this machine cannot hold while computing it, the body says so
+    (naming itself and the memory) before it starts, and nothing is computed."""
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", "off")
+    body = _layer()
+    monkeypatch.setattr(compliance, "available_memory", lambda: 1000)
+    monkeypatch.setattr(type(body), "inverse_between", lambda self, *a, **k: pytest.fail("computed anyway"))
+    from gausstac_maniskill.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"layer: compliance at \d+ surface points: needs about .* GiB .* "
+                                          r"0\.0 GiB available.*fem_precompute=False"):
+        body.precompute_compliance(progress=False)
+    assert not body.has_compliance
+    assert compliance.available_memory() is not None or not os.path.exists("/proc/meminfo")
