@@ -47,7 +47,7 @@ def lattice_planes(coordinates: np.ndarray) -> tuple[np.ndarray, int]:
     coordinates = np.asarray(coordinates, np.int64)
     best = None
     for axis in range(3):
-        values, plane = np.unique(coordinates[:, axis], return_inverse=True)
+        _, plane = np.unique(coordinates[:, axis], return_inverse=True)
         cost = float((np.bincount(plane).astype(float) ** 2).sum())
         if best is None or cost < best[0]:
             best = (cost, plane.ravel(), axis)
@@ -94,6 +94,8 @@ class _Loads:
 
 
 def _chol(A: np.ndarray, name: str, where: str) -> np.ndarray:
+    """The lower Cholesky factor of a plane's Schur complement ``A``, or a ValueError naming
+    ``name`` and ``where`` when it is not positive definite."""
     import scipy.linalg as la
 
     try:
