@@ -21,8 +21,8 @@ the middle plane comes last (a twisted factorization): a column meets only the p
 its own and the middle, and each half's product is a quarter of the whole.
 
 On 2 cores this computes the index pad's compliance among its 1 994 surface points (5 982 load
-columns, 46 743 unknowns) in 22 s, where SuperLU's column-by-column solves in two worker
-processes took 114 s, and its maps' response (1 024 readouts) in 18 s instead of 26
+columns, 46 743 unknowns) in 17–20 s, where SuperLU's column-by-column solves in two worker
+processes took 114 s, and its maps' response (1 024 readouts) in 15 s instead of 26
 (BENCHMARKS.md, eighteenth session).
 """
 from __future__ import annotations
@@ -131,6 +131,15 @@ def _symmetrise(out: np.ndarray) -> None:
             b[...] = mean.T
 
 
+def _couple(K, L_inv: np.ndarray, prev: np.ndarray, r: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """L_r,prev = K_r,prev L_prev⁻ᵀ (its transpose is L_prev⁻¹ K_prev,r) for the plane of unknowns
+    ``r`` after the eliminated plane ``prev`` (whose factor's inverse is ``L_inv``); takes its
+    share L_r,prev L_r,prevᵀ off ``A`` (the plane's Schur complement, in place) and returns it."""
+    C = (L_inv @ K[prev][:, r].toarray()).T
+    A -= C @ C.T
+    return C
+
+
 def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
     """Factor and forward-substitute along ``rows`` (the unknowns of each plane, in the sweep's
     order; ``plane`` [n] numbers them so, and ≥ len(rows) off the sweep), summing (L⁻¹P)ᵀ(L⁻¹Q)
@@ -151,9 +160,7 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
     for i, r in enumerate(rows):
         A = K[r][:, r].toarray()
         if i:
-            # L_i,i−1 = K_i,i−1 L_i−1,i−1⁻ᵀ: its transpose is L_i−1,i−1⁻¹ K_i−1,i
-            C = (L_inv @ K[rows[i - 1]][:, r].toarray()).T
-            A -= C @ C.T  # this plane's Schur complement
+            C = _couple(K, L_inv, rows[i - 1], r, A)
         L = _chol(A, name, f"plane {i} of a sweep of {count}")
         L_inv = la.lapack.dtrtri(L, lower=1)[0]
         G = None if C is None else L_inv @ C
@@ -215,7 +222,7 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
             if not len(planes):  # a half with no plane
                 continue
             part, p_loads, q_loads, L_inv = _sweep(K, planes, P, Q, numbering, name, bar)
-            out[np.ix_(p_loads.order[:part.shape[0]], q_loads.order[:part.shape[1]])] += part
+            out[np.ix_(p_loads.columns, q_loads.columns)] += part
             del part
             halves.append((p_loads, q_loads, L_inv, rows[side]))
         # the middle plane, coupled to the last plane of each half
@@ -224,8 +231,7 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
         Yp = P[r].toarray()
         Yq = None if Q is None else Q[r].toarray()
         for p_loads, q_loads, L_inv, side in halves:
-            C = (L_inv @ K[side][:, r].toarray()).T
-            A -= C @ C.T
+            C = _couple(K, L_inv, side, r, A)
             Yp[:, p_loads.columns] -= C @ p_loads.Y
             if Q is not None:
                 Yq[:, q_loads.columns] -= C @ q_loads.Y
