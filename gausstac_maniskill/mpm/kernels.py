@@ -565,21 +565,28 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
         is_kin = kind[p] == KINEMATIC
         base, fx, w = stencil(x[p], inv_dx, origin)
         off = field_offset(group_copy, group, p, ncell)
+        # velocity v = Σ w_i v_i and APIC gradient C = (4/dx²) Σ w_i v_i (x_i - x_p)ᵀ
+        #   = (4/dx) [Σ w_i v_i (i, j, k)ᵀ - v fxᵀ]: the node offsets (i, j, k) are the
+        # stencil's own integers, so the moment sums only add (no product per node)
         new_v = vec3(0.0)
-        new_C = ti.Matrix.zero(ti.f32, 3, 3)
+        moment = ti.Matrix.zero(ti.f32, 3, 3)  # columns Σ w_i v_i i, Σ w_i v_i j, Σ w_i v_i k
         soft_dv = vec3(0.0)
-        all_pinned = True
         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-            dpos = ti.Vector([i, j, k]) - fx
             weight = w[i][0] * w[j][1] * w[k][2]
             idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
-            gv = grid_v[idx]
-            new_v += weight * gv
-            new_C += (4.0 * inv_dx * weight) * gv.outer_product(dpos)
+            wv = weight * grid_v[idx]
+            new_v += wv
+            for d, o in ti.static(enumerate((i, j, k))):
+                if ti.static(o > 0):
+                    moment[:, d] += wv if ti.static(o == 1) else 2.0 * wv
             if ti.static(two_field):
                 soft_dv += weight * grid_ds[idx]
-            if is_kin:
-                all_pinned = all_pinned and pinned(grid_m, grid_mk, idx)
+        new_C = (4.0 * inv_dx) * (moment - new_v.outer_product(fx))
+        all_pinned = is_kin
+        if is_kin:
+            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                all_pinned = all_pinned and pinned(grid_m, grid_mk,
+                                                   off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k)
         mi = matid[p]
         if ti.static(two_field):
             if group_field[group[p]] == 0 and not is_kin and soft_dv.norm_sqr() > 0.0:
