@@ -17,10 +17,22 @@ variant directly while the same objects come back. The first call with new templ
 new arrays, and any call after Taichi was reset, takes the ordinary path, which compiles and
 checks.
 
-``mpm/kernels.py`` applies it to the kernels of every substep and every step. It uses three
-members of Taichi's kernel object (``compiled_kernels``, ``ensure_compiled``,
-``launch_kernel``), present throughout Taichi 1.7 (pinned in ``pyproject.toml``); where they
-are missing it falls back to the ordinary call, as it does everywhere with
+On that direct launch it also fills the launch context itself. Taichi's ``launch_kernel``
+walks every argument through a chain of type tests (``recursive_set_args``: about 40 calls per
+launch of ``advance``, each pack member visited). The arrays and packs are the ones checked on
+the ordinary call, so their slots are planned once (``CachedKernel._plan``, laid out as
+Taichi lays them) and each launch only copies the plan into a fresh context and sets the
+scalars. A context cannot be reused: the launch rewrites the arrays' entries in place (a
+second launch from it read an invalid allocation). Measured on the index pad: the substep's
+Python time fell from 1.5 to 0.6 ms under cProfile, and the wall time per substep by 6 %
+(``BENCHMARKS.md``, issue 10, nineteenth session). ``GAUSSTAC_KERNEL_ARGS=taichi`` (or
+:data:`LEAN_ARGS` set False) hands the arguments to Taichi's own launch again.
+
+``mpm/kernels.py`` applies it to the kernels of every substep and every step. It uses members
+of Taichi's kernel object (``arguments``, ``compiled_kernels``, ``ensure_compiled``,
+``launch_kernel``, ``return_type``, ``has_print``, ``construct_kernel_ret``) and its launch
+context's ``set_arg_*``, present throughout Taichi 1.7 (pinned in ``pyproject.toml``); where
+the first four are missing it falls back to the ordinary call, as it does everywhere with
 ``GAUSSTAC_KERNEL_CACHE=0`` (or :data:`ENABLED` set False: the A/B of ``BENCHMARKS.md``).
 """
 from __future__ import annotations
@@ -29,17 +41,24 @@ import functools
 import os
 import weakref
 
-from taichi.lang import impl
+from taichi._lib import core as _ti_core
+from taichi.lang import impl, runtime_ops
 from taichi.lang.argpack import ArgPackType
+from taichi.lang.util import cook_dtype
 from taichi.types import primitive_types
 from taichi.types.annotations import template
 from taichi.types.ndarray_type import NdarrayType
+from taichi.types.utils import is_signed
 
 __all__ = ["CachedKernel", "cached_kernel", "ENABLED"]
+
+_LCB = _ti_core.KernelLaunchContext  # Taichi's launch context builder (set_arg_* methods)
 
 _MEMBERS = ("arguments", "compiled_kernels", "ensure_compiled", "launch_kernel")
 #: False: every CachedKernel takes Taichi's ordinary call (``GAUSSTAC_KERNEL_CACHE=0``)
 ENABLED = os.environ.get("GAUSSTAC_KERNEL_CACHE", "1") != "0"
+#: False: the fast path sets the arguments through Taichi's own ``launch_kernel`` (``GAUSSTAC_KERNEL_ARGS=taichi``)
+LEAN_ARGS = os.environ.get("GAUSSTAC_KERNEL_ARGS", "lean") != "taichi"
 
 
 class CachedKernel:
@@ -67,8 +86,11 @@ class CachedKernel:
                                 "their declaration")
         self._arrays = tuple(i for i, a in enumerate(primal.arguments)
                              if isinstance(a.annotation, (ArgPackType, NdarrayType)))
-        # template values -> (weak references to the arrays and packs checked with them, compiled variant's key)
-        self._keys: dict[tuple, tuple] = {}
+        self._scalars = tuple((i, a.annotation) for i, a in enumerate(primal.arguments)
+                              if id(a.annotation) in primitive_types.type_ids)
+        # template values -> [weak references to the arrays and packs checked with them, compiled variant's
+        # key, plan of their launch-context slots (made on the first fast launch)]
+        self._keys: dict[tuple, list] = {}
 
     def __call__(self, *args):
         primal = self._primal
@@ -81,10 +103,86 @@ class CachedKernel:
             compiled = primal.compiled_kernels.get(seen[1])  # None once Taichi was reset
         if compiled is None:  # the ordinary call: compiles if need be, checks every ndarray
             out = self.kernel(*args)
-            self._keys[values] = (tuple(weakref.ref(args[i]) for i in self._arrays), primal.ensure_compiled(*args))
+            self._keys[values] = [tuple(weakref.ref(args[i]) for i in self._arrays), primal.ensure_compiled(*args),
+                                  None]
             return out
         impl.get_runtime().materialize()  # as every kernel call does: fields defined since then
-        return primal.launch_kernel(compiled, *args)
+        if not LEAN_ARGS:
+            return primal.launch_kernel(compiled, *args)
+        if seen[2] is None:
+            seen[2] = self._plan(args)
+        # a launch context takes the arrays' addresses afresh each time (the launch rewrites them in
+        # place), but from the plan: no type dispatch per argument as in Taichi's launch_kernel
+        ctx = compiled.make_launch_context()
+        for setter, idx, obj in seen[2]:
+            setter(ctx, idx, obj)
+        for i, ann in self._scalars:
+            _set_scalar(ctx, (self._slot[i],), ann, args[i])
+        prog = impl.get_runtime().prog
+        prog.launch_kernel(prog.compile_kernel(prog.config(), prog.get_device_caps(), compiled), ctx)
+        ret_types = primal.return_type
+        if ret_types is None and not primal.has_print:
+            return None
+        runtime_ops.sync()
+        if ret_types is None:
+            return None
+        ret = [primal.construct_kernel_ret(ctx, t, (k,)) for k, t in enumerate(ret_types)]
+        return ret[0] if len(ret) == 1 else ret
+
+    @functools.cached_property
+    def _slot(self) -> dict[int, int]:
+        """Argument index -> its slot in the launch context (templates take none)."""
+        slots, n = {}, 0
+        for i, a in enumerate(self._primal.arguments):
+            if not isinstance(a.annotation, template):
+                slots[i], n = n, n + 1
+        return slots
+
+    def _plan(self, args) -> list:
+        """How to put ``args``' arrays and packs into a launch context, as Taichi 1.7's
+        ``Kernel.launch_kernel`` lays them out: one slot per non-template argument in order (an
+        argpack's own slot holds its buffer, with its nested packs under it), then the ndarrays
+        found inside argpacks, in the order met, in slots after the last argument. Rows
+        (setter, slot, C++ object); scalars are set on each launch."""
+        plan, inside = [], []
+        for i, a in enumerate(self._primal.arguments):
+            ann, v = a.annotation, args[i]
+            if isinstance(ann, ArgPackType):
+                _plan_pack(plan, (self._slot[i],), ann, v, inside)
+            elif isinstance(ann, NdarrayType):
+                plan.append((_LCB.set_arg_ndarray, (self._slot[i],), _device_array(v)))
+        for k, arr in enumerate(inside):
+            plan.append((_LCB.set_arg_ndarray, (len(self._slot) + k,), _device_array(arr)))
+        return plan
+
+
+def _device_array(v):
+    """The C++ ndarray of ``v``; arrays with a gradient take the ordinary call (not reused here)."""
+    if getattr(v, "grad", None) is not None:
+        raise TypeError("CachedKernel: ndarrays with gradients are not supported")
+    return v.arr
+
+
+def _plan_pack(plan, idx, ann, pack, inside):
+    j = 0
+    for name, member in ann.members.items():
+        if isinstance(member, ArgPackType):
+            _plan_pack(plan, idx + (j,), member, pack[name], inside)
+            j += 1
+        elif isinstance(member, NdarrayType):
+            inside.append(pack[name])  # no slot inside the pack
+        else:
+            j += 1  # scalars and matrices live in the pack's own buffer
+    plan.append((_LCB.set_arg_argpack, idx, pack._ArgPack__argpack))
+
+
+def _set_scalar(ctx, idx, ann, v):
+    if id(ann) in primitive_types.real_type_ids:
+        ctx.set_arg_float(idx, float(v))
+    elif is_signed(cook_dtype(ann)):
+        ctx.set_arg_int(idx, int(v))
+    else:
+        ctx.set_arg_uint(idx, int(v))
 
 
 def cached_kernel(kernel) -> CachedKernel:

@@ -107,6 +107,51 @@ def test_the_switch_and_kernels_whose_key_depends_on_an_argument_of_no_fixed_typ
     assert ordinary.calls == 2
 
 
+Inner = ti.types.argpack(v=ti.types.ndarray(dtype=ti.f32, ndim=1), s=ti.f32)
+Ints = ti.types.argpack(a=ti.types.ndarray(dtype=ti.i32, ndim=1))
+Outer = ti.types.argpack(inner=Inner, ints=Ints)  # packs of packs, as the solver's World
+
+
+@ti.kernel
+def mixed(o: Outer, y: ti.types.ndarray(dtype=ti.f32, ndim=1), c: ti.f32, n: ti.i32, flip: ti.template()) -> ti.f32:
+    total = 0.0
+    for i in range(n):
+        w = o.inner.v[i] * c + o.inner.s + o.ints.a[i]
+        if ti.static(flip):
+            w = -w
+        y[i] = w
+        total += w
+    return total
+
+
+def test_lean_arguments_fill_the_launch_context_as_taichi_does():
+    """The fast path puts the arguments into the launch context itself (a nested pack, ndarrays
+    inside and outside packs, float and int scalars, a return value) and must fill the same
+    slots as Taichi's own launch: each call is compared with Taichi's path on the same inputs.
+    (A pack holding an ndarray beside a nested pack read the nested pack's array in place of
+    its own, on both paths: Taichi 1.7's layout; the solver's World holds packs only.)"""
+    cached = CachedKernel(mixed)
+
+    def inputs():
+        a = ti.ndarray(ti.i32, 4)
+        a.from_numpy(np.array([1, 2, 3, 4], np.int32))
+        v = ti.ndarray(ti.f32, 4)
+        v.from_numpy(np.array([0.5, 1.5, 2.5, 3.5], np.float32))
+        return Outer(inner=Inner(v=v, s=0.25), ints=Ints(a=a)), ti.ndarray(ti.f32, 4)
+
+    mine, ref = inputs(), inputs()
+    for c, n, flip in [(1.0, 4, False), (2.0, 3, False), (-1.0, 4, True), (0.5, 2, True), (3.0, 4, False)]:
+        got = cached(*mine, c, n, flip)
+        kernel_launch.LEAN_ARGS = False
+        try:
+            want = cached(*ref, c, n, flip)  # the same cached variant, its arguments set by Taichi
+        finally:
+            kernel_launch.LEAN_ARGS = True
+        assert got == want
+        assert np.array_equal(mine[1].to_numpy(), ref[1].to_numpy())
+    assert mine[1].to_numpy()[0] == pytest.approx(3.0 * 0.5 + 0.25 + 1)
+
+
 _AFTER_RESET = """
 import taichi as ti
 from gausstac_maniskill.kernel_launch import CachedKernel
