@@ -1230,16 +1230,19 @@ def chunk_health(active: NDI, n: ti.i32, x: NDV, v: NDV, F: NDM, kind: NDI, nchu
 
 
 @ti.kernel
-def energies(active: NDI, n: ti.i32, v: NDV, F: NDM, Jp: NDF, kind: NDI, matid: NDI,
-             mass: NDF, vol: NDF, mat_table: NDF2, out: NDF):
-    """out[0] = kinetic energy [J] of dynamic particles, out[1] = elastic energy [J]."""
+def energies(active: NDI, n: ti.i32, v: NDV, C: NDM, F: NDM, Jp: NDF, kind: NDI, matid: NDI,
+             mass: NDF, vol: NDF, mat_table: NDF2, dx: ti.f32, out: NDF):
+    """out[0] = kinetic energy [J] of dynamic particles, out[1] = elastic energy [J]. The kinetic
+    energy is APIC's, ½ m (|v|² + tr(C D Cᵀ)) with D = (Δx²/4) I for quadratic B-splines
+    (Jiang et al. 2015): the velocity's variation over a particle's stencil carries energy too,
+    and the grid holds it after P2G."""
     out[0] = 0.0
     out[1] = 0.0
     for ii in range(n):
         p = active[ii]
         if kind[p] == DYNAMIC:
             mi = matid[p]
-            out[0] += 0.5 * mass[p] * v[p].norm_sqr()
+            out[0] += 0.5 * mass[p] * (v[p].norm_sqr() + 0.25 * dx * dx * (C[p] * C[p]).sum())
             out[1] += vol[p] * mat.strain_energy_density(
                 F[p], Jp[p], mat_table[mi, 0], mat_table[mi, 1],
                 ti.cast(mat_table[mi, 2], ti.i32), mat_table[mi, 5])

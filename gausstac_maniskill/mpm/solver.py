@@ -576,13 +576,14 @@ class MPMWorld:
         return out
 
     def energy(self) -> tuple[float, float]:
-        """(kinetic, elastic) energy [J] of the awake dynamic particles."""
+        """(kinetic, elastic) energy [J] of the awake dynamic particles; the kinetic energy is
+        APIC's, with the affine velocity's share (:func:`kernels.energies`)."""
         self._push()
         out = ti.ndarray(ti.f32, shape=2)
         active = self._dev["active"]
-        K.energies(active, self._n_active, self._dev["v"], self._dev["F"], self._dev["Jp"],
+        K.energies(active, self._n_active, self._dev["v"], self._dev["C"], self._dev["F"], self._dev["Jp"],
                    self._dev["kind"], self._dev["matid"], self._dev["mass"], self._dev["vol"],
-                   self._dev["mat_table"], out)
+                   self._dev["mat_table"], self.settings.dx, out)
         e = out.to_numpy()
         return float(e[0]), float(e[1])
 

@@ -129,6 +129,13 @@ def test_kinematic_link_rotating_180_deg_in_one_second():
 
 
 def test_long_run_2000_steps_energy_bounded():
+    """2000 steps of a free cube started in a stretching mode: no energy growth, no drift.
+    APIC's transfers dissipate, but the explicit step's energy reading (kinetic from the
+    gathered velocities, elastic from F) overshoots in the first oscillation by an O(Δt)
+    amount: max E/E0 over 40 steps measured 1.113, 1.018 and 1.0015 at Courant numbers 0.5,
+    0.1 and 0.02 (this set-up, same control step). The test runs at the default 0.4, so it
+    allows 15 %; an instability grows without bound in 2000 steps. (Before add_group fitted C
+    to the initial velocity, the first transfer lost 20 % of the energy and hid the overshoot.)"""
     s = SolverSettings(dx=2e-3, gravity=(0, 0, 0))
     world = MPMWorld(s)
     pts = box_particles([0, 0, 0], [0.01, 0.01, 0.01], s.particle_spacing)
@@ -144,7 +151,8 @@ def test_long_run_2000_steps_energy_bounded():
         if k % 50 == 0:
             worst = max(worst, sum(world.energy()))
     assert_healthy(world, n0)
-    assert worst <= 1.01 * e0, (worst, e0)  # APIC dissipates; it must never gain energy
+    assert worst <= 1.15 * e0, (worst, e0)  # the step's O(Δt) overshoot, see above; no growth
+    assert sum(world.energy()) < 0.5 * e0  # APIC dissipates over the run
     assert np.abs(world.positions().mean(0) - c).max() < 1e-4  # momentum conserved: no drift
 
 
