@@ -107,10 +107,10 @@ class CachedKernel:
                                   None]
             return out
         impl.get_runtime().materialize()  # as every kernel call does: fields defined since then
-        if not LEAN_ARGS:
-            return primal.launch_kernel(compiled, *args)
         if seen[2] is None:
             seen[2] = self._plan(args)
+        if not LEAN_ARGS or seen[2] is False:
+            return primal.launch_kernel(compiled, *args)
         # a launch context takes the arrays' addresses afresh each time (the launch rewrites them in
         # place), but from the plan: no type dispatch per argument as in Taichi's launch_kernel
         ctx = compiled.make_launch_context()
@@ -138,29 +138,24 @@ class CachedKernel:
                 slots[i], n = n, n + 1
         return slots
 
-    def _plan(self, args) -> list:
+    def _plan(self, args) -> list | bool:
         """How to put ``args``' arrays and packs into a launch context, as Taichi 1.7's
         ``Kernel.launch_kernel`` lays them out: one slot per non-template argument in order (an
         argpack's own slot holds its buffer, with its nested packs under it), then the ndarrays
         found inside argpacks, in the order met, in slots after the last argument. Rows
-        (setter, slot, C++ object); scalars are set on each launch."""
+        (setter, slot, C++ object); scalars are set on each launch. False where an array has a
+        gradient (Taichi's launch sets those)."""
         plan, inside = [], []
         for i, a in enumerate(self._primal.arguments):
             ann, v = a.annotation, args[i]
             if isinstance(ann, ArgPackType):
                 _plan_pack(plan, (self._slot[i],), ann, v, inside)
             elif isinstance(ann, NdarrayType):
-                plan.append((_LCB.set_arg_ndarray, (self._slot[i],), _device_array(v)))
-        for k, arr in enumerate(inside):
-            plan.append((_LCB.set_arg_ndarray, (len(self._slot) + k,), _device_array(arr)))
-        return plan
-
-
-def _device_array(v):
-    """The C++ ndarray of ``v``; arrays with a gradient take the ordinary call (not reused here)."""
-    if getattr(v, "grad", None) is not None:
-        raise TypeError("CachedKernel: ndarrays with gradients are not supported")
-    return v.arr
+                plan.append((_LCB.set_arg_ndarray, (self._slot[i],), v))
+        plan += [(_LCB.set_arg_ndarray, (len(self._slot) + k,), arr) for k, arr in enumerate(inside)]
+        if any(setter is _LCB.set_arg_ndarray and arr.grad is not None for setter, _, arr in plan):
+            return False
+        return [(setter, idx, arr.arr if setter is _LCB.set_arg_ndarray else arr) for setter, idx, arr in plan]
 
 
 def _plan_pack(plan, idx, ann, pack, inside):

@@ -1538,12 +1538,16 @@ def _velocity_gradient(pts: np.ndarray, vel: np.ndarray, neighbours: int = 19) -
         return out
     from scipy.spatial import cKDTree
 
-    _, nb = cKDTree(pts).query(pts, k=min(n, neighbours))
-    dX = pts[nb] - pts[:, None]  # [N, k, 3]
-    dV = vel[nb] - vel[:, None]
-    # normal equations per point: (Σ dX dXᵀ) Cᵀ = Σ dX dVᵀ
-    Ct = np.linalg.pinv(np.einsum("nki,nkj->nij", dX, dX)) @ np.einsum("nki,nkj->nij", dX, dV)
-    return np.swapaxes(Ct, 1, 2)
+    tree = cKDTree(pts)
+    for lo in range(0, n, 65536):  # in chunks: [chunk, k, 3] float64 temporaries
+        rows = slice(lo, min(n, lo + 65536))
+        _, nb = tree.query(pts[rows], k=min(n, neighbours))
+        dX = pts[nb] - pts[rows, None]  # [chunk, k, 3]
+        dV = vel[nb] - vel[rows, None]
+        # normal equations per point: (Σ dX dXᵀ) Cᵀ = Σ dX dVᵀ
+        Ct = np.linalg.pinv(np.einsum("nki,nkj->nij", dX, dX)) @ np.einsum("nki,nkj->nij", dX, dV)
+        out[rows] = np.swapaxes(Ct, 1, 2)
+    return out
 
 
 def _layer_thickness(pts: np.ndarray, kin: np.ndarray) -> float:
@@ -1588,8 +1592,9 @@ def _collider_bound(c: Collider) -> float:
     (a half-space has none): for a mesh, its SDF grid's box, which holds the surface in any of
     the shapes :meth:`MPMWorld.set_collider_sdf` gives it (kernels.beyond_bound)."""
     if isinstance(c, MeshCollider):
-        lo = np.asarray(c.params()[:3], np.float64)
-        hi = lo + c.params()[3] * (np.asarray(c.sdf.shape, np.float64) - 1.0)
+        prm = c.params()
+        lo = np.asarray(prm[:3], np.float64)
+        hi = lo + prm[3] * (np.asarray(c.sdf.shape, np.float64) - 1.0)
         return float(np.linalg.norm(np.maximum(np.abs(lo), np.abs(hi))))
     return min(_collider_radius(c), 1e30)
 
