@@ -24,8 +24,9 @@ the ordinary call, so their slots are planned once (``CachedKernel._plan``, laid
 Taichi lays them) and each launch only copies the plan into a fresh context and sets the
 scalars. A context cannot be reused: the launch rewrites the arrays' entries in place (a
 second launch from it read an invalid allocation). Measured on the index pad: the substep's
-Python time fell from 1.5 to 0.6 ms under cProfile, and the wall time per substep by 6 %
-(``BENCHMARKS.md``, issue 10, nineteenth session). ``GAUSSTAC_KERNEL_ARGS=taichi`` (or
+Python time fell from 1.5 to 0.6 ms under cProfile; with Taichi's argument setting a substep
+takes 1.11–1.15× as long, with Taichi's whole call 1.20–1.29× (``python -m
+gausstac_maniskill.bench kernels --launches 6``; ``BENCHMARKS.md``, issue 10, nineteenth session). ``GAUSSTAC_KERNEL_ARGS=taichi`` (or
 :data:`LEAN_ARGS` set False) hands the arguments to Taichi's own launch again.
 
 ``mpm/kernels.py`` applies it to the kernels of every substep and every step. It uses members

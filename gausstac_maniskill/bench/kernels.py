@@ -9,6 +9,13 @@ order of :func:`~gausstac_maniskill.mpm.kernels.advance` (clear grid, F-bar volu
 P2G for the two slab colours, grid update, contact scatter for the two colours, contact
 apply, G2P) and :func:`~gausstac_maniskill.mpm.kernels.prepare` (frames, kinematic
 particles, bounds, slab sort). The time not in any task is Python launch overhead.
+
+``--launches N`` instead times the three ways of launching the kernels in one process, without
+the profiler: Taichi's own call, :class:`~gausstac_maniskill.kernel_launch.CachedKernel` with
+Taichi's argument setting, and CachedKernel with its planned launch context (the default).
+They take turns step by step over N held steps each (the host's noise then falls on all three
+alike); it prints each one's median ms per substep and the median of its ratio to the
+default's step of the same turn.
 """
 from __future__ import annotations
 
@@ -23,8 +30,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
     ap.add_argument("--indenter", default="sphere", choices=["plate", "sphere"])
     ap.add_argument("--arch", default="cpu", choices=["cpu", "cuda"], help="Taichi backend (default: cpu)")
+    ap.add_argument("--launches", type=int, default=0, metavar="N",
+                    help="compare the three launch paths over N held steps each (no profiler)")
     args = ap.parse_args(argv)
-    os.environ["GAUSSTAC_KERNEL_PROFILER"] = "1"
+    if args.launches <= 0:
+        os.environ["GAUSSTAC_KERNEL_PROFILER"] = "1"
     from .. import backend
 
     arch = backend.init(args.arch)  # raises BackendError if cuda was asked for and does not work
@@ -40,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
 
     for z in (P.GAP, -0.5e-3, -1e-3):  # JIT, then press
         step(z)
+    if args.launches > 0:
+        return compare_launches(step, args.launches)
     ti.profiler.clear_kernel_profiler_info()
     t0 = time.perf_counter()
     info = step(-1e-3)
@@ -52,4 +64,37 @@ def main(argv: list[str] | None = None) -> int:
     print(f"throughput {info.active_particles * info.substeps / wall / 1e6:.2f} M particle-substeps/s "
           f"({info.active_particles * info.substeps / busy / 1e6:.2f} M/s in kernels)")
     ti.profiler.print_kernel_profiler_info("count")
+    return 0
+
+
+#: the launch paths of ``--launches``: (name, kernel_launch.ENABLED, kernel_launch.LEAN_ARGS)
+LAUNCH_PATHS = (("planned context (default)", True, True), ("cached, Taichi's arguments", True, False),
+                ("Taichi's call", False, True))
+
+
+def compare_launches(step, n: int) -> int:
+    """Time ``step(-1e-3)`` (one held control step) under each of :data:`LAUNCH_PATHS` in turn,
+    ``n`` times each; print the medians [ms per substep] and the paired ratios."""
+    import statistics
+    import time
+
+    from .. import kernel_launch
+
+    per: dict[str, list] = {name: [] for name, _, _ in LAUNCH_PATHS}
+    try:
+        for _ in range(n):
+            for name, enabled, lean in LAUNCH_PATHS:
+                kernel_launch.ENABLED, kernel_launch.LEAN_ARGS = enabled, lean
+                t0 = time.perf_counter()
+                info = step(-1e-3)
+                per[name].append((time.perf_counter() - t0) / info.substeps)
+    finally:
+        kernel_launch.ENABLED, kernel_launch.LEAN_ARGS = True, True
+    base = per[LAUNCH_PATHS[0][0]]
+    print(f"index pad, sphere pressed 1 mm: {info.active_particles} particles, {n} held steps per launch path")
+    for name, times in per.items():
+        ratio = statistics.median(t / b for t, b in zip(times, base))
+        print(f"  {name:28s} {1e3 * statistics.median(times):7.3f} ms per substep "
+              f"({info.active_particles / statistics.median(times) / 1e6:.2f} M particle-substeps/s), "
+              f"{ratio:.3f} x the default")
     return 0
