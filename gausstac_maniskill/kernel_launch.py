@@ -87,8 +87,11 @@ class CachedKernel:
                                 "their declaration")
         self._arrays = tuple(i for i, a in enumerate(primal.arguments)
                              if isinstance(a.annotation, (ArgPackType, NdarrayType)))
-        self._scalars = tuple((i, a.annotation) for i, a in enumerate(primal.arguments)
-                              if id(a.annotation) in primitive_types.type_ids)
+        # argument index -> its slot in the launch context (templates take none)
+        self._slot = {i: n for n, i in enumerate(i for i in range(len(primal.arguments)) if i not in self._templates)}
+        # the scalars, set on every launch: (argument index, slot, the context's setter, the cast it takes)
+        self._scalars = tuple((i, (self._slot[i],)) + _scalar_setter(a.annotation)
+                              for i, a in enumerate(primal.arguments) if id(a.annotation) in primitive_types.type_ids)
         # template values -> [weak references to the arrays and packs checked with them, compiled variant's
         # key, plan of their launch-context slots (made on the first fast launch)]
         self._keys: dict[tuple, list] = {}
@@ -117,8 +120,8 @@ class CachedKernel:
         ctx = compiled.make_launch_context()
         for setter, idx, obj in seen[2]:
             setter(ctx, idx, obj)
-        for i, ann in self._scalars:
-            _set_scalar(ctx, (self._slot[i],), ann, args[i])
+        for i, slot, setter, cast in self._scalars:
+            setter(ctx, slot, cast(args[i]))
         prog = impl.get_runtime().prog
         prog.launch_kernel(prog.compile_kernel(prog.config(), prog.get_device_caps(), compiled), ctx)
         ret_types = primal.return_type
@@ -129,15 +132,6 @@ class CachedKernel:
             return None
         ret = [primal.construct_kernel_ret(ctx, t, (k,)) for k, t in enumerate(ret_types)]
         return ret[0] if len(ret) == 1 else ret
-
-    @functools.cached_property
-    def _slot(self) -> dict[int, int]:
-        """Argument index -> its slot in the launch context (templates take none)."""
-        slots, n = {}, 0
-        for i, a in enumerate(self._primal.arguments):
-            if not isinstance(a.annotation, template):
-                slots[i], n = n, n + 1
-        return slots
 
     def _plan(self, args) -> list | bool:
         """How to put ``args``' arrays and packs into a launch context, as Taichi 1.7's
@@ -172,13 +166,11 @@ def _plan_pack(plan, idx, ann, pack, inside):
     plan.append((_LCB.set_arg_argpack, idx, pack._ArgPack__argpack))
 
 
-def _set_scalar(ctx, idx, ann, v):
+def _scalar_setter(ann) -> tuple:
+    """(the launch context's setter, the Python cast it takes) for a scalar argument of type ``ann``."""
     if id(ann) in primitive_types.real_type_ids:
-        ctx.set_arg_float(idx, float(v))
-    elif is_signed(cook_dtype(ann)):
-        ctx.set_arg_int(idx, int(v))
-    else:
-        ctx.set_arg_uint(idx, int(v))
+        return _LCB.set_arg_float, float
+    return (_LCB.set_arg_int if is_signed(cook_dtype(ann)) else _LCB.set_arg_uint), int
 
 
 def cached_kernel(kernel) -> CachedKernel:
