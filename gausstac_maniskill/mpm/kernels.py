@@ -39,6 +39,7 @@ from .colliders import collider_contact
 from .kinematics import frame_at, pose_at, quat_to_mat, write_frames
 
 vec3 = ti.math.vec3
+vec4 = ti.math.vec4
 mat3 = ti.math.mat3
 NDI = ti.types.ndarray(dtype=ti.i32, ndim=1)
 NDI2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
@@ -47,7 +48,7 @@ NDF2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 NDV = ti.types.ndarray(dtype=vec3, ndim=1)
 NDM = ti.types.ndarray(dtype=mat3, ndim=1)
 NDV4 = ti.types.ndarray(dtype=ti.math.vec4, ndim=1)
-NDV5 = ti.types.ndarray(dtype=ti.types.vector(5, ti.f32), ndim=1)
+NDV6 = ti.types.ndarray(dtype=ti.types.vector(6, ti.f32), ndim=1)
 
 DYNAMIC, KINEMATIC = 0, 1
 PIN_FRACTION = 0.25  # kinematic share of a node's mass that pins it to its link (see pinned)
@@ -221,19 +222,16 @@ def field_offset(group_copy: ti.template(), group: ti.template(), p, ncell):
 
 
 @ti.func
-def clear_grid(ntot: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template(),
-        grid_vc: ti.template(), grid_ds: ti.template(), grid_bond: ti.template(), two_field: ti.template(),
+def clear_grid(ntot: ti.template(), grid_pm: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template(),
+        grid_vc: ti.template(), grid_ds: ti.template(), grid_kin: ti.template(), two_field: ti.template(),
         cellp: ti.template(), cell_slot: ti.template()):
     for i in range(ntot):
         if ti.static(cellp):
             cell_slot[i] = 0
-        grid_v[i] = vec3(0.0)
-        grid_bond[i] = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0])
+        grid_pm[i] = vec4(0.0)
+        grid_kin[i] = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
         grid_dp[i] = vec3(0.0)
         grid_vol[i] = ti.Vector([0.0, 0.0])
-        grid_m[i] = 0.0
-        grid_mk[i] = 0.0
         grid_mq[i] = 0.0
         if ti.static(two_field):
             grid_vc[i] = 0.0
@@ -246,22 +244,26 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
         mass: ti.template(), vol: ti.template(), kind: ti.template(), link: ti.template(),
         matid: ti.template(), mat_table: ti.template(), group: ti.template(), group_qs: ti.template(),
         ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
-        nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
-        grid_m: ti.template(), grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(),
+        nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_pm: ti.template(),
+        grid_mq: ti.template(), grid_link: ti.template(),
         grid_vol: ti.template(), fbar: ti.template(), nh_only: ti.template(),
         group_copy: ti.template(), ncell: ti.template(), two_field: ti.template(), grid_vc: ti.template(),
-        bond: ti.template(), link_frames: ti.template(), grid_bond: ti.template(), atomic: ti.template(),
+        bond: ti.template(), link_frames: ti.template(), grid_kin: ti.template(), atomic: ti.template(),
         cellp: ti.template(), cell_slot: ti.template(), cell_a: ti.template(), cell_G: ti.template()):
-    """Scatter mass and APIC momentum (with the stress impulse) to the grid (to the
-    particle's own velocity field; with two fields also its deformed volume V0 J to
-    ``grid_vc``, for :func:`field_contact`).
+    """Scatter APIC momentum (with the stress impulse) and mass to the grid, one record
+    (p, m) per node in ``grid_pm`` (to the particle's own velocity field; with two fields
+    also its deformed volume V0 J to ``grid_vc``, for :func:`field_contact`).
 
     Momentum to node i: w_ip [m_p v_p + (m_p C_p - Δt V0_p (4/dx²) τ_p)(x_i - x_p)].
-    Kinematic particles also scatter their mass to ``grid_mk`` and their link id;
-    dynamic particles of quasi-static groups scatter theirs to ``grid_mq`` (and the link id).
-    Kinematic particles that know the bond surface (``bond``: its normal n in the link frame
-    and their signed distance s from it) scatter the linear extrapolation of that distance,
-    w m (n, s + n·(x_i - x_p), 1), to ``grid_bond`` (:func:`bond_ghosts`).
+    Bound (kinematic) particles also scatter their own record to ``grid_kin``,
+    w m (n, s + n·(x_i - x_p), b, 1), and their link id to ``grid_link``: b = 1 for those that
+    know the bond surface (``bond``: its normal n in the link frame and their signed distance s
+    from it; the linear extrapolation of that distance serves :func:`bond_ghosts`), n = s = b = 0
+    for the others; the last entry is the node's kinematic mass (:func:`pinned`).
+    Dynamic particles of quasi-static groups scatter their mass to ``grid_mq`` (and the link id).
+    One record per node and kind of sum, not one array per quantity: a scatter's time is
+    mostly its read-modify-writes, and a record of 4 or 6 floats is one of them (BENCHMARKS,
+    twentieth session).
     With ``fbar`` the stress τ_p is first evaluated here, on the same stencil, from the
     nodal volume change that :func:`volume_scatter` left in ``grid_vol``.
     With ``cellp``, a particle whose λ ln J term is solved on cells (:func:`pressure_solve`)
@@ -302,16 +304,18 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                 is_qs = (not is_kin) and group_qs[group[p]] > 0
                 lk = link[p]
                 bn = ti.Vector([bond[p][0], bond[p][1], bond[p][2]])
-                has_bond = is_kin and bn.norm_sqr() > 0.0
-                if has_bond:
+                bond_d = bond[p][3]
+                bonded = 0.0  # 1 for a bound particle that knows the bond surface
+                if is_kin and bn.norm_sqr() > 0.0:
                     R0, _t0, _R1, _t1 = frame_at(link_frames, lk)  # the pose kinematic_update placed it at
                     bn = R0 @ bn
+                    bonded = 1.0
                 for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                     dpos = (ti.Vector([i, j, k]) - fx) / inv_dx
                     weight = w[i][0] * w[j][1] * w[k][2]
                     idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
-                    add_to(grid_v, idx, weight * (mv + affine @ dpos), atomic)
-                    add_to(grid_m, idx, weight * m, atomic)
+                    mom = mv + affine @ dpos
+                    add_to(grid_pm, idx, weight * ti.Vector([mom[0], mom[1], mom[2], m]), atomic)
                     if ti.static(cellp):
                         if slot >= 0:  # V0 ∇w_ip, ∇w_ip = (4/dx²) w_ip (x_i - x_p) (MLS)
                             lcl = base + ti.Vector([i, j, k]) - cell + 1
@@ -320,12 +324,10 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                     if ti.static(two_field):
                         add_to(grid_vc, idx, weight * vj, atomic)
                     if is_kin:
-                        add_to(grid_mk, idx, weight * m, atomic)
+                        wm = weight * m
+                        add_to(grid_kin, idx, ti.Vector([wm * bn[0], wm * bn[1], wm * bn[2], wm * (bond_d + bn.dot(dpos)),
+                                                         wm * bonded, wm]), atomic)
                         grid_link[idx] = lk
-                        if has_bond:
-                            wm = weight * m
-                            add_to(grid_bond, idx, ti.Vector([wm * bn[0], wm * bn[1], wm * bn[2],
-                                                              wm * (bond[p][3] + bn.dot(dpos)), wm]), atomic)
                     elif is_qs:
                         add_to(grid_mq, idx, weight * m, atomic)
                         grid_link[idx] = lk
@@ -335,14 +337,15 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
 def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
         dt: ti.template(), damping: ti.template(), env_relax: ti.template(), n_env: ti.template(),
-        grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), grid_mq: ti.template(), grid_link: ti.template(), link_frames: ti.template(),
+        grid_pm: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
+        grid_kin: ti.template(), grid_mq: ti.template(), grid_link: ti.template(), link_frames: ti.template(),
         walls: ti.template(),
         n_walls: ti.template(), grid_contact: ti.template(), n_col: ti.template(),
         col_kind: ti.template(), col_prm: ti.template(), col_frames: ti.template(),
         col_friction: ti.template(), sdf: ti.template(),
         sdf_info: ti.template(), col_impulse: ti.template(), col_env: ti.template()):
-    """Momentum -> velocity, damping, then boundary conditions per node (gravity is in P2G).
+    """Momentum -> velocity, damping, then boundary conditions per node (gravity is in P2G):
+    P2G's record (p, m) in ``grid_pm`` becomes ``grid_v`` and ``grid_m`` of every node of the box.
 
     * Nodes where kinematic mass is at least PIN_FRACTION of the node mass move exactly with
       their link (Dirichlet), so a kinematic layer is rigid, not a viscous drag (with
@@ -361,14 +364,17 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
     updated alike.
     """
     for idx in range(ntot):
-        m = grid_m[idx]
+        pm = grid_pm[idx]
+        m = pm[3]
+        grid_m[idx] = m
+        vel = vec3(0.0)
         if m > 0.0:
             env = (idx // ncell) % n_env
             relax = ti.exp(-env_relax[env] * dt)
             xi = node_position(idx, ncell, ox, oy, oz, ny, nz, dx)
-            vel = grid_v[idx] / m
+            vel = ti.Vector([pm[0], pm[1], pm[2]]) / m
             vel *= damping
-            if pinned(grid_m, grid_mk, idx):
+            if pinned(grid_m, grid_kin, idx):
                 vel, _omega, _t0 = link_motion_at(link_frames, grid_link[idx], xi, dt)
             else:
                 if grid_mq[idx] >= 0.5 * m:
@@ -404,7 +410,7 @@ def grid_update(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
                                 ti.atomic_add(col_impulse[c, 4], tq[1])
                                 ti.atomic_add(col_impulse[c, 5], tq[2])
                                 vel = new_vel
-            grid_v[idx] = vel
+        grid_v[idx] = vel
 
 
 @ti.func
@@ -429,11 +435,11 @@ def slip_walls(walls: ti.template(), n_walls, xi, v):
 
 
 @ti.func
-def pinned(grid_m: ti.template(), grid_mk: ti.template(), idx):
+def pinned(grid_m: ti.template(), grid_kin: ti.template(), idx):
     """A node is held by its link when kinematic particles bring at least PIN_FRACTION of
     its mass (Dirichlet): it moves rigidly with the link (:func:`grid_update`), or, where its
     bound particles know the bond surface, as :func:`bond_ghosts` sets it."""
-    return grid_mk[idx] >= PIN_FRACTION * grid_m[idx]
+    return grid_kin[idx][5] >= PIN_FRACTION * grid_m[idx]
 
 
 @ti.func
@@ -448,7 +454,7 @@ def mass_gradient(grid_m: ti.template(), idx, ny: ti.template(), nz: ti.template
 
 @ti.func
 def field_contact(stride: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
-        mu: ti.template(), grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
+        mu: ti.template(), grid_v: ti.template(), grid_m: ti.template(), grid_kin: ti.template(),
         grid_vc: ti.template(), grid_ds: ti.template()):
     """Contact between the two velocity fields (multi-field MPM, Bardenhagen et al. 2000).
 
@@ -476,8 +482,8 @@ def field_contact(stride: ti.template(), ny: ti.template(), nz: ti.template(), d
         m1 = grid_m[i1]
         V0, V1, cell = grid_vc[i0], grid_vc[i1], dx * dx * dx
         if m0 > 0.0 and m1 > 0.0 and ti.min(V0, V1) >= SHARE * cell and V0 + V1 >= FILL * cell:
-            pin0 = pinned(grid_m, grid_mk, i0)
-            pin1 = pinned(grid_m, grid_mk, i1)
+            pin0 = pinned(grid_m, grid_kin, i0)
+            pin1 = pinned(grid_m, grid_kin, i1)
             if not (pin0 and pin1):
                 n = mass_gradient(grid_m, i1, ny, nz) - mass_gradient(grid_m, i0, ny, nz)
                 if n.norm() > 1e-6:
@@ -541,7 +547,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
         group: ti.template(), group_frames: ti.template(), ox: ti.template(),
         oy: ti.template(), oz: ti.template(), ny: ti.template(), nz: ti.template(),
         inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(),
-        grid_mk: ti.template(), fbar: ti.template(), group_copy: ti.template(), group_field: ti.template(),
+        grid_kin: ti.template(), fbar: ti.template(), group_copy: ti.template(), group_field: ti.template(),
         ncell: ti.template(),
         two_field: ti.template(), grid_ds: ti.template(), mass: ti.template(), impulse: ti.template(),
         contact_id: ti.template(), cellp: ti.template()):
@@ -585,7 +591,7 @@ def g2p(nh_only: ti.template(), order: ti.template(), n: ti.template(), x: ti.te
         all_pinned = is_kin
         if is_kin:
             for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                all_pinned = all_pinned and pinned(grid_m, grid_mk,
+                all_pinned = all_pinned and pinned(grid_m, grid_kin,
                                                    off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k)
         mi = matid[p]
         if ti.static(two_field):
@@ -757,7 +763,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
         radius: ti.template(), impulse: ti.template(), contact_id: ti.template(),
         ox: ti.template(), oy: ti.template(), oz: ti.template(), ny: ti.template(),
         nz: ti.template(), inv_dx: ti.template(), dt: ti.template(), grid_v: ti.template(),
-        grid_m: ti.template(), grid_mk: ti.template(),
+        grid_m: ti.template(), grid_kin: ti.template(),
         grid_dp: ti.template(), n_col: ti.template(), col_kind: ti.template(),
         col_prm: ti.template(), col_frames: ti.template(), col_friction: ti.template(),
         sdf: ti.template(), sdf_info: ti.template(),
@@ -864,7 +870,7 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
                                 idx = off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k
                                 wi = w[i][0] * w[j][1] * w[k][2]
                                 add_to(grid_dp, idx, wi * J, atomic)
-                                if not pinned(grid_m, grid_mk, idx):
+                                if not pinned(grid_m, grid_kin, idx):
                                     free += wi
                             impulse[p] += free * J
                     if stuck_to < 0:
@@ -874,13 +880,13 @@ def contact_scatter(order: ti.template(), slab_start: ti.template(),
 @ti.func
 def contact_apply(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
-        grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
+        grid_v: ti.template(), grid_m: ti.template(), grid_kin: ti.template(),
         grid_dp: ti.template(), walls: ti.template(), n_walls: ti.template()):
     """Add the scattered contact momentum to free nodes (not pinned, walls kept)."""
     for idx in range(ntot):
         m = grid_m[idx]
         dp = grid_dp[idx]
-        if m > 0.0 and not pinned(grid_m, grid_mk, idx) and dp.norm_sqr() > 0.0:
+        if m > 0.0 and not pinned(grid_m, grid_kin, idx) and dp.norm_sqr() > 0.0:
             xi = node_position(idx, ncell, ox, oy, oz, ny, nz, dx)
             grid_v[idx] = grid_v[idx] + slip_walls(walls, n_walls, xi, dp / m)
 
@@ -888,13 +894,13 @@ def contact_apply(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), 
 @ti.func
 def bond_ghosts(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy: ti.template(),
         oz: ti.template(), nx: ti.template(), ny: ti.template(), nz: ti.template(), dx: ti.template(),
-        dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(), grid_mk: ti.template(),
-        grid_bond: ti.template(), grid_link: ti.template(), link_frames: ti.template()):
+        dt: ti.template(), grid_v: ti.template(), grid_m: ti.template(), grid_kin: ti.template(),
+        grid_link: ti.template(), link_frames: ti.template()):
     """The bond of a layer to its link's rigid core, placed where the bond surface is, not on a
     node plane (a ghost-node Dirichlet condition, as in ghost-fluid methods).
 
     A pinned node (:func:`pinned`) whose kinematic mass all knows the bond surface lies at a
-    signed distance d from it (positive in the layer; from ``grid_bond``, the mass-weighted
+    signed distance d from it (positive in the layer; from ``grid_kin``, the mass-weighted
     linear extrapolation of the bound particles' distances) along the surface normal n. Pinned
     to the link's rigid velocity, it would hold the layer at the node plane, up to a cell from
     the bond: the layer's stiffness then depends on how the grid lies (±11 % at 4 cells).
@@ -911,8 +917,8 @@ def bond_ghosts(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
     """
     for idx in range(ntot):
         m = grid_m[idx]
-        b = grid_bond[idx]
-        if m > 0.0 and b[4] > 0.0 and pinned(grid_m, grid_mk, idx) and b[4] >= 0.999 * grid_mk[idx]:
+        b = grid_kin[idx]
+        if m > 0.0 and b[4] > 0.0 and pinned(grid_m, grid_kin, idx) and b[4] >= 0.999 * b[5]:
             nrm = ti.Vector([b[0], b[1], b[2]])
             if nrm.norm() > 1e-3 * b[4]:
                 nrm = nrm.normalized()
@@ -931,7 +937,7 @@ def bond_ghosts(ntot: ti.template(), ncell: ti.template(), ox: ti.template(), oy
                     q = base + ti.Vector([a, c, e])
                     if 0 <= q[0] < nx and 0 <= q[1] < ny and 0 <= q[2] < nz:
                         j = off + (q[0] * ny + q[1]) * nz + q[2]
-                        if grid_m[j] > 0.0 and not pinned(grid_m, grid_mk, j):
+                        if grid_m[j] > 0.0 and not pinned(grid_m, grid_kin, j):
                             wt = (f[0] if a else 1.0 - f[0]) * (f[1] if c else 1.0 - f[1]) * (f[2] if e else 1.0 - f[2])
                             vsum += wt * grid_v[j]
                             wsum += wt
@@ -1001,9 +1007,9 @@ def number_cells(P: ti.template(), S: ti.template(), G: ti.template(), O: ti.tem
 
 
 @ti.func
-def free_node(grid_m: ti.template(), grid_mk: ti.template(), idx):
+def free_node(grid_m: ti.template(), grid_kin: ti.template(), idx):
     """A node that carries mass and is not held by a link (its velocity is an unknown)."""
-    return grid_m[idx] > 0.0 and not pinned(grid_m, grid_mk, idx)
+    return grid_m[idx] > 0.0 and not pinned(grid_m, grid_kin, idx)
 
 
 @ti.func
@@ -1025,7 +1031,7 @@ def gather_cells(G: ti.template(), S: ti.template(), comp: ti.template(), geo, c
         if ti.static(comp == 2):  # the CG direction: nothing to do once converged
             live = G.cg_sum[CG_DONE] == 0.0
         if live:
-            if free_node(G.grid_m, G.grid_mk, idx):
+            if free_node(G.grid_m, G.grid_kin, idx):
                 cc = idx % ncell
                 node = ti.Vector([cc // (ny * nz), (cc // nz) % ny, cc % nz])
                 for l in range(64):
@@ -1091,7 +1097,7 @@ def cg_start(G: ti.template(), k, geo, coef):
     diag = a[0] * a[0] / a[2]  # V/λ̄, λ̄ = Σ V0 λ / V
     for l in range(64):
         i = cell_node(c, l, ny, nz)
-        if free_node(G.grid_m, G.grid_mk, i):
+        if free_node(G.grid_m, G.grid_kin, i):
             diag += dt * dt * G.cell_G[k * 64 + l].norm_sqr() / G.grid_m[i]
     r = dt * cell_apply(G, k, geo, True, dt)
     G.cell_a[k][3] = diag
@@ -1161,7 +1167,7 @@ def pressure_solve(G: ti.template(), S: ti.template(), geo, dt, inv_dx, iters: t
     G.cg_sum[CG_RZ] = rz
     gather_cells(G, S, 0, geo, coef)  # t = M⁻¹ G π⁺
     for idx in range(ntot):
-        if free_node(G.grid_m, G.grid_mk, idx):
+        if free_node(G.grid_m, G.grid_kin, idx):
             G.grid_v[idx] = G.grid_v[idx] - dt * G.grid_t[idx]
 
 
@@ -1274,11 +1280,13 @@ Particles = ti.types.argpack(  # member names are unique over the packs (Taichi 
     kind=NDI, link=NDI, matid=NDI, group=NDI,  # DYNAMIC | KINEMATIC, link, material row, group
     bond=NDV4)  # bound particles: normal of the bond surface (link frame), signed distance [m] (0: none)
 Grid = ti.types.argpack(
-    grid_v=NDV, grid_m=NDF,  # momentum then velocity [m/s], mass [kg]
-    grid_mk=NDF, grid_mq=NDF, grid_link=NDI,  # kinematic mass, quasi-static mass, link of those
+    grid_pm=NDV4,  # P2G's sums: momentum [kg m/s] and mass [kg], one record per node
+    grid_v=NDV, grid_m=NDF,  # velocity [m/s] and mass [kg], from grid_update
+    grid_mq=NDF, grid_link=NDI,  # quasi-static mass [kg], link of bound and quasi-static particles
     grid_dp=NDV, grid_vol=NDV2,  # contact momentum [N s]; (Σ w V0, Σ w V0 J) for F-bar
     grid_vc=NDF, grid_ds=NDV,  # two fields: deformed volume Σ w V0 J [m³]; field 0's contact Δv [m/s]
-    grid_bond=NDV5,  # Σ w m (n, d, 1) of bound particles that know the bond surface (bond_ghosts)
+    # bound particles' record: Σ w m (n, d, 1) of those that know the bond surface (bond_ghosts), Σ w m
+    grid_kin=NDV6,
     # cell pressure (pressure_solve): box cell -> slot (-1: none), slot -> box cell, (slots, overflow)
     cell_slot=NDI, slot_cell=NDI, cell_count=NDI,
     cell_a=NDV4, cell_b=NDV4,  # per slot: (Σ V0, Σ V0 ln J, Σ V0 λ, CG diagonal); CG (π, r, p, Ap)
@@ -1480,8 +1488,8 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     ny, nz, n_slabs = O.active_box[4], O.active_box[5], O.active_box[6]
     ncell = O.active_box[3] * ny * nz
     ntot = ncell * n_env * (2 if ti.static(two_field) else 1)  # every env's box, of each field
-    clear_grid(ntot, G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_dp, G.grid_vol, G.grid_vc, G.grid_ds,
-               G.grid_bond, two_field, cellp, G.cell_slot)
+    clear_grid(ntot, G.grid_pm, G.grid_mq, G.grid_dp, G.grid_vol, G.grid_vc, G.grid_ds,
+               G.grid_kin, two_field, cellp, G.cell_slot)
     if ti.static(cellp):
         number_cells(P, S, G, O, ntot, ncell, ny, nz, inv_dx, ti.Vector([ox, oy, oz]), two_field)
     if ti.static(fbar):
@@ -1489,11 +1497,11 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
                        ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field, atomic)
     p2g(gravity, O.order, O.slab_start, n_slabs, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.mass, P.vol, P.kind,
         P.link, P.matid, S.mat_table, P.group, S.group_qs, ox, oy, oz, ny, nz, inv_dx, dt,
-        G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only,
-        S.group_copy, ncell, two_field, G.grid_vc, P.bond, S.link_frames, G.grid_bond, atomic,
+        G.grid_pm, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only,
+        S.group_copy, ncell, two_field, G.grid_vc, P.bond, S.link_frames, G.grid_kin, atomic,
         cellp, G.cell_slot, G.cell_a, G.cell_G)
     grid_update(ntot, ncell, ox, oy, oz, ny, nz, dx, dt, damping, S.env_relax, n_env,
-                G.grid_v, G.grid_m, G.grid_mk, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
+                G.grid_pm, G.grid_v, G.grid_m, G.grid_kin, G.grid_mq, G.grid_link, S.link_frames, S.walls, n_walls,
                 1 if ti.static(contact_mode == 2) else 0, n_col, S.col_kind, S.col_prm, S.col_frames,
                 S.col_friction, S.sdf, S.sdf_info, S.col_impulse, S.col_env)
     nx = O.active_box[3]
@@ -1501,28 +1509,28 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     # the loop: Taichi runs a loop under a run-time `if` serially (one GPU thread, 4.5 ms a
     # substep on an H100 for the index pad, 95 % of its substep)
     n_bond = ti.select(S.consts[BOND] > 0.0, ntot, 0)
-    bond_ghosts(n_bond, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
+    bond_ghosts(n_bond, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_kin,
                 G.grid_link, S.link_frames)
     if ti.static(cellp):
         pressure_solve(G, S, ti.Vector([ntot, ncell, ny, nz, ox, oy, oz]), dt, inv_dx, cellp, atomic)
         # the pressure moved free nodes near the bond: the ghosts follow
-        bond_ghosts(n_bond, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
+        bond_ghosts(n_bond, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_kin,
                     G.grid_link, S.link_frames)
     if ti.static(two_field):
-        field_contact(ncell * n_env, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_mk, G.grid_vc, G.grid_ds)
+        field_contact(ncell * n_env, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_kin, G.grid_vc, G.grid_ds)
     if ti.static(contact_mode == 1):
         contact_scatter(O.order, O.slab_start, n_slabs, P.x, P.kind, P.mass, P.radius, P.impulse,
-                        P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp,
+                        P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_kin, G.grid_dp,
                         n_col, S.col_kind, S.col_prm, S.col_frames, S.col_friction, S.sdf, S.sdf_info,
                         max_push, reach, P.group, S.group_copy, ncell, two_field, atomic, P.anchor, S.group_env,
                         S.col_env, S.col_bound)
-        contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_mk, G.grid_dp, S.walls,
+        contact_apply(ntot, ncell, ox, oy, oz, ny, nz, dx, G.grid_v, G.grid_m, G.grid_kin, G.grid_dp, S.walls,
                       n_walls)
         # the contact moved free nodes near the bond: the ghosts follow
-        bond_ghosts(n_bond, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_mk, G.grid_bond,
+        bond_ghosts(n_bond, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_kin,
                     G.grid_link, S.link_frames)
     g2p(nh_only, O.order, n, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.kind, P.matid, S.mat_table, P.group,
-        S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_mk, fbar,
+        S.group_frames, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_kin, fbar,
         S.group_copy, S.group_field, ncell, two_field, G.grid_ds, P.mass, P.impulse, P.contact_id, cellp)
 
 

@@ -1094,16 +1094,16 @@ class MPMWorld:
 
     def _alloc_grid(self, cap: int) -> None:
         d = self._dev
+        d["grid_pm"] = ti.Vector.ndarray(4, ti.f32, shape=cap)
         d["grid_v"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         d["grid_m"] = ti.ndarray(ti.f32, shape=cap)
-        d["grid_mk"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_mq"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_link"] = ti.ndarray(ti.i32, shape=cap)
         d["grid_dp"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         d["grid_vol"] = ti.Vector.ndarray(2, ti.f32, shape=cap)
         d["grid_vc"] = ti.ndarray(ti.f32, shape=cap)
         d["grid_ds"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
-        d["grid_bond"] = ti.Vector.ndarray(5, ti.f32, shape=cap)
+        d["grid_kin"] = ti.Vector.ndarray(6, ti.f32, shape=cap)
         d["cell_slot"] = ti.ndarray(ti.i32, shape=cap)
         d["grid_t"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
         self._grid_cap = cap
@@ -1124,9 +1124,9 @@ class MPMWorld:
             d["cell_count"] = ti.ndarray(ti.i32, shape=2)
             d["cg_sum"] = ti.ndarray(ti.f32, shape=K.CG_ROWS)
         self._pack["W"] = None
-        self._pack["G"] = K.Grid(**{k: d[k] for k in ("grid_v", "grid_m", "grid_mk", "grid_mq", "grid_link",
-                                                       "grid_dp", "grid_vol", "grid_vc", "grid_ds",
-                                                       "grid_bond", "cell_slot", "slot_cell", "cell_count",
+        self._pack["G"] = K.Grid(**{k: d[k] for k in ("grid_pm", "grid_v", "grid_m", "grid_mq", "grid_link",
+                                                       "grid_dp", "grid_vol", "grid_vc", "grid_ds", "grid_kin",
+                                                       "cell_slot", "slot_cell", "cell_count",
                                                        "cell_a", "cell_b", "cell_G", "grid_t", "cg_sum")})
 
     def _env_major(self, parts) -> tuple[np.ndarray, np.ndarray]:
