@@ -10,6 +10,14 @@ P2G for the two slab colours, grid update, contact scatter for the two colours, 
 apply, G2P) and :func:`~gausstac_maniskill.mpm.kernels.prepare` (frames, kinematic
 particles, bounds, slab sort). The time not in any task is Python launch overhead.
 
+``--steps N`` runs N held steps instead of one and adds each task's spread over all of their
+substeps: minimum, 10th percentile, median, mean and 90th percentile [ms], and the sums of each
+column over the substep's tasks with the throughput each sum implies. On a shared host the
+spread is the host's: the same task on the same data takes from its minimum to twice that (a
+memory-bound loop alone on this 2-core host reads a median 1.6 times its minimum), so the
+minimum's sum is what the kernels cost when nothing else uses the memory system, and the
+mean's what this host gave them.
+
 ``--launches N`` instead times the three ways of launching the kernels in one process, without
 the profiler: Taichi's own call, :class:`~gausstac_maniskill.kernel_launch.CachedKernel` with
 Taichi's argument setting, and CachedKernel with its planned launch context (the default).
@@ -32,7 +40,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--arch", default="cpu", choices=["cpu", "cuda"], help="Taichi backend (default: cpu)")
     ap.add_argument("--launches", type=int, default=0, metavar="N",
                     help="compare the three launch paths over N held steps each (no profiler)")
+    ap.add_argument("--steps", type=int, default=1, metavar="N",
+                    help="held steps under the profiler (default 1); with N > 1 also each task's spread")
     args = ap.parse_args(argv)
+    if args.steps < 1:
+        ap.error(f"--steps {args.steps}: at least 1")
     if args.launches <= 0:
         os.environ["GAUSSTAC_KERNEL_PROFILER"] = "1"
     from .. import backend
@@ -54,17 +66,52 @@ def main(argv: list[str] | None = None) -> int:
         return compare_launches(step, args.launches)
     ti.profiler.clear_kernel_profiler_info()
     t0 = time.perf_counter()
-    info = step(-1e-3)
+    substeps = 0
+    for _ in range(args.steps):
+        info = step(-1e-3)
+        substeps += info.substeps
     wall = time.perf_counter() - t0
     busy = ti.profiler.get_kernel_profiler_total_time()
+    n = info.active_particles
     print(f"index pad, {args.indenter} pressed 1 mm, dx = {args.dx * 1e3:g} mm, Taichi {arch}: "
-          f"{info.active_particles} particles, {info.substeps} substeps, {info.grid_cells} grid cells")
-    print(f"wall {wall * 1e3:.0f} ms per 50 ms step, in kernels {busy * 1e3:.0f} ms "
-          f"({100 * busy / wall:.0f} %), launch overhead {1e3 * (wall - busy) / info.substeps:.2f} ms per substep")
-    print(f"throughput {info.active_particles * info.substeps / wall / 1e6:.2f} M particle-substeps/s "
-          f"({info.active_particles * info.substeps / busy / 1e6:.2f} M/s in kernels)")
+          f"{n} particles, {substeps} substeps in {args.steps} held step(s), {info.grid_cells} grid cells")
+    print(f"wall {wall / args.steps * 1e3:.0f} ms per 50 ms step, in kernels {busy / args.steps * 1e3:.0f} ms "
+          f"({100 * busy / wall:.0f} %), launch overhead {1e3 * (wall - busy) / substeps:.2f} ms per substep")
+    print(f"throughput {n * substeps / wall / 1e6:.2f} M particle-substeps/s "
+          f"({n * substeps / busy / 1e6:.2f} M/s in kernels)")
+    if args.steps > 1:
+        task_spread(n, substeps)
     ti.profiler.print_kernel_profiler_info("count")
     return 0
+
+
+def task_spread(particles: int, substeps: int) -> None:
+    """Print each task of :func:`~gausstac_maniskill.mpm.kernels.prepare` and
+    :func:`~gausstac_maniskill.mpm.kernels.advance` over the profiled substeps: min, p10, median,
+    mean, p90 [ms] (those under 10 µs at the median only in the sums); then each column's sum over
+    all tasks and the throughput it implies [M particle-substeps/s]."""
+    import numpy as np
+    from taichi.lang import impl
+
+    prog = impl.get_runtime().prog  # every record, not only Taichi's per-kernel summary (its table's source)
+    prog.sync_kernel_profiler()
+    prog.update_kernel_profiler()
+    times: dict[str, list[float]] = {}
+    for rec in prog.get_kernel_profiler_records():
+        if rec.name.startswith(("advance_", "prepare_")):
+            times.setdefault(rec.name, []).append(rec.kernel_time)
+    cols = ("min", "p10", "median", "mean", "p90")
+    sums = np.zeros(len(cols))
+    print(f"each task over {substeps} substeps [ms]:")
+    print(f"  {'task':40s}" + "".join(f"{c:>9s}" for c in cols))
+    for name, t in sorted(times.items(), key=lambda kv: -float(np.median(kv[1]))):
+        a = np.asarray(t)
+        row = np.array([a.min(), np.percentile(a, 10), np.median(a), a.mean(), np.percentile(a, 90)])
+        sums += row
+        if row[2] >= 0.01:
+            print(f"  {name:40s}" + "".join(f"{v:9.3f}" for v in row))
+    print(f"  {'sum [ms per substep]':40s}" + "".join(f"{v:9.3f}" for v in sums))
+    print(f"  {'M particle-substeps/s in kernels':40s}" + "".join(f"{particles / v / 1e3:9.2f}" for v in sums))
 
 
 #: the launch paths of ``--launches``: (name, kernel_launch.ENABLED, kernel_launch.LEAN_ARGS)
