@@ -18,6 +18,13 @@ memory-bound loop alone on this 2-core host reads a median 1.6 times its minimum
 minimum's sum is what the kernels cost when nothing else uses the memory system, and the
 mean's what this host gave them.
 
+``--probe`` instead measures the host: three small serial kernels taking turns 200 times, a
+dependent chain of square roots (arithmetic only), and a read-modify-write sweep over 16 KB
+(in L1) and over 1 MB (in L2); it prints each one's minimum, median and 90th percentile. Where
+the sweeps' median is well above their minimum and the chain's is not, the host's load/store
+side is shared (a busy neighbour on the same core) and a scatter-bound kernel is slowed by the
+same factor.
+
 ``--launches N`` instead times the three ways of launching the kernels in one process, without
 the profiler: Taichi's own call, :class:`~gausstac_maniskill.kernel_launch.CachedKernel` with
 Taichi's argument setting, and CachedKernel with its planned launch context (the default).
@@ -42,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="compare the three launch paths over N held steps each (no profiler)")
     ap.add_argument("--steps", type=int, default=1, metavar="N",
                     help="held steps under the profiler (default 1); with N > 1 also each task's spread")
+    ap.add_argument("--probe", action="store_true", help="measure the host's noise only (no pad scene)")
     args = ap.parse_args(argv)
     if args.steps < 1:
         ap.error(f"--steps {args.steps}: at least 1")
@@ -51,6 +59,11 @@ def main(argv: list[str] | None = None) -> int:
 
     arch = backend.init(args.arch)  # raises BackendError if cuda was asked for and does not work
     import taichi as ti
+
+    if args.probe:
+        from .host_probe import probe_host
+
+        return probe_host()
 
     from . import pad as P
 
