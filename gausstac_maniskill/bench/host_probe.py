@@ -1,10 +1,12 @@
 """How noisy is this host? (``python -m gausstac_maniskill.bench kernels --probe``)
 
-Three small serial Taichi kernels take turns: a dependent chain of square roots (arithmetic
-only), and a read-modify-write sweep over 16 KB (in L1) and over 1 MB (in L2). On a host whose
-cores are shared with another tenant's work, the sweeps' median lies well above their minimum
-while the chain's does not: the load/store side is what is shared, and a scatter-bound MPM
-kernel is slowed by the same factor. (No ``from __future__ import annotations`` here: Taichi
+Four small Taichi kernels take turns: a dependent chain of square roots (arithmetic only), a
+read-modify-write sweep over 16 KB (in L1) and over 1 MB (in L2), each on one thread, and the
+1 MB sweep on both threads at once (1 MB each, the way the MPM's loops share out their work).
+On a host whose cores are shared with another tenant's work, the sweeps' median lies well
+above their minimum while the chain's does not: the load/store side is what is shared. The
+two-thread sweep waits for the slower thread, as the MPM's loops do: where its median/min is
+above the one-thread sweep's, one core was slower than the other. (No ``from __future__ import annotations`` here: Taichi
 reads the kernels' annotations as objects.)
 """
 import statistics
@@ -34,11 +36,22 @@ def probe_host(rounds: int = 200) -> int:
                 for i in range(b.shape[0]):
                     b[i] = b[i] * 0.5 + 1.0  # one load and one store per float
 
+    @ti.kernel
+    def sweep_both(b: ti.types.ndarray(), reps: ti.i32):
+        ti.loop_config(block_dim=512)  # Taichi's smallest CPU block: one half per thread
+        for q in range(2 * 512):
+            if q % 512 == 0:
+                half = b.shape[0] // 2
+                for _k in range(reps):
+                    for i in range(q // 512 * half, (q // 512 + 1) * half):
+                        b[i] = b[i] * 0.5 + 1.0
+
     a = ti.ndarray(ti.f32, 16)
     a.from_numpy(np.ones(16, np.float32))
     cases = (("dependent sqrt chain (arithmetic)", chain, (a, 200_000)),
              ("sweep over 16 KB x 1280 (L1)", sweep, (ti.ndarray(ti.f32, 1 << 12), 1280)),
-             ("sweep over 1 MB x 20 (L2)", sweep, (ti.ndarray(ti.f32, 1 << 18), 20)))
+             ("sweep over 1 MB x 20 (L2)", sweep, (ti.ndarray(ti.f32, 1 << 18), 20)),
+             ("two threads, 1 MB each x 20", sweep_both, (ti.ndarray(ti.f32, 1 << 19), 20)))
     times: dict[str, list[float]] = {name: [] for name, _, _ in cases}
     for name, f, args in cases:
         f(*args)  # compile

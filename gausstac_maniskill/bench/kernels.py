@@ -18,12 +18,13 @@ memory-bound loop alone on this 2-core host reads a median 1.6 times its minimum
 minimum's sum is what the kernels cost when nothing else uses the memory system, and the
 mean's what this host gave them.
 
-``--probe`` instead measures the host: three small serial kernels taking turns 200 times, a
-dependent chain of square roots (arithmetic only), and a read-modify-write sweep over 16 KB
-(in L1) and over 1 MB (in L2); it prints each one's minimum, median and 90th percentile. Where
-the sweeps' median is well above their minimum and the chain's is not, the host's load/store
-side is shared (a busy neighbour on the same core) and a scatter-bound kernel is slowed by the
-same factor.
+``--probe`` instead measures the host (:mod:`~gausstac_maniskill.bench.host_probe`): four small
+kernels taking turns 200 times, a dependent chain of square roots (arithmetic only), a
+read-modify-write sweep over 16 KB (in L1) and over 1 MB (in L2) on one thread, and the 1 MB
+sweep on both threads; it prints each one's minimum, median and 90th percentile. Where the
+sweeps' median is well above their minimum and the chain's is not, the host's load/store side is
+shared (a busy neighbour); where the two-thread sweep's is above the one-thread sweep's, one
+core ran slower than the other, and every parallel loop of the MPM waits for it.
 
 ``--launches N`` instead times the three ways of launching the kernels in one process, without
 the profiler: Taichi's own call, :class:`~gausstac_maniskill.kernel_launch.CachedKernel` with
