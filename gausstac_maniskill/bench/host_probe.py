@@ -6,8 +6,8 @@ read-modify-write sweep over 16 KB (in L1) and over 1 MB (in L2), each on one th
 On a host whose cores are shared with another tenant's work, the sweeps' median lies well
 above their minimum while the chain's does not: the load/store side is what is shared. The
 two-thread sweep waits for the slower thread, as the MPM's loops do: where its median/min is
-above the one-thread sweep's, one core was slower than the other. (No ``from __future__ import annotations`` here: Taichi
-reads the kernels' annotations as objects.)
+above the one-thread sweep's, one core was slower than the other. (No ``from __future__ import
+annotations`` here: Taichi reads the kernels' annotations as objects.)
 """
 import statistics
 import time

@@ -222,8 +222,9 @@ def field_offset(group_copy: ti.template(), group: ti.template(), p, ncell):
 
 
 @ti.func
-def clear_grid(ntot: ti.template(), grid_pm: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(), grid_vol: ti.template(),
-        grid_vc: ti.template(), grid_ds: ti.template(), grid_kin: ti.template(), two_field: ti.template(),
+def clear_grid(ntot: ti.template(), grid_pm: ti.template(), grid_mq: ti.template(), grid_dp: ti.template(),
+        grid_vol: ti.template(), grid_vc: ti.template(), grid_ds: ti.template(), grid_kin: ti.template(),
+        two_field: ti.template(),
         cellp: ti.template(), cell_slot: ti.template()):
     for i in range(ntot):
         if ti.static(cellp):
@@ -325,8 +326,8 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
                         add_to(grid_vc, idx, weight * vj, atomic)
                     if is_kin:
                         wm = weight * m
-                        add_to(grid_kin, idx, ti.Vector([wm * bn[0], wm * bn[1], wm * bn[2], wm * (bond_d + bn.dot(dpos)),
-                                                         wm * bonded, wm]), atomic)
+                        add_to(grid_kin, idx, ti.Vector([wm * bn[0], wm * bn[1], wm * bn[2],
+                                                         wm * (bond_d + bn.dot(dpos)), wm * bonded, wm]), atomic)
                         grid_link[idx] = lk
                     elif is_qs:
                         add_to(grid_mq, idx, weight * m, atomic)
@@ -1517,7 +1518,8 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
         bond_ghosts(n_bond, ncell, ox, oy, oz, nx, ny, nz, dx, dt, G.grid_v, G.grid_m, G.grid_kin,
                     G.grid_link, S.link_frames)
     if ti.static(two_field):
-        field_contact(ncell * n_env, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_kin, G.grid_vc, G.grid_ds)
+        field_contact(ncell * n_env, ny, nz, dx, S.consts[FIELD_MU], G.grid_v, G.grid_m, G.grid_kin, G.grid_vc,
+                      G.grid_ds)
     if ti.static(contact_mode == 1):
         contact_scatter(O.order, O.slab_start, n_slabs, P.x, P.kind, P.mass, P.radius, P.impulse,
                         P.contact_id, ox, oy, oz, ny, nz, inv_dx, dt, G.grid_v, G.grid_m, G.grid_kin, G.grid_dp,
