@@ -13,10 +13,10 @@ particles, bounds, slab sort). The time not in any task is Python launch overhea
 ``--steps N`` runs N held steps instead of one and adds each task's spread over all of their
 substeps: minimum, 10th percentile, median, mean and 90th percentile [ms], and the sums of each
 column over the substep's tasks with the throughput each sum implies. On a shared host the
-spread is the host's: the same task on the same data takes from its minimum to twice that (a
-memory-bound loop alone on this 2-core host reads a median 1.6 times its minimum), so the
-minimum's sum is what the kernels cost when nothing else uses the memory system, and the
-mean's what this host gave them.
+spread is mostly the host's (``--probe`` says how much): the same task on the same data took
+from its minimum to twice that on the 2-core host of BENCHMARKS' twentieth session. The
+minimum's sum is then what the kernels cost when nothing else slows the cores, and the mean's
+what this host gave them.
 
 ``--probe`` instead measures the host (:mod:`~gausstac_maniskill.bench.host_probe`): four small
 kernels taking turns 200 times, a dependent chain of square roots (arithmetic only), a
@@ -54,6 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.steps < 1:
         ap.error(f"--steps {args.steps}: at least 1")
+    if args.probe and args.arch != "cpu":
+        ap.error("--probe measures the CPU host: use it with --arch cpu")
     if args.launches <= 0:
         os.environ["GAUSSTAC_KERNEL_PROFILER"] = "1"
     from .. import backend
