@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--steps {args.steps}: at least 1")
     if args.probe and args.arch != "cpu":
         ap.error("--probe measures the CPU host: use it with --arch cpu")
-    if args.launches <= 0:
+    if args.launches <= 0 and not args.probe:  # the probe times whole launches: no profiler in them
         os.environ["GAUSSTAC_KERNEL_PROFILER"] = "1"
     from .. import backend
 
