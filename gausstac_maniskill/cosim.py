@@ -87,9 +87,9 @@ class GaussTacSim:
             these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)
             every env solves its own, with one body per pad.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
-            at once): 1 s at the default resolution, plus 40 s on 2 cores for its compliance
-            and 10 s for its maps' response the first time on a machine (kept under
-            ``~/.cache/gausstac_maniskill``).
+            at once): 1 s at the default resolution, plus about 20 s on 2 cores for its
+            compliance and its maps' response (one sweep) the first time on a machine (kept
+            under ``~/.cache/gausstac_maniskill``).
         fem_model: the ``"fem"`` pads' material model, ``"linear"`` (fast; small strain) or
             ``"neo_hookean"`` (finite strain; seconds per step at the default resolution; a
             step whose iterations stall with the layer's cut cells finite is solved with them
@@ -416,9 +416,9 @@ class GaussTacSim:
         stiffness and compute or load its surface compliance
         (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`), which otherwise happens in
         the first step that brings an object within ``sleep_margin`` of the pad. At the
-        default resolution: 1 s per pad shape, plus 40 s (2 cores) for its compliance the
-        first time on a machine (then read from the disk cache; the maps' response, another
-        10 s the first time, follows at the first touch). Does nothing for MPM pads."""
+        default resolution: 1 s per pad shape, plus about 20 s (2 cores) for its compliance
+        and its maps' response (the default binning's, in the same sweep) the first time on a
+        machine (then read from the disk cache). Does nothing for MPM pads."""
         for fp in self._fem.values():
             fp.body  # noqa: B018 (built on first access)
 

@@ -676,14 +676,16 @@ class QuasiStaticBody:
         :meth:`precompute_compliance`)."""
         return self.num_points if self._compliance is not None else len(self._columns)
 
-    def precompute_compliance(self, progress: bool = True, cache: bool = True) -> None:
+    def precompute_compliance(self, progress: bool = True, cache: bool = True, readouts=()) -> None:
         """Compute (or load from the disk cache) the compliance among all surface points now,
         so that contact solves need no sparse solve for it: :func:`~.compliance.surface_compliance`
-        (float32, 36 S² bytes; about 20 s on 2 cores for the index pad's 1 994 points, the first time)."""
+        (float32, 36 S² bytes; about 20 s on 2 cores for the index pad's 1 994 points, the first time).
+        ``readouts``: readouts [R, 3V] whose responses will be asked for, computed in the same sweep
+        where the compliance is computed (see there)."""
         from .compliance import surface_compliance
 
         if self._compliance is None:
-            self._compliance = surface_compliance(self, progress=progress, cache=cache)
+            self._compliance = surface_compliance(self, progress=progress, cache=cache, readouts=readouts)
             self._columns = {}
 
     # ------------------------------------------------------------------ linear algebra
@@ -727,10 +729,18 @@ class QuasiStaticBody:
         and :meth:`dofs_to_free` give them): all their solves at once, by the stiffness's Cholesky
         factor taken lattice plane by lattice plane (:mod:`.plane_cholesky`, dense BLAS 3 on every
         core; SuperLU's factor is not needed). ``bar``: a tqdm bar advanced once per plane."""
-        from .plane_cholesky import inverse_between
+        return self.inverse_products([P] if Q is None else [P, Q], [(0, 0)] if Q is None else [(0, 1)], bar=bar,
+                                     dtype=dtype)[0]
+
+    def inverse_products(self, loads: list, pairs: list, bar=None, dtype=np.float64) -> list[np.ndarray]:
+        """[Pᵢᵀ K⁻¹ Pⱼ for (i, j) in ``pairs``] of load sets ``loads`` [num_free, pᵢ] (sparse), as
+        :meth:`inverse_between` computes one, all in one sweep: the factor and each load set's
+        forward substitution once (:func:`~.plane_cholesky.inverse_products`)."""
+        from .plane_cholesky import inverse_products
 
         free = self._free
-        return inverse_between(self._K[free][:, free], self._planes, P, Q, bar=bar, name=self.name, dtype=dtype)
+        return inverse_products(self._K[free][:, free], self._planes, loads, pairs, bar=bar, name=self.name,
+                                dtype=dtype)
 
     @functools.cached_property
     def _planes(self) -> np.ndarray:

@@ -23,13 +23,14 @@ its own and the middle, and each half's product is a quarter of the whole.
 On 2 cores this computes the index pad's compliance among its 1 994 surface points (5 982 load
 columns, 46 743 unknowns) in 17–20 s, where SuperLU's column-by-column solves in two worker
 processes took 114 s, and its maps' response (1 024 readouts) in 15 s instead of 26
-(BENCHMARKS.md, eighteenth session).
+(BENCHMARKS.md, eighteenth session). :func:`inverse_products` takes both in one sweep, which
+factors K and forward-substitutes the point loads once: 17–19 s for both (twenty-first session).
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["lattice_planes", "inverse_between"]
+__all__ = ["lattice_planes", "inverse_between", "inverse_products"]
 
 
 def lattice_planes(coordinates: np.ndarray) -> tuple[np.ndarray, int]:
@@ -140,22 +141,21 @@ def _couple(K, L_inv: np.ndarray, prev: np.ndarray, r: np.ndarray, A: np.ndarray
     return C
 
 
-def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
+def _sweep(K, rows: list, loads: list, pairs: list, plane: np.ndarray, name: str, bar):
     """Factor and forward-substitute along ``rows`` (the unknowns of each plane, in the sweep's
-    order; ``plane`` [n] numbers them so, and ≥ len(rows) off the sweep), summing (L⁻¹P)ᵀ(L⁻¹Q)
-    over them.
+    order; ``plane`` [n] numbers them so, and ≥ len(rows) off the sweep), summing
+    (L⁻¹Pᵢ)ᵀ(L⁻¹Pⱼ) over them for each pair (i, j) of ``pairs`` of the load sets ``loads``.
 
     Returns:
-        (that sum [cp, cq] on the cp columns of P and cq of Q begun along the sweep, in the
-        sweep's column order; P's and Q's :class:`_Loads`, holding that order and the last
+        (each pair's sum [cᵢ, cⱼ] on the columns of Pᵢ and Pⱼ begun along the sweep, in the
+        sweep's column order; each load set's :class:`_Loads`, holding that order and the last
         plane's forward solution; the last L_ii⁻¹).
     """
     import scipy.linalg as la
 
     count = len(rows)
-    p_loads = _Loads(P, plane, count)
-    q_loads = p_loads if Q is None else _Loads(Q, plane, count)
-    out = np.zeros((int(p_loads.begun[-1]), int(q_loads.begun[-1]))) if count else np.zeros((0, 0))
+    sets = [_Loads(P, plane, count) for P in loads]
+    outs = [np.zeros((int(sets[i].begun[-1]), int(sets[j].begun[-1])) if count else (0, 0)) for i, j in pairs]
     L_inv = C = None
     for i, r in enumerate(rows):
         A = K[r][:, r].toarray()
@@ -164,12 +164,12 @@ def _sweep(K, rows: list, P, Q, plane: np.ndarray, name: str, bar):
         L = _chol(A, name, f"plane {i} of a sweep of {count}")
         L_inv = la.lapack.dtrtri(L, lower=1)[0]
         G = None if C is None else L_inv @ C
-        Yp = p_loads.advance(i, r, L_inv, G)
-        Yq = Yp if Q is None else q_loads.advance(i, r, L_inv, G)
-        _add_product(out[:Yp.shape[1], :Yq.shape[1]], Yp, Yq)
+        Y = [s.advance(i, r, L_inv, G) for s in sets]  # each load set's forward solution, once
+        for out, (a, b) in zip(outs, pairs):
+            _add_product(out[:Y[a].shape[1], :Y[b].shape[1]], Y[a], Y[b])
         if bar is not None:
             bar.update(1)
-    return out, p_loads, q_loads, L_inv
+    return outs, sets, L_inv
 
 
 def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body", dtype=np.float64) -> np.ndarray:
@@ -191,6 +191,22 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
         ValueError: K couples planes that are not adjacent, or is not positive definite (a part
             of the body held by nothing).
     """
+    if Q is None:
+        return inverse_products(K, plane, [P], [(0, 0)], bar=bar, name=name, dtype=dtype)[0]
+    return inverse_products(K, plane, [P, Q], [(0, 1)], bar=bar, name=name, dtype=dtype)[0]
+
+
+def inverse_products(K, plane: np.ndarray, loads: list, pairs: list, bar=None, name: str = "body",
+                     dtype=np.float64) -> list[np.ndarray]:
+    """[Pᵢᵀ K⁻¹ Pⱼ for (i, j) in ``pairs``] of the load sets ``loads`` [n, pᵢ] (sparse), all from
+    one sweep (:func:`inverse_between` for one product): K is factored once and each load set
+    forward-substituted once, however many products use it. A pair (i, i) gives a symmetric
+    result (its two triangles averaged). ``K``, ``plane``, ``bar``, ``name``, ``dtype`` and the
+    errors: as :func:`inverse_between`.
+
+    A pad's compliance W = Nᵀ K⁻¹ N and its maps' response M = A K⁻¹ N share the point loads N:
+    in one sweep N's forward substitution and the factor are paid once instead of twice.
+    """
     import scipy.linalg as la
     import scipy.sparse as sp
     from threadpoolctl import threadpool_limits
@@ -200,47 +216,49 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
     K = sp.csr_matrix(K, dtype=np.float64)
     plane = np.asarray(plane, np.int64)
     n = K.shape[0]
-    if K.shape != (n, n) or plane.shape != (n,) or P.shape[0] != n or (Q is not None and Q.shape[0] != n):
+    if K.shape != (n, n) or plane.shape != (n,) or any(P.shape[0] != n for P in loads):
         raise ValueError(f"{name}: K {K.shape}, plane {plane.shape} and the loads do not match")
+    if not pairs or any(not (0 <= i < len(loads) and 0 <= j < len(loads)) for i, j in pairs):
+        raise ValueError(f"{name}: pairs {pairs} must name load sets 0…{len(loads) - 1}")
     coo = K.tocoo()
     if len(coo.row) and np.abs(plane[coo.row] - plane[coo.col]).max() > 1:
         raise ValueError(f"{name}: the stiffness couples unknowns more than one plane apart")
-    P = sp.csc_matrix(P, dtype=np.float64)
-    Q = None if Q is None else sp.csc_matrix(Q, dtype=np.float64)
-    out = np.zeros((P.shape[1], P.shape[1] if Q is None else Q.shape[1]), dtype)
+    loads = [sp.csc_matrix(P, dtype=np.float64) for P in loads]
+    outs = [np.zeros((loads[i].shape[1], loads[j].shape[1]), dtype) for i, j in pairs]
     if n == 0:
-        return out
+        return outs
     count = int(plane.max()) + 1
     rows = np.split(np.argsort(plane, kind="stable"), np.cumsum(np.bincount(plane, minlength=count))[:-1])
     mid = count // 2
     with threadpool_limits(limits=cpu_threads(), user_api="blas"):
         # the two halves, each swept toward the middle plane (its planes numbered from its far end);
-        # each half's product goes into the result at once (its buffer is then freed)
+        # each half's products go into the results at once (their buffers are then freed)
         halves = []
         for planes, numbering, side in ((rows[:mid], np.where(plane < mid, plane, count), mid - 1),
                                         (rows[:mid:-1], np.where(plane > mid, count - 1 - plane, count), mid + 1)):
             if not len(planes):  # a half with no plane
                 continue
-            part, p_loads, q_loads, L_inv = _sweep(K, planes, P, Q, numbering, name, bar)
-            out[np.ix_(p_loads.columns, q_loads.columns)] += part
-            del part
-            halves.append((p_loads, q_loads, L_inv, rows[side]))
+            parts, sets, L_inv = _sweep(K, planes, loads, pairs, numbering, name, bar)
+            for out, part, (i, j) in zip(outs, parts, pairs):
+                out[np.ix_(sets[i].columns, sets[j].columns)] += part
+            del parts
+            halves.append((sets, L_inv, rows[side]))
         # the middle plane, coupled to the last plane of each half
         r = rows[mid]
         A = K[r][:, r].toarray()
-        Yp = P[r].toarray()
-        Yq = None if Q is None else Q[r].toarray()
-        for p_loads, q_loads, L_inv, side in halves:
+        Y = [P[r].toarray() for P in loads]
+        for sets, L_inv, side in halves:
             C = _couple(K, L_inv, side, r, A)
-            Yp[:, p_loads.columns] -= C @ p_loads.Y
-            if Q is not None:
-                Yq[:, q_loads.columns] -= C @ q_loads.Y
+            for y, s in zip(Y, sets):
+                y[:, s.columns] -= C @ s.Y
         del halves
         L = _chol(A, name, "the middle plane")
-        Yp = la.solve_triangular(L, Yp, lower=True, check_finite=False)
-        _add_product(out, Yp, Yp if Q is None else la.solve_triangular(L, Yq, lower=True, check_finite=False))
+        Y = [la.solve_triangular(L, y, lower=True, check_finite=False) for y in Y]
+        for out, (i, j) in zip(outs, pairs):
+            _add_product(out, Y[i], Y[j])
         if bar is not None:
             bar.update(1)
-    if Q is None:  # symmetric to rounding as computed; exactly so
-        _symmetrise(out)
-    return out
+    for out, (i, j) in zip(outs, pairs):
+        if i == j:  # symmetric to rounding as computed; exactly so
+            _symmetrise(out)
+    return outs

@@ -48,7 +48,7 @@ def test_cache_round_trip_scales_with_E_and_keys_on_nu(tmp_path, monkeypatch):
     assert len(files) == 1 and files[0].startswith("compliance-")
 
     stiffer = _layer(E=0.6e6)  # same shape and nu: loaded, not solved, and W ∝ 1/E
-    monkeypatch.setattr(type(stiffer), "inverse_between", lambda self, *a, **k: pytest.fail("solved instead of loaded"))
+    monkeypatch.setattr(type(stiffer), "inverse_products", lambda self, *a, **k: pytest.fail("solved instead of loaded"))
     stiffer.precompute_compliance(progress=False)
     assert not stiffer.factored  # nothing needed K's factor
     np.testing.assert_allclose(stiffer._compliance, 0.5 * first._compliance, rtol=1e-6)
@@ -104,13 +104,64 @@ def test_readout_response_is_the_compliance_row_and_keyed_on_E(tmp_path, monkeyp
     assert len([f for f in os.listdir(tmp_path) if f.startswith("readout-")]) == 2
 
 
+def _point_readout(body, d, axis=2):
+    """[1, 3V]: surface point d's displacement along ``axis``, as a readout."""
+    import scipy.sparse as sp
+
+    from gausstac_maniskill.fem.hex import trilinear
+
+    nodes, w = trilinear(body.body, body.points[d:d + 1], body.point_elements[d:d + 1])
+    return sp.csr_matrix((w[0], (np.zeros(8, int), 3 * nodes[0] + axis)), shape=(1, body.body.num_dofs))
+
+
+def test_compliance_and_readout_responses_come_from_one_sweep(tmp_path, monkeypatch):
+    """Guards the bookkeeping of the shared sweep: readouts named with the compliance get their
+    responses from the compliance's own sweep (one sweep in all, counted), the same as each
+    computed alone (to float32 rounding), kept on disk under the keys a lone computation uses;
+    where the compliance is on disk already, the readouts are not even built."""
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    body = _layer()
+    A, B = _point_readout(body, 7), _point_readout(body, 3, axis=0)
+    sweeps = []
+    real = type(body).inverse_products
+
+    def spy(self, loads, pairs, **k):
+        sweeps.append(pairs)
+        return real(self, loads, pairs, **k)
+
+    monkeypatch.setattr(type(body), "inverse_products", spy)
+    body.precompute_compliance(progress=False, readouts=lambda: [A, B, A])  # A twice: computed once
+    assert sweeps == [[(0, 0), (1, 0), (2, 0)]]
+    MA, MB = (compliance.readout_responses(body, R, progress=False) for R in (A, B))
+    assert len(sweeps) == 1  # taken from the compliance's sweep
+    assert len([f for f in os.listdir(tmp_path) if f.startswith("readout-")]) == 2
+
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", "off")
+    alone = _layer()
+    W = alone.inverse_between(alone.point_loads(np.arange(alone.num_points)))
+    for M, R in ((MA, A), (MB, B)):
+        ref = compliance.readout_responses(alone, R, progress=False)
+        assert M.shape == ref.shape and M.dtype == np.float32
+        np.testing.assert_allclose(M, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
+    np.testing.assert_allclose(body._compliance, W, rtol=0, atol=1e-6 * np.abs(W).max())
+    np.testing.assert_allclose(MA[0], W[3 * 7 + 2], rtol=0, atol=1e-6 * np.abs(W).max())  # Maxwell-Betti
+
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    sweeps.clear()
+    again = _layer()
+    again.precompute_compliance(progress=False, readouts=lambda: pytest.fail("built although W is on disk"))
+    assert not sweeps and np.array_equal(again._compliance, body._compliance)
+    np.testing.assert_array_equal(compliance.readout_responses(again, A, progress=False), MA)
+    assert not sweeps  # from disk
+
+
 def test_a_compliance_beyond_the_memory_at_hand_is_refused_by_name(monkeypatch):
     """Asked for a compliance this machine cannot hold while computing it, the body says so
     (naming itself and the memory) before it starts, and nothing is computed."""
     monkeypatch.setenv("GAUSSTAC_CACHE_DIR", "off")
     body = _layer()
     monkeypatch.setattr(compliance, "available_memory", lambda: 1000)
-    monkeypatch.setattr(type(body), "inverse_between", lambda self, *a, **k: pytest.fail("computed anyway"))
+    monkeypatch.setattr(type(body), "inverse_products", lambda self, *a, **k: pytest.fail("computed anyway"))
     from gausstac_maniskill.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"layer: compliance at \d+ surface points: needs about .* GiB .* "

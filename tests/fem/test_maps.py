@@ -1,4 +1,6 @@
 """A linear pad's tactile maps as one matrix times its contact forces (fem/maps.py)."""
+import os
+
 import numpy as np
 import pytest
 
@@ -88,4 +90,32 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
     assert again._fem[bp.INDEX].body is not body and not again._fem[bp.INDEX].body.factored
     for k in maps:
         np.testing.assert_allclose(m2[k].cpu().numpy(), maps[k].cpu().numpy(), atol=1e-6 * float(maps[k].abs().max()))
+    forget_bodies()
+
+
+def test_first_contact_sweeps_the_pad_once(tmp_path, monkeypatch):
+    """Guard of the first-contact cost: a linear pad's compliance and its maps' response (the
+    co-simulator's default binning) come from one sweep of its stiffness, and the maps then
+    read need no second one; both are kept on disk."""
+    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.fem.contact import QuasiStaticBody
+    from gausstac_maniskill.fem.sensor import forget_bodies
+
+    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    sweeps = []
+    real = QuasiStaticBody.inverse_products
+
+    def spy(self, loads, pairs, **k):
+        sweeps.append(pairs)
+        return real(self, loads, pairs, **k)
+
+    monkeypatch.setattr(QuasiStaticBody, "inverse_products", spy)
+    forget_bodies()
+    sim, pad, body, _ = _pad_and_body()
+    W = bp.LINK_POSE @ pad.sensor_frame
+    sim.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, bp.GAP), 0.5))
+    maps = sim.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"ball": bp.indenter_pose("sphere", W, -1e-3)})[bp.INDEX]
+    assert float(maps["force"].sum()) > 0
+    assert sweeps == [[(0, 0), (1, 0)]]
+    assert sorted(f.split("-")[0] for f in os.listdir(tmp_path)) == ["compliance", "readout"]
     forget_bodies()

@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 
 from gausstac_maniskill.fem import layer_body
-from gausstac_maniskill.fem.plane_cholesky import inverse_between, lattice_planes
+from gausstac_maniskill.fem.plane_cholesky import inverse_between, inverse_products, lattice_planes
 
 
 def _dense(K, P, Q):
@@ -56,6 +56,26 @@ def test_any_number_of_planes(sizes, monkeypatch):
     for a, b in ((P, None), (P, Q)):
         ref = _dense(K, a, a if b is None else b)
         np.testing.assert_allclose(inverse_between(K, plane, a, b), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("sizes", [(4,), (3, 5, 4), (2, 3, 4, 5, 6)])
+def test_several_products_in_one_sweep(sizes):
+    """Each product of a shared sweep against a dense solve: symmetric pairs, a pair and its
+    reverse, a load set used by several products, and one used by none."""
+    K, plane = _chain(sizes, seed=3)
+    rng = np.random.default_rng(4)
+    loads = [sp.random(len(plane), c, density=0.3, random_state=rng, format="csc") for c in (5, 3, 2, 4)]
+    pairs = [(0, 0), (1, 0), (0, 1), (2, 2), (1, 2)]
+    outs = inverse_products(K, plane, loads, pairs)
+    assert len(outs) == len(pairs)
+    for out, (i, j) in zip(outs, pairs):
+        ref = _dense(K, loads[i], loads[j])
+        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    assert np.array_equal(outs[0], outs[0].T)
+    single = inverse_between(K, plane, loads[1], loads[0])
+    np.testing.assert_allclose(outs[1], single, rtol=0, atol=1e-13 * np.abs(single).max())
+    with pytest.raises(ValueError, match=r"pad: pairs \[\(0, 4\)\] must name load sets 0…3"):
+        inverse_products(K, plane, loads, [(0, 4)], name="pad")
 
 
 def test_bad_matrices_are_refused_by_name():
