@@ -209,16 +209,85 @@ def _store(scaled: np.ndarray, path: Path, name: str) -> None:
 PEAK_BYTES_PER_ENTRY = 7
 
 
-def available_memory() -> int | None:
-    """Memory [bytes] this machine has available now (Linux's MemAvailable), None where unknown."""
+def available_memory(root: str = "/") -> int | None:
+    """Memory [bytes] this process can still take now: Linux's MemAvailable, or less where the
+    process's control group (a container's memory limit, v1 or v2, itself or an ancestor) leaves
+    less (its limit less what the group uses, reclaimable file cache not counted); None where
+    unknown. ``root``: where ``/proc`` and ``/sys`` are read (tests)."""
+    out = None
     try:
-        with open("/proc/meminfo") as fh:
+        with open(os.path.join(root, "proc/meminfo")) as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+                    out = int(line.split()[1]) * 1024
+                    break
     except (OSError, ValueError, IndexError):
         pass
-    return None
+    for headroom in _cgroup_headrooms(root):
+        out = headroom if out is None else min(out, headroom)
+    return out
+
+
+#: A cgroup v1 "limit" at or above this is the kernel's "no limit" (2⁶³ rounded to a page).
+_NO_LIMIT = 1 << 60
+
+
+def _cgroup_headrooms(root: str):
+    """Each memory limit over this process's control group and its ancestors: limit − (usage −
+    inactive file cache) [bytes], from cgroup v2 (``memory.max``, ``memory.current``) or v1
+    (``memory.limit_in_bytes``, ``memory.usage_in_bytes``). Nothing where none is set or readable."""
+    try:
+        with open(os.path.join(root, "proc/self/cgroup")) as fh:
+            lines = fh.read().splitlines()
+    except OSError:
+        return
+    for line in lines:
+        parts = line.split(":", 2)
+        if len(parts) != 3:
+            continue
+        _, controllers, path = parts
+        if controllers == "":  # v2: one hierarchy
+            base, files = os.path.join(root, "sys/fs/cgroup"), ("memory.max", "memory.current", "inactive_file")
+        elif "memory" in controllers.split(","):
+            base, files = (os.path.join(root, "sys/fs/cgroup/memory"),
+                           ("memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file"))
+        else:
+            continue
+        # the group and each ancestor up to the mount's root (which, in a container, may be the group itself)
+        rel = path.strip("/")
+        while True:
+            folder = os.path.join(base, rel)
+            headroom = _headroom(folder, *files)
+            if headroom is not None:
+                yield headroom
+            if not rel:
+                break
+            rel = os.path.dirname(rel)
+
+
+def _headroom(folder: str, limit_file: str, usage_file: str, inactive_key: str) -> int | None:
+    """limit − (usage − inactive file cache) [bytes] of one cgroup folder; None without a limit."""
+    try:
+        with open(os.path.join(folder, limit_file)) as fh:
+            text = fh.read().strip()
+        if text == "max" or int(text) >= _NO_LIMIT:
+            return None
+        limit = int(text)
+        with open(os.path.join(folder, usage_file)) as fh:
+            usage = int(fh.read().strip())
+    except (OSError, ValueError):
+        return None
+    inactive = 0
+    try:
+        with open(os.path.join(folder, "memory.stat")) as fh:
+            for line in fh:
+                key, _, value = line.partition(" ")
+                if key == inactive_key:
+                    inactive = int(value)
+                    break
+    except (OSError, ValueError):
+        pass
+    return max(limit - max(usage - inactive, 0), 0)
 
 
 def _products(body, loads: list, pairs: list, scales: list, progress: bool, desc: str) -> list[np.ndarray]:
@@ -235,8 +304,8 @@ def _products(body, loads: list, pairs: list, scales: list, progress: bool, desc
     have = available_memory()
     if have is not None and need > have:
         raise ConfigError(
-            f"{desc}: needs about {need / 2 ** 30:.1f} GiB of memory while it is computed, and this machine has "
-            f"{have / 2 ** 30:.1f} GiB available. Leave the pad's compliance to be solved point by point "
+            f"{desc}: needs about {need / 2 ** 30:.1f} GiB of memory while it is computed, and this process has "
+            f"{have / 2 ** 30:.1f} GiB available (the machine's free memory, or its container's limit). Leave the pad's compliance to be solved point by point "
             f"(fem_precompute=False, the default above fem.sensor.PRECOMPUTE_BYTES), or use a coarser grid.")
     with tqdm(total=body.num_planes, desc=desc, unit="plane", disable=not progress, leave=False) as bar:
         outs = body.inverse_products(loads, pairs, bar=bar, dtype=np.float32)

@@ -165,7 +165,49 @@ def test_a_compliance_beyond_the_memory_at_hand_is_refused_by_name(monkeypatch):
     from gausstac_maniskill.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"layer: compliance at \d+ surface points: needs about .* GiB .* "
-                                          r"0\.0 GiB available.*fem_precompute=False"):
+                                          r"0\.0 GiB available \(the machine's free memory, or its container's "
+                                          r"limit\).*fem_precompute=False"):
         body.precompute_compliance(progress=False)
     assert not body.has_compliance
     assert compliance.available_memory() is not None or not os.path.exists("/proc/meminfo")
+
+
+def _fake_host(tmp_path, meminfo_kb, cgroup_lines, files):
+    """A /proc and /sys under tmp_path: MemAvailable, /proc/self/cgroup and cgroup files {path: text}."""
+    (tmp_path / "proc/self").mkdir(parents=True)
+    (tmp_path / "proc/meminfo").write_text(f"MemTotal: 99999999 kB\nMemAvailable: {meminfo_kb} kB\n")
+    (tmp_path / "proc/self/cgroup").write_text("\n".join(cgroup_lines) + "\n")
+    for path, text in files.items():
+        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path).write_text(text)
+    return str(tmp_path)
+
+
+def test_available_memory_follows_a_container_limit(tmp_path):
+    """Guards the memory check against a container's limit (the kernel would kill the process
+    instead of our error): the least of MemAvailable and each cgroup's limit − (usage − inactive
+    file cache), over the group and its ancestors, for cgroup v2 and v1; 'no limit' is none."""
+    GiB = 2 ** 30
+    v2 = _fake_host(tmp_path / "v2", 8 * GiB // 1024, ["0::/job/task"], {
+        "sys/fs/cgroup/job/task/memory.max": "max\n",
+        "sys/fs/cgroup/job/task/memory.current": f"{GiB}\n",
+        "sys/fs/cgroup/job/memory.max": f"{3 * GiB}\n",  # the parent's limit binds
+        "sys/fs/cgroup/job/memory.current": f"{2 * GiB}\n",
+        "sys/fs/cgroup/job/memory.stat": f"anon 1\ninactive_file {GiB // 2}\n",
+    })
+    assert compliance.available_memory(v2) == 3 * GiB - (2 * GiB - GiB // 2)
+    v1 = _fake_host(tmp_path / "v1", 8 * GiB // 1024, ["4:memory:/box", "1:cpu:/box"], {
+        "sys/fs/cgroup/memory/box/memory.limit_in_bytes": f"{4 * GiB}\n",
+        "sys/fs/cgroup/memory/box/memory.usage_in_bytes": f"{GiB}\n",
+        "sys/fs/cgroup/memory/memory.limit_in_bytes": "9223372036854771712\n",  # the root: no limit
+        "sys/fs/cgroup/memory/memory.usage_in_bytes": f"{5 * GiB}\n",
+    })
+    assert compliance.available_memory(v1) == 3 * GiB
+    roomy = _fake_host(tmp_path / "roomy", GiB // 1024, ["4:memory:/box"], {
+        "sys/fs/cgroup/memory/box/memory.limit_in_bytes": f"{4 * GiB}\n",
+        "sys/fs/cgroup/memory/box/memory.usage_in_bytes": f"{GiB}\n",
+    })
+    assert compliance.available_memory(roomy) == GiB  # the machine has less than the group allows
+    bare = _fake_host(tmp_path / "bare", GiB // 1024, ["0::/"], {})
+    assert compliance.available_memory(bare) == GiB
+    assert compliance.available_memory(str(tmp_path / "nowhere")) is None
