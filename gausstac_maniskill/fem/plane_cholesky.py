@@ -95,41 +95,71 @@ class _Loads:
 
 
 def _chol(A: np.ndarray, name: str, where: str) -> np.ndarray:
-    """The lower Cholesky factor of a plane's Schur complement ``A``, or a ValueError naming
-    ``name`` and ``where`` when it is not positive definite."""
+    """The lower Cholesky factor L of a plane's Schur complement ``A`` (symmetric, C order), as
+    the transpose (a view) of LAPACK's upper factor of Aᵀ = A taken in place in Fortran order (no
+    copy); ``A`` is overwritten. A ValueError names ``name`` and ``where`` when it is not
+    positive definite.
+
+    On one BLAS thread: OpenBLAS's threaded factorization of these ~1 100-unknown planes, right
+    after the sweep's threaded products, took 2.6 s for the index pad's 45 planes, one thread
+    0.84 s (twenty-first session; scipy.linalg.cholesky, which also copies, 2.6–3.1 s)."""
     import scipy.linalg as la
+    from threadpoolctl import threadpool_limits
 
-    try:
-        return la.cholesky(A, lower=True, check_finite=False)
-    except la.LinAlgError:
+    with threadpool_limits(limits=1, user_api="blas"):
+        U, info = la.lapack.dpotrf(A.T, lower=0, clean=1, overwrite_a=1)
+    if info != 0:
         raise ValueError(f"{name}: the stiffness is not positive definite ({where}: a part of the body "
-                         "held by nothing?)") from None
+                         "held by nothing?)")
+    return U.T
 
 
-#: Columns of the right factor per product in :func:`_add_product` (and the blocks of :func:`_symmetrise`).
+def _chol_inverse(A: np.ndarray, name: str, where: str) -> np.ndarray:
+    """L⁻¹ for the lower Cholesky factor L of ``A`` (:func:`_chol`; ``A`` is overwritten), inverted
+    in place in LAPACK's Fortran order (the transpose of U⁻¹), on one BLAS thread as :func:`_chol`."""
+    import scipy.linalg as la
+    from threadpoolctl import threadpool_limits
+
+    U = _chol(A, name, where).T
+    with threadpool_limits(limits=1, user_api="blas"):
+        U_inv, info = la.lapack.dtrtri(U, lower=0, overwrite_c=1)
+    if info != 0:  # (a singular factor: not reached after a successful factorization)
+        raise ValueError(f"{name}: the stiffness is singular ({where})")
+    return U_inv.T
+
+
+#: Columns of the right factor per product in :func:`_add_product`.
 PRODUCT_BLOCK = 4096
+#: The same for a symmetric product, summed on and above its block diagonal only (and the blocks of
+#: :func:`_mirror_upper`): narrower, so that the blocks left out are about half the product.
+SYMMETRIC_BLOCK = 512
 
 
-def _add_product(out: np.ndarray, Yp: np.ndarray, Yq: np.ndarray) -> None:
+def _add_product(out: np.ndarray, Yp: np.ndarray, Yq: np.ndarray, upper: bool = False) -> None:
     """out += Ypᵀ Yq, by blocks of :data:`PRODUCT_BLOCK` columns of Yq. NumPy hands Yᵀ Y on one
     buffer to BLAS's dsyrk, which crashed (segmentation fault) beyond 16 384 columns here (NumPy
     2.4.6, OpenBLAS 0.3.31: 1 200 × 16 500 crashes, × 14 000 does not); the blocks stay far below
-    that, and keep the product's temporary small."""
-    for j in range(0, Yq.shape[1], PRODUCT_BLOCK):
-        block = Yq[:, j:j + PRODUCT_BLOCK]
-        if Yp.shape[1] and block.shape[1]:
-            out[:, j:j + block.shape[1]] += Yp.T @ block
+    that, and keep the product's temporary small.
+
+    ``upper`` (Yp is Yq, the product symmetric): only the blocks on and above the block diagonal
+    (rows up to each column block's end), about half the work; :func:`_mirror_upper` fills the rest."""
+    width = SYMMETRIC_BLOCK if upper else PRODUCT_BLOCK
+    for j in range(0, Yq.shape[1], width):
+        block = Yq[:, j:j + width]
+        rows = min(j + width, Yp.shape[1]) if upper else Yp.shape[1]
+        if rows and block.shape[1]:
+            out[:rows, j:j + block.shape[1]] += Yp[:, :rows].T @ block
 
 
-def _symmetrise(out: np.ndarray) -> None:
-    """out ← (out + outᵀ) / 2 in place, block by block (no second matrix of its size)."""
-    m = out.shape[0]
-    for i in range(0, m, PRODUCT_BLOCK):
-        for j in range(i, m, PRODUCT_BLOCK):
-            a, b = out[i:i + PRODUCT_BLOCK, j:j + PRODUCT_BLOCK], out[j:j + PRODUCT_BLOCK, i:i + PRODUCT_BLOCK]
-            mean = 0.5 * (a + b.T)
-            a[...] = mean
-            b[...] = mean.T
+def _mirror_upper(out: np.ndarray) -> None:
+    """Make the square ``out`` exactly symmetric from its blocks on and above the block diagonal
+    (of :data:`SYMMETRIC_BLOCK`, as :func:`_add_product` with ``upper`` fills them): each diagonal
+    block ← (B + Bᵀ)/2, each block below ← the transpose of its mirror above. In place."""
+    m, w = out.shape[0], SYMMETRIC_BLOCK
+    for i in range(0, m, w):
+        d = out[i:i + w, i:i + w]
+        d[...] = 0.5 * (d + d.T)
+        out[i + w:, i:i + w] = out[i:i + w, i + w:].T
 
 
 def _couple(K, L_inv: np.ndarray, prev: np.ndarray, r: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -151,8 +181,6 @@ def _sweep(K, rows: list, loads: list, pairs: list, plane: np.ndarray, name: str
         sweep's column order; each load set's :class:`_Loads`, holding that order and the last
         plane's forward solution; the last L_ii⁻¹).
     """
-    import scipy.linalg as la
-
     count = len(rows)
     sets = [_Loads(P, plane, count) for P in loads]
     outs = [np.zeros((int(sets[i].begun[-1]), int(sets[j].begun[-1])) if count else (0, 0)) for i, j in pairs]
@@ -161,14 +189,16 @@ def _sweep(K, rows: list, loads: list, pairs: list, plane: np.ndarray, name: str
         A = K[r][:, r].toarray()
         if i:
             C = _couple(K, L_inv, rows[i - 1], r, A)
-        L = _chol(A, name, f"plane {i} of a sweep of {count}")
-        L_inv = la.lapack.dtrtri(L, lower=1)[0]
+        L_inv = _chol_inverse(A, name, f"plane {i} of a sweep of {count}")
         G = None if C is None else L_inv @ C
         Y = [s.advance(i, r, L_inv, G) for s in sets]  # each load set's forward solution, once
         for out, (a, b) in zip(outs, pairs):
-            _add_product(out[:Y[a].shape[1], :Y[b].shape[1]], Y[a], Y[b])
+            _add_product(out[:Y[a].shape[1], :Y[b].shape[1]], Y[a], Y[b], upper=a == b)
         if bar is not None:
             bar.update(1)
+    for out, (a, b) in zip(outs, pairs):
+        if a == b:  # the symmetric sums were summed above the block diagonal only
+            _mirror_upper(out)
     return outs, sets, L_inv
 
 
@@ -181,7 +211,7 @@ def inverse_between(K, plane: np.ndarray, P, Q=None, bar=None, name: str = "body
             adjacent planes (a Q1 lattice body's stiffness on its free unknowns).
         plane: [n] int, each unknown's plane (:func:`lattice_planes`).
         P: [n, p] sparse load columns; Q: [n, q] sparse, or None for P (the result is then
-            symmetric: its two triangles are averaged).
+            exactly symmetric: summed on and above the block diagonal, then mirrored).
         bar: a progress bar (tqdm) advanced by one per plane.
         name: what K belongs to, for error messages.
         dtype: the result's; float32 halves its memory (each half's sum is kept in float64 and
@@ -200,9 +230,9 @@ def inverse_products(K, plane: np.ndarray, loads: list, pairs: list, bar=None, n
                      dtype=np.float64) -> list[np.ndarray]:
     """[Pᵢᵀ K⁻¹ Pⱼ for (i, j) in ``pairs``] of the load sets ``loads`` [n, pᵢ] (sparse), all from
     one sweep (:func:`inverse_between` for one product): K is factored once and each load set
-    forward-substituted once, however many products use it. A pair (i, i) gives a symmetric
-    result (its two triangles averaged). ``K``, ``plane``, ``bar``, ``name``, ``dtype`` and the
-    errors: as :func:`inverse_between`.
+    forward-substituted once, however many products use it. A pair (i, i) gives an exactly
+    symmetric result, for about half the product work of a pair (i, j). ``K``, ``plane``,
+    ``bar``, ``name``, ``dtype`` and the errors: as :func:`inverse_between`.
 
     A pad's compliance W = Nᵀ K⁻¹ N and its maps' response M = A K⁻¹ N share the point loads N:
     in one sweep N's forward substitution and the factor are paid once instead of twice.
@@ -255,10 +285,10 @@ def inverse_products(K, plane: np.ndarray, loads: list, pairs: list, bar=None, n
         L = _chol(A, name, "the middle plane")
         Y = [la.solve_triangular(L, y, lower=True, check_finite=False) for y in Y]
         for out, (i, j) in zip(outs, pairs):
-            _add_product(out, Y[i], Y[j])
+            _add_product(out, Y[i], Y[j], upper=i == j)
         if bar is not None:
             bar.update(1)
     for out, (i, j) in zip(outs, pairs):
-        if i == j:  # symmetric to rounding as computed; exactly so
-            _symmetrise(out)
+        if i == j:  # the halves' sums are symmetric, the middle plane's is above the block diagonal
+            _mirror_upper(out)
     return outs

@@ -49,6 +49,7 @@ def test_any_number_of_planes(sizes, monkeypatch):
     from gausstac_maniskill.fem import plane_cholesky
 
     monkeypatch.setattr(plane_cholesky, "PRODUCT_BLOCK", 2)  # the products in several blocks
+    monkeypatch.setattr(plane_cholesky, "SYMMETRIC_BLOCK", 3)
     K, plane = _chain(sizes)
     rng = np.random.default_rng(2)
     P = sp.random(len(plane), 6, density=0.3, random_state=rng, format="csc")
@@ -111,9 +112,9 @@ def test_blas_threads_follow_the_process_share(monkeypatch):
     seen = []
     real = plane_cholesky._add_product
 
-    def spy(out, Yp, Yq):
+    def spy(out, Yp, Yq, **k):
         seen.append(max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"))
-        real(out, Yp, Yq)
+        real(out, Yp, Yq, **k)
 
     monkeypatch.setattr(plane_cholesky, "_add_product", spy)
     K, plane = _chain((3, 4, 3))
