@@ -180,6 +180,22 @@ def cpu_threads() -> int:
         return os.cpu_count() or 1
 
 
+_BLAS = None
+
+
+def blas_threads(n: int):
+    """Context: BLAS (OpenBLAS, MKL) on ``n`` threads inside it (threadpoolctl, with one
+    controller for the process: entering costs microseconds, a fresh ``threadpool_limits``
+    re-reads the loaded libraries each time)."""
+    global _BLAS
+    if _BLAS is None:
+        import scipy.linalg  # noqa: F401 (SciPy's own BLAS loaded first, so that the controller sees it)
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=int(n), user_api="blas")
+
+
 def ensure_init() -> str:
     """Initialise with ``$GAUSSTAC_ARCH`` (default ``auto``) unless already done."""
     if _arch is not None:

@@ -32,18 +32,12 @@ from .hex import VoxelBody, dissection_order, neo_hookean_remainder, stiffness, 
 __all__ = ["QuasiStaticBody", "ContactResult", "Indenter", "Indenters", "solve_lcp", "solve_frictional",
            "tangent_bases"]
 
-_BLAS = None
-
-
 def _one_blas_thread():
     """Context: BLAS on one thread. The dense algebra here is small (a few hundred unknowns);
     OpenBLAS's threads only contend with Taichi's workers for the cores (measured 2× slower)."""
-    global _BLAS
-    from threadpoolctl import ThreadpoolController
+    from ..backend import blas_threads
 
-    if _BLAS is None:
-        _BLAS = ThreadpoolController()
-    return _BLAS.limit(limits=1, user_api="blas")
+    return blas_threads(1)
 
 
 #: Points whose compliance columns are solved together (one multi-right-hand-side solve).

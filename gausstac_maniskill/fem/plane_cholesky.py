@@ -104,9 +104,10 @@ def _chol(A: np.ndarray, name: str, where: str) -> np.ndarray:
     after the sweep's threaded products, took 2.6 s for the index pad's 45 planes, one thread
     0.84 s (twenty-first session; scipy.linalg.cholesky, which also copies, 2.6–3.1 s)."""
     import scipy.linalg as la
-    from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1, user_api="blas"):
+    from ..backend import blas_threads
+
+    with blas_threads(1):
         U, info = la.lapack.dpotrf(A.T, lower=0, clean=1, overwrite_a=1)
     if info != 0:
         raise ValueError(f"{name}: the stiffness is not positive definite ({where}: a part of the body "
@@ -118,10 +119,11 @@ def _chol_inverse(A: np.ndarray, name: str, where: str) -> np.ndarray:
     """L⁻¹ for the lower Cholesky factor L of ``A`` (:func:`_chol`; ``A`` is overwritten), inverted
     in place in LAPACK's Fortran order (the transpose of U⁻¹), on one BLAS thread as :func:`_chol`."""
     import scipy.linalg as la
-    from threadpoolctl import threadpool_limits
+
+    from ..backend import blas_threads
 
     U = _chol(A, name, where).T
-    with threadpool_limits(limits=1, user_api="blas"):
+    with blas_threads(1):
         U_inv, info = la.lapack.dtrtri(U, lower=0, overwrite_c=1)
     if info != 0:  # (a singular factor: not reached after a successful factorization)
         raise ValueError(f"{name}: the stiffness is singular ({where})")
@@ -239,9 +241,7 @@ def inverse_products(K, plane: np.ndarray, loads: list, pairs: list, bar=None, n
     """
     import scipy.linalg as la
     import scipy.sparse as sp
-    from threadpoolctl import threadpool_limits
-
-    from ..backend import cpu_threads
+    from ..backend import blas_threads, cpu_threads
 
     K = sp.csr_matrix(K, dtype=np.float64)
     plane = np.asarray(plane, np.int64)
@@ -260,7 +260,7 @@ def inverse_products(K, plane: np.ndarray, loads: list, pairs: list, bar=None, n
     count = int(plane.max()) + 1
     rows = np.split(np.argsort(plane, kind="stable"), np.cumsum(np.bincount(plane, minlength=count))[:-1])
     mid = count // 2
-    with threadpool_limits(limits=cpu_threads(), user_api="blas"):
+    with blas_threads(cpu_threads()):
         # the two halves, each swept toward the middle plane (its planes numbered from its far end);
         # each half's products go into the results at once (their buffers are then freed)
         halves = []
