@@ -87,7 +87,7 @@ class GaussTacSim:
             these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)
             every env solves its own, with one body per pad.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
-            at once): 1 s at the default resolution, plus about 20 s on 2 cores for its
+            at once): 1 s at the default resolution, plus about 15 s on 2 cores for its
             compliance and its maps' response (one sweep) the first time on a machine (kept
             under ``~/.cache/gausstac_maniskill``).
         fem_model: the ``"fem"`` pads' material model, ``"linear"`` (fast; small strain) or
@@ -416,7 +416,7 @@ class GaussTacSim:
         stiffness and compute or load its surface compliance
         (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`), which otherwise happens in
         the first step that brings an object within ``sleep_margin`` of the pad. At the
-        default resolution: 1 s per pad shape, plus about 20 s (2 cores) for its compliance
+        default resolution: 1 s per pad shape, plus about 15 s (2 cores) for its compliance
         and its maps' response (the default binning's, in the same sweep) the first time on a
         machine (then read from the disk cache). Does nothing for MPM pads."""
         for fp in self._fem.values():

@@ -9,7 +9,7 @@ point it reaches the first time.
 W = Nᵀ K⁻¹ N for the point loads N [num_free, 3S]: 3S solves, all taken at once by the body's
 stiffness factored lattice plane by lattice plane (:meth:`~.contact.QuasiStaticBody.inverse_between`,
 dense BLAS 3 on every core). At the index pad's 0.5 mm elements (S = 1994 points, 46 743
-unknowns) that is about 20 s on 2 cores, where SuperLU's column-by-column solves in two worker
+unknowns) that is about 11 s on 2 cores, where SuperLU's column-by-column solves in two worker
 processes took 114 s on the same host. :func:`surface_compliance` shows a progress bar and stores E·W in float32 (36 S²
 bytes: 143 MB for that pad) under :func:`cache_dir`, keyed by the body's elements, bond, points
 and ν: later runs, and other pads of the same shape, load it in a fraction of a second. The cache
@@ -19,7 +19,7 @@ it), never trusted.
 A readout's response M = A K⁻¹ N (a pad's tactile maps as M times the point forces,
 :func:`readout_responses`) shares N with W. Named with the compliance (``readouts``), it comes
 from W's own sweep: N's forward substitution and the factor are paid once, and the index pad's
-W with its maps' M take 17–19 s instead of 31–33 s in two sweeps.
+W with its maps' M take 13–15 s instead of 28–30 s in two sweeps.
 """
 from __future__ import annotations
 

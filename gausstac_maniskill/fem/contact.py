@@ -673,7 +673,7 @@ class QuasiStaticBody:
     def precompute_compliance(self, progress: bool = True, cache: bool = True, readouts=()) -> None:
         """Compute (or load from the disk cache) the compliance among all surface points now,
         so that contact solves need no sparse solve for it: :func:`~.compliance.surface_compliance`
-        (float32, 36 S² bytes; about 20 s on 2 cores for the index pad's 1 994 points, the first time).
+        (float32, 36 S² bytes; about 11 s on 2 cores for the index pad's 1 994 points, the first time).
         ``readouts``: readouts [R, 3V] whose responses will be asked for, computed in the same sweep
         where the compliance is computed (see there)."""
         from .compliance import surface_compliance

@@ -24,7 +24,8 @@ On 2 cores this computes the index pad's compliance among its 1 994 surface poin
 columns, 46 743 unknowns) in 17–20 s, where SuperLU's column-by-column solves in two worker
 processes took 114 s, and its maps' response (1 024 readouts) in 15 s instead of 26
 (BENCHMARKS.md, eighteenth session). :func:`inverse_products` takes both in one sweep, which
-factors K and forward-substitutes the point loads once: 17–19 s for both (twenty-first session).
+factors K and forward-substitutes the point loads once: 13–15 s for both, with each plane's factor on
+one BLAS thread (twenty-first session).
 """
 from __future__ import annotations
 

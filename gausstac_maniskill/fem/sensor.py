@@ -97,7 +97,7 @@ class EquilibriumPad:
             (default: at the displaced surface, as the MPM does) or ``"rest"``.
         precompute: compute the body's compliance among all its surface points when the body
             is built (:meth:`~.contact.QuasiStaticBody.precompute_compliance`, with a linear
-            pad's maps' response in the same sweep: about 20 s on 2 cores for the index pad at
+            pad's maps' response in the same sweep: about 15 s on 2 cores for the index pad at
             the default resolution, the first time on a machine, then read from the disk cache
             in 0.1 s), so that a press or a slide costs no sparse
             solve; or (False) solve each point's column when it first comes into contact.
