@@ -266,7 +266,7 @@ def p2g(gravity: ti.template(), order: ti.template(), slab_start: ti.template(),
     mostly its read-modify-writes, and a record of 4 or 6 floats is one of them (BENCHMARKS,
     twentieth session).
     With ``fbar`` the stress τ_p is first evaluated here, on the same stencil, from the
-    nodal volume change that :func:`volume_scatter` left in ``grid_vol``.
+    nodal volume change that :func:`volume_scatter` and :func:`nodal_volume_change` left in ``grid_vol``.
     With ``cellp``, a particle whose λ ln J term is solved on cells (:func:`pressure_solve`)
     adds (V0, V0 ln J, V0 λ) to its cell's ``cell_a`` and V0 ∇w_ip to the cell's operator
     ``cell_G`` (the cell holds 4³ nodes, those of its particles' stencils). Its cell lies
@@ -716,19 +716,38 @@ def fbar_stress_at(nh_only: ti.template(), Fp, jp, mi, mat_table: ti.template(),
     over-constrained (volumetric locking). This is the selective form of F-bar / J-bar
     (de Souza Neto et al. 1996; for MPM, Coombs et al. 2018): replacing the whole F by
     (J̄/J)^{1/3} F was tried and lets particles trade volume at no cost (a pad crept 7 µm
-    after contact); the μ terms' own volume stiffness stops that."""
+    after contact); the μ terms' own volume stiffness stops that. ``grid_vol`` holds
+    (Σ w V0, J_i) per node (:func:`nodal_volume_change`). A Neo-Hookean material takes
+    μ(F Fᵀ - I) + λ ln J̄ I at once (its own λ ln J is never formed). P2G is bound by its
+    arithmetic per particle, so both matter (BENCHMARKS, twenty-first session)."""
     J = ti.max(Fp.determinant(), mat.MIN_J)
     J_sum, w_sum = 0.0, 0.0
     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
         gv = grid_vol[off + ((base[0] + i) * ny + base[1] + j) * nz + base[2] + k]
         if gv[0] > 0.0:
             weight = w[i][0] * w[j][1] * w[k][2]
-            J_sum += weight * gv[1] / gv[0]
+            J_sum += weight * gv[1]  # the node's J_i (nodal_volume_change)
             w_sum += weight
     J_bar = J if w_sum <= 0.0 else J_sum / w_sum
-    dp = mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), jp, mi, mat_table) - \
-        mat.volumetric_stress(nh_only, J, jp, mi, mat_table)
-    return elastic_stress(nh_only, Fp, jp, mi, mat_table) + dp * ti.Matrix.identity(ti.f32, 3)
+    tau = ti.Matrix.zero(ti.f32, 3, 3)
+    if ti.static(nh_only):  # μ(F Fᵀ - I) + λ ln J̄ I: the particle's own λ ln J is never needed
+        tau = mat_table[mi, 0] * (Fp @ Fp.transpose() - ti.Matrix.identity(ti.f32, 3)) + \
+            mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), jp, mi, mat_table) * ti.Matrix.identity(ti.f32, 3)
+    else:
+        dp = mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), jp, mi, mat_table) - \
+            mat.volumetric_stress(nh_only, J, jp, mi, mat_table)
+        tau = elastic_stress(nh_only, Fp, jp, mi, mat_table) + dp * ti.Matrix.identity(ti.f32, 3)
+    return tau
+
+
+@ti.func
+def nodal_volume_change(ntot, grid_vol: ti.template()):
+    """F-bar, step 1b: each node's (Σ w V0, Σ w V0 J) becomes (Σ w V0, J_i = Σ w V0 J / Σ w V0): one
+    division per node instead of one per particle and stencil node (:func:`fbar_stress_at`)."""
+    for idx in range(ntot):
+        gv = grid_vol[idx]
+        if gv[0] > 0.0:
+            grid_vol[idx] = ti.Vector([gv[0], gv[1] / gv[0]])
 
 
 @ti.func
@@ -1284,7 +1303,7 @@ Grid = ti.types.argpack(
     grid_pm=NDV4,  # P2G's sums: momentum [kg m/s] and mass [kg], one record per node
     grid_v=NDV, grid_m=NDF,  # velocity [m/s] and mass [kg], from grid_update
     grid_mq=NDF, grid_link=NDI,  # quasi-static mass [kg], link of bound and quasi-static particles
-    grid_dp=NDV, grid_vol=NDV2,  # contact momentum [N s]; (Σ w V0, Σ w V0 J) for F-bar
+    grid_dp=NDV, grid_vol=NDV2,  # contact momentum [N s]; (Σ w V0, Σ w V0 J), then (Σ w V0, J_i), for F-bar
     grid_vc=NDF, grid_ds=NDV,  # two fields: deformed volume Σ w V0 J [m³]; field 0's contact Δv [m/s]
     # bound particles' record: Σ w m (n, d, 1) of those that know the bond surface (bond_ghosts), Σ w m
     grid_kin=NDV6,
@@ -1496,6 +1515,7 @@ def substep(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template
     if ti.static(fbar):
         volume_scatter(O.order, O.slab_start, n_slabs, P.x, P.F, P.vol, P.kind, P.matid, S.mat_table, ox, oy, oz,
                        ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field, atomic)
+        nodal_volume_change(ntot, G.grid_vol)
     p2g(gravity, O.order, O.slab_start, n_slabs, P.x, P.v, P.C, P.F, P.tau, P.Jp, P.mass, P.vol, P.kind,
         P.link, P.matid, S.mat_table, P.group, S.group_qs, ox, oy, oz, ny, nz, inv_dx, dt,
         G.grid_pm, G.grid_mq, G.grid_link, G.grid_vol, fbar, nh_only,
@@ -1559,5 +1579,6 @@ def stress_pass(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.temp
             G.grid_vol[i] = ti.Vector([0.0, 0.0])
         volume_scatter(O.order, O.slab_start, O.active_box[6], P.x, P.F, P.vol, P.kind, P.matid, S.mat_table,
                        ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field, atomic)
+        nodal_volume_change(ncell * S.counts[N_ENVS] * (2 if ti.static(two_field) else 1), G.grid_vol)
     report_stress(nh_only, fbar, cellp, O.order, S.counts[N_ACTIVE], P.x, P.F, P.tau, P.Jp, P.matid, S.mat_table,
                 ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field)
