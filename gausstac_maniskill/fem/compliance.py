@@ -305,7 +305,8 @@ def _products(body, loads: list, pairs: list, scales: list, progress: bool, desc
     if have is not None and need > have:
         raise ConfigError(
             f"{desc}: needs about {need / 2 ** 30:.1f} GiB of memory while it is computed, and this process has "
-            f"{have / 2 ** 30:.1f} GiB available (the machine's free memory, or its container's limit). Leave the pad's compliance to be solved point by point "
+            f"{have / 2 ** 30:.1f} GiB available (the machine's free memory, or its container's limit). "
+            "Leave the pad's compliance to be solved point by point "
             f"(fem_precompute=False, the default above fem.sensor.PRECOMPUTE_BYTES), or use a coarser grid.")
     with tqdm(total=body.num_planes, desc=desc, unit="plane", disable=not progress, leave=False) as bar:
         outs = body.inverse_products(loads, pairs, bar=bar, dtype=np.float32)

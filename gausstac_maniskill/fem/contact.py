@@ -32,6 +32,7 @@ from .hex import VoxelBody, dissection_order, neo_hookean_remainder, stiffness, 
 __all__ = ["QuasiStaticBody", "ContactResult", "Indenter", "Indenters", "solve_lcp", "solve_frictional",
            "tangent_bases"]
 
+
 def _one_blas_thread():
     """Context: BLAS on one thread. The dense algebra here is small (a few hundred unknowns);
     OpenBLAS's threads only contend with Taichi's workers for the cores (measured 2× slower)."""

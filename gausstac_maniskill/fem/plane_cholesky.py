@@ -242,6 +242,7 @@ def inverse_products(K, plane: np.ndarray, loads: list, pairs: list, bar=None, n
     """
     import scipy.linalg as la
     import scipy.sparse as sp
+
     from ..backend import blas_threads, cpu_threads
 
     K = sp.csr_matrix(K, dtype=np.float64)

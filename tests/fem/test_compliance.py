@@ -48,7 +48,8 @@ def test_cache_round_trip_scales_with_E_and_keys_on_nu(tmp_path, monkeypatch):
     assert len(files) == 1 and files[0].startswith("compliance-")
 
     stiffer = _layer(E=0.6e6)  # same shape and nu: loaded, not solved, and W ∝ 1/E
-    monkeypatch.setattr(type(stiffer), "inverse_products", lambda self, *a, **k: pytest.fail("solved instead of loaded"))
+    monkeypatch.setattr(type(stiffer), "inverse_products",
+                        lambda self, *a, **k: pytest.fail("solved instead of loaded"))
     stiffer.precompute_compliance(progress=False)
     assert not stiffer.factored  # nothing needed K's factor
     np.testing.assert_allclose(stiffer._compliance, 0.5 * first._compliance, rtol=1e-6)
