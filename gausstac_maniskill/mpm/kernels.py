@@ -694,7 +694,7 @@ def stress_at(nh_only: ti.template(), fbar: ti.template(), cellp: ti.template(),
     if ti.static(cellp):
         on_cells = mat_table[mi, mat.CELL_P] > 0.0
     if on_cells:
-        tau = mat_table[mi, 0] * (Fp @ Fp.transpose() - ti.Matrix.identity(ti.f32, 3))
+        tau = mat.neo_hookean_shear(Fp, mat_table[mi, 0])
         if ti.static(report):
             tau += mat_table[mi, 1] * ti.log(ti.max(Fp.determinant(), mat.MIN_J)) * ti.Matrix.identity(ti.f32, 3)
     else:
@@ -729,13 +729,12 @@ def fbar_stress_at(nh_only: ti.template(), Fp, jp, mi, mat_table: ti.template(),
             J_sum += weight * gv[1]  # the node's J_i (nodal_volume_change)
             w_sum += weight
     J_bar = J if w_sum <= 0.0 else J_sum / w_sum
+    s_bar = mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), jp, mi, mat_table)
     tau = ti.Matrix.zero(ti.f32, 3, 3)
     if ti.static(nh_only):  # μ(F Fᵀ - I) + λ ln J̄ I: the particle's own λ ln J is never needed
-        tau = mat_table[mi, 0] * (Fp @ Fp.transpose() - ti.Matrix.identity(ti.f32, 3)) + \
-            mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), jp, mi, mat_table) * ti.Matrix.identity(ti.f32, 3)
+        tau = mat.neo_hookean_shear(Fp, mat_table[mi, 0]) + s_bar * ti.Matrix.identity(ti.f32, 3)
     else:
-        dp = mat.volumetric_stress(nh_only, ti.max(J_bar, mat.MIN_J), jp, mi, mat_table) - \
-            mat.volumetric_stress(nh_only, J, jp, mi, mat_table)
+        dp = s_bar - mat.volumetric_stress(nh_only, J, jp, mi, mat_table)
         tau = elastic_stress(nh_only, Fp, jp, mi, mat_table) + dp * ti.Matrix.identity(ti.f32, 3)
     return tau
 

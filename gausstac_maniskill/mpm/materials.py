@@ -57,10 +57,16 @@ def polar_rotation(F):
 
 
 @ti.func
+def neo_hookean_shear(F, mu):
+    """The μ part of the compressible Neo-Hookean Kirchhoff stress, μ(F Fᵀ - I) [Pa]."""
+    return mu * (F @ F.transpose() - ti.Matrix.identity(ti.f32, 3))
+
+
+@ti.func
 def neo_hookean_stress(F, mu, lam):
     """Kirchhoff stress of the compressible Neo-Hookean model (J clamped at MIN_J)."""
     J = ti.max(F.determinant(), MIN_J)
-    return mu * (F @ F.transpose() - ti.Matrix.identity(ti.f32, 3)) + lam * ti.log(J) * ti.Matrix.identity(ti.f32, 3)
+    return neo_hookean_shear(F, mu) + lam * ti.log(J) * ti.Matrix.identity(ti.f32, 3)
 
 
 @ti.func
