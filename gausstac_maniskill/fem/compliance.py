@@ -95,8 +95,12 @@ def surface_compliance(body, progress: bool = True, cache: bool = True, readouts
         wanted = {}  # stem: the load set Aᵀ of each response computed alongside
         for A in (readouts() if callable(readouts) else readouts):
             A, rstem = _readout(body, A)
-            if rstem not in wanted and ("response", rstem) not in body.derived \
-                    and _load(body.name, rstem, (A.shape[0], 3 * S), cache) is None:
+            if rstem in wanted or ("response", rstem) in body.derived:
+                continue
+            on_disk = _load(body.name, rstem, (A.shape[0], 3 * S), cache)
+            if on_disk is not None:  # kept for readout_responses: the file is not read twice
+                body.derived[("response", rstem)] = on_disk
+            else:
                 wanted[rstem] = body.dofs_to_free(A)
         loads = [body.point_loads(np.arange(S))] + list(wanted.values())
         also = f" and the response of {sum(P.shape[1] for P in loads[1:])} readouts" if wanted else ""

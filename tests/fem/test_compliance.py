@@ -155,6 +155,15 @@ def test_compliance_and_readout_responses_come_from_one_sweep(tmp_path, monkeypa
     np.testing.assert_array_equal(compliance.readout_responses(again, A, progress=False), MA)
     assert not sweeps  # from disk
 
+    for f in os.listdir(tmp_path):  # W gone, the responses still on disk: W alone is swept
+        if f.startswith("compliance-"):
+            os.remove(tmp_path / f)
+    third = _layer()
+    third.precompute_compliance(progress=False, readouts=[A, B])
+    assert sweeps == [[(0, 0)]]
+    np.testing.assert_array_equal(compliance.readout_responses(third, B, progress=False), MB)
+    assert len(sweeps) == 1
+
 
 def test_a_compliance_beyond_the_memory_at_hand_is_refused_by_name(monkeypatch):
     """Asked for a compliance this machine cannot hold while computing it, the body says so
