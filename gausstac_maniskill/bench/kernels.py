@@ -26,6 +26,12 @@ sweeps' median is well above their minimum and the chain's is not, the host's lo
 shared (a busy neighbour); where the two-thread sweep's is above the one-thread sweep's, one
 core ran slower than the other, and every parallel loop of the MPM waits for it.
 
+``--ir`` also counts the instructions of every task of ``advance`` in the optimized LLVM IR that Taichi
+compiled for this machine (loads, stores, float operations with a vector's lanes counted each, and all). A
+scatter's or gather's body is one particle's code with its 27-node stencil unrolled, every branch included, so
+its count is an upper bound of what one particle executes; against the task's fastest time it says how close the
+loop runs to the core's instruction rate (the twenty-second session of BENCHMARKS reads it).
+
 ``--launches N`` instead times the three ways of launching the kernels in one process, without
 the profiler: Taichi's own call, :class:`~gausstac_maniskill.kernel_launch.CachedKernel` with
 Taichi's argument setting, and CachedKernel with its planned launch context (the default).
@@ -51,6 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=1, metavar="N",
                     help="held steps under the profiler (default 1); with N > 1 also each task's spread")
     ap.add_argument("--probe", action="store_true", help="measure the host's noise only (no pad scene)")
+    ap.add_argument("--ir", action="store_true", help="also count each task's instructions in the optimized IR")
     args = ap.parse_args(argv)
     if args.steps < 1:
         ap.error(f"--steps {args.steps}: at least 1")
@@ -70,6 +77,16 @@ def main(argv: list[str] | None = None) -> int:
 
     from . import pad as P
 
+    ir_dir = None
+    if args.ir:  # Taichi writes each kernel's optimized IR to the working directory as it compiles it
+        import tempfile
+
+        from taichi.lang import impl
+
+        ir_dir, cwd = tempfile.TemporaryDirectory(), os.getcwd()
+        cfg = impl.current_cfg()
+        cfg.print_kernel_llvm_ir_optimized, cfg.offline_cache = True, False  # compile here, not from the cache
+        os.chdir(ir_dir.name)
     sim, W = P.make_sim(args.dx, args.indenter)
 
     def step(z: float):
@@ -78,6 +95,11 @@ def main(argv: list[str] | None = None) -> int:
 
     for z in (P.GAP, -0.5e-3, -1e-3):  # JIT, then press
         step(z)
+    if ir_dir is not None:
+        impl.current_cfg().print_kernel_llvm_ir_optimized = False
+        os.chdir(cwd)
+        print_ir_counts(ir_dir.name)
+        ir_dir.cleanup()
     if args.launches > 0:
         return compare_launches(step, args.launches)
     ti.profiler.clear_kernel_profiler_info()
@@ -128,6 +150,57 @@ def task_spread(particles: int, substeps: int) -> None:
             print(f"  {name:40s}" + "".join(f"{v:9.3f}" for v in row))
     print(f"  {'sum [ms per substep]':40s}" + "".join(f"{v:9.3f}" for v in sums))
     print(f"  {'M particle-substeps/s in kernels':40s}" + "".join(f"{particles / v / 1e3:9.2f}" for v in sums))
+
+
+def ir_counts(text: str, kernel: str = "advance") -> dict[str, dict[str, int]]:
+    """Instruction counts of each parallel task of ``kernel`` in Taichi's optimized LLVM IR ``text``:
+    {task: {"all", "load", "store", "float"}}, the task's loop body (the ``function_body`` that
+    follows its definition) counted; "float" counts fadd/fsub/fmul/fdiv/fneg and fused multiply-adds,
+    one per vector lane."""
+    import re
+
+    counts: dict[str, dict[str, int]] = {}
+    task = None
+    for line in text.splitlines():
+        head = re.match(r"define [^@]*@([\w.]+)\(", line)
+        if head:
+            name = head.group(1)
+            if name.startswith(kernel + "_") and name.endswith("_range_for"):
+                task = name
+                counts[task] = {"all": 0, "load": 0, "store": 0, "float": 0}
+            elif not name.startswith("function_body"):
+                task = None  # a runtime function, a serial task: not counted
+            continue
+        if task is None or not line.startswith("  ") or line.lstrip().startswith(";"):
+            continue
+        op = re.match(r"\s+(?:%\S+ = )?(\w+)", line)
+        if op is None or op.group(1) in ("br", "ret", "phi", "switch", "unreachable"):
+            continue  # control flow and SSA joins are not work
+        c = counts[task]
+        c["all"] += 1
+        if op.group(1) in ("load", "store"):
+            c[op.group(1)] += 1
+        elif re.search(r"\b(fadd|fsub|fmul|fdiv|fneg)\b|@llvm\.fmuladd|@llvm\.fma\b", line):
+            lanes = re.search(r"<(\d+) x float>", line)
+            c["float"] += int(lanes.group(1)) if lanes else 1
+    return counts
+
+
+def print_ir_counts(folder: str) -> None:
+    """Print :func:`ir_counts` of ``advance`` from the IR files Taichi wrote to ``folder``."""
+    import glob
+
+    for path in sorted(glob.glob(os.path.join(folder, "*.ll"))):
+        with open(path) as f:
+            text = f.read()
+        if "define void @advance_" in text:
+            counts = ir_counts(text)
+            print("instructions of each advance task's body in the optimized IR (every branch, unrolled stencils):")
+            print(f"  {'task':40s}{'all':>8s}{'load':>8s}{'store':>8s}{'float':>8s}")
+            for task, c in counts.items():
+                print(f"  {task:40s}" + "".join(f"{c[k]:8d}" for k in ("all", "load", "store", "float")))
+            return
+    print(f"no IR of advance found in {folder} (was the kernel compiled in this run?)")
 
 
 #: the launch paths of ``--launches``: (name, kernel_launch.ENABLED, kernel_launch.LEAN_ARGS)
