@@ -87,17 +87,20 @@ def main(argv: list[str] | None = None) -> int:
         cfg = impl.current_cfg()
         cfg.print_kernel_llvm_ir_optimized, cfg.offline_cache = True, False  # compile here, not from the cache
         os.chdir(ir_dir.name)
-    sim, W = P.make_sim(args.dx, args.indenter)
+    try:
+        sim, W = P.make_sim(args.dx, args.indenter)
 
-    def step(z: float):
-        sim.step({P.INDEX: P.LINK_POSE}, P.DT, {"indenter": P.indenter_pose(args.indenter, W, z)})
-        return sim.world.last_step
+        def step(z: float):
+            sim.step({P.INDEX: P.LINK_POSE}, P.DT, {"indenter": P.indenter_pose(args.indenter, W, z)})
+            return sim.world.last_step
 
-    for z in (P.GAP, -0.5e-3, -1e-3):  # JIT, then press
-        step(z)
+        for z in (P.GAP, -0.5e-3, -1e-3):  # JIT, then press
+            step(z)
+    finally:
+        if ir_dir is not None:  # back where the user started, whatever happened
+            impl.current_cfg().print_kernel_llvm_ir_optimized = False
+            os.chdir(cwd)
     if ir_dir is not None:
-        impl.current_cfg().print_kernel_llvm_ir_optimized = False
-        os.chdir(cwd)
         print_ir_counts(ir_dir.name)
         ir_dir.cleanup()
     if args.launches > 0:
@@ -154,8 +157,8 @@ def task_spread(particles: int, substeps: int) -> None:
 
 def ir_counts(text: str, kernel: str = "advance") -> dict[str, dict[str, int]]:
     """Instruction counts of each parallel task of ``kernel`` in Taichi's optimized LLVM IR ``text``:
-    {task: {"all", "load", "store", "float"}}, the task's loop body (the ``function_body`` that
-    follows its definition) counted; "float" counts fadd/fsub/fmul/fdiv/fneg and fused multiply-adds,
+    {task: {"all", "load", "store", "float"}}, over the task's own launch code and its loop body (the
+    ``function_body`` that follows its definition); "float" counts fadd/fsub/fmul/fdiv/fneg and fused multiply-adds,
     one per vector lane."""
     import re
 
