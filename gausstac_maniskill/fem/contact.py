@@ -724,8 +724,9 @@ class QuasiStaticBody:
         and :meth:`dofs_to_free` give them): all their solves at once, by the stiffness's Cholesky
         factor taken lattice plane by lattice plane (:mod:`.plane_cholesky`, dense BLAS 3 on every
         core; SuperLU's factor is not needed). ``bar``: a tqdm bar advanced once per plane."""
-        return self.inverse_products([P] if Q is None else [P, Q], [(0, 0)] if Q is None else [(0, 1)], bar=bar,
-                                     dtype=dtype)[0]
+        from .plane_cholesky import inverse_between
+
+        return inverse_between(self._free_stiffness(), self._planes, P, Q, bar=bar, name=self.name, dtype=dtype)
 
     def inverse_products(self, loads: list, pairs: list, bar=None, dtype=np.float64) -> list[np.ndarray]:
         """[Pᵢᵀ K⁻¹ Pⱼ for (i, j) in ``pairs``] of load sets ``loads`` [num_free, pᵢ] (sparse), as
@@ -733,9 +734,13 @@ class QuasiStaticBody:
         forward substitution once (:func:`~.plane_cholesky.inverse_products`)."""
         from .plane_cholesky import inverse_products
 
-        free = self._free
-        return inverse_products(self._K[free][:, free], self._planes, loads, pairs, bar=bar, name=self.name,
+        return inverse_products(self._free_stiffness(), self._planes, loads, pairs, bar=bar, name=self.name,
                                 dtype=dtype)
+
+    def _free_stiffness(self):
+        """The stiffness on the free degrees of freedom (sparse [num_free, num_free])."""
+        free = self._free
+        return self._K[free][:, free]
 
     @functools.cached_property
     def _planes(self) -> np.ndarray:

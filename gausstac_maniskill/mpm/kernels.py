@@ -1574,10 +1574,11 @@ def stress_pass(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.temp
     ny, nz = O.active_box[4], O.active_box[5]
     ncell = O.active_box[3] * ny * nz
     if ti.static(fbar):
-        for i in range(ncell * S.counts[N_ENVS] * (2 if ti.static(two_field) else 1)):
+        ntot = ncell * S.counts[N_ENVS] * (2 if ti.static(two_field) else 1)  # every env's box, of each field
+        for i in range(ntot):
             G.grid_vol[i] = ti.Vector([0.0, 0.0])
         volume_scatter(O.order, O.slab_start, O.active_box[6], P.x, P.F, P.vol, P.kind, P.matid, S.mat_table,
                        ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field, atomic)
-        nodal_volume_change(ncell * S.counts[N_ENVS] * (2 if ti.static(two_field) else 1), G.grid_vol)
+        nodal_volume_change(ntot, G.grid_vol)
     report_stress(nh_only, fbar, cellp, O.order, S.counts[N_ACTIVE], P.x, P.F, P.tau, P.Jp, P.matid, S.mat_table,
                 ox, oy, oz, ny, nz, inv_dx, G.grid_vol, P.group, S.group_copy, ncell, two_field)
