@@ -18,7 +18,7 @@ if [ ! -x "$VENV/bin/python" ]; then
     echo "[setup] creating virtualenv $VENV"
     "$PY" -m venv "$VENV"
 fi
-if [ ! -f "$STAMP" ] || [ pyproject.toml -nt "$STAMP" ]; then
+if [ ! -f "$STAMP" ] || [ pyproject.toml -nt "$STAMP" ] || [ setup.py -nt "$STAMP" ]; then
     echo "[setup] installing torch==2.13.0 and gausstac_maniskill[test,ray] (about 2 minutes on a fresh machine)"
     "${PIP[@]}" --upgrade pip
     "${PIP[@]}" "torch==2.13.0"
