@@ -8,8 +8,7 @@ setup:
 	@bash scripts/setup.sh
 
 # make demo compiles with GAUSSTAC_COMPILE=fast unless told otherwise (GAUSSTAC_COMPILE= make demo: the
-# product build): on a fresh 2-core machine its part 1 takes 3.5 min instead of 10 (BENCHMARKS.md,
-# sixteenth session), its steps 1.2x as long once compiled
+# product build, which compiles about 3x longer for steps about 1.2x shorter; `bench compile` measures it)
 demo: setup
 	GAUSSTAC_COMPILE=$${GAUSSTAC_COMPILE-fast} $(PY) -m gausstac_maniskill.cli demo
 

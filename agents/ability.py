@@ -3,27 +3,14 @@
 :func:`~gausstac_maniskill.agents.add_gausstac_pads` (the agent, its URDF, controllers
 and SAPIEN collisions are ManiSkill's, unchanged).
 
-Pad links and geometry (link frames of ``ability_hand_right_floating.urdf``):
-
-* ``thumb_L2`` (thumb) and ``index_L2`` / ``middle_L2`` / ``ring_L2`` / ``pinky_L2``.
-  Each distal phalanx runs from its flexion joint (link origin, flexion axis = link z)
-  towards the ``*_tip`` point: (65, 16, 0) mm on the thumb, (35, -18, 0) mm on the
-  fingers.
-* The pad axis is the palmar normal of the phalanx (``z × tip``, the direction the tip
-  moves when the joint flexes) tilted towards the tip, so that the pad covers the pulp of
-  the distal part of the phalanx rather than its middle: fingers 20° (45° cone, 671
-  particles at 2 mm grid spacing), thumb 40° (30° cone, 2662 particles; its phalanx is a
-  75 mm convex paddle). Checked in SAPIEN (``tests/agents/test_agents.py``): with the hand
-  open every finger pad faces the palm side (world +x, where the fingers close to), and in
-  a pinch (thumb q1 = -0.8, q2 = 1.0, index q1 = 1.0) the thumb and index pads face each
-  other ~2 mm apart.
-* Meshes: the thumb's collision mesh (``thumb-F2_C.obj``) is one closed convex hull and
-  is used as is. A finger's collision is ``idx-F2_C.obj`` (three overlapping
-  cylinders with unshared vertices: not watertight as loaded) plus a sphere of 7 mm
-  radius at the tip. SAPIEN collides with the
-  convex hull of that file and the sphere, so the pad is cut from the convex hull of both
-  (``assets/ability_hand_right/finger_L2_hull.obj``, written by
-  :func:`write_finger_hull`); it lies at most 0.13 mm outside SAPIEN's shapes.
+Pads on ``thumb_L2`` and ``index_L2`` / ``middle_L2`` / ``ring_L2`` / ``pinky_L2`` (link
+frames of ``ability_hand_right_floating.urdf``; flexion axis = link z, the ``*_tip`` point
+at (65, 16, 0) mm on the thumb, (35, -18, 0) mm on the fingers). The pad axis is the
+phalanx's palmar normal (``z × tip``) tilted towards the tip, so the pad covers the pulp:
+fingers 20° (45° cone), thumb 40° (30° cone). The thumb's pad is cut from its convex
+collision mesh (``thumb-F2_C.obj``); a finger's from the convex hull of ``idx-F2_C.obj``
+(not watertight as loaded) and a 7 mm tip sphere, which is what SAPIEN collides with
+(``assets/ability_hand_right/finger_L2_hull.obj``, :func:`write_finger_hull`).
 
 No hand Gaussians: the splat camera draws the pads over SAPIEN's render of the hand.
 """

@@ -44,7 +44,7 @@ def floating_allegro_urdf() -> str:
     the cache; its path."""
     import hashlib
 
-    from ..assets import cache_dir
+    from ..cache import cache_dir
     from ..urdf import write_floating_urdf
 
     src = AllegroHandRight.urdf_path

@@ -8,7 +8,7 @@ their collision meshes come from, and optionally a folder of hand Gaussians
 
 One thing changes in SAPIEN: a pad link collides with its **rigid core**, its collision
 geometry without the soft layer (:func:`~gausstac_maniskill.tactile.pad_core_meshes`). The
-MPM pad handles contact in the layer in front of the core, and an object that reaches
+soft pad handles contact in the layer in front of the core, and an object that reaches
 the core stops the finger (it can never pass through). The agent loads a copy of its
 URDF with those collision meshes (:func:`core_urdf`, written once to
 :func:`~gausstac_maniskill.assets.cache_path`). Controllers, keyframes, visuals and every
@@ -81,7 +81,7 @@ def core_urdf(agent: type) -> str:
 def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
     import hashlib
 
-    from ..assets import cache_dir
+    from ..cache import cache_dir
     from ..tactile import pad_mesh
     from ..tactile.pad import CORE_DEPTH
     from ..urdf import write_urdf_with_collisions

@@ -1,7 +1,8 @@
 """GaussTac's packaged assets: one folder per hand (``allegro_hand_right/gaussians.ply`` +
 ``links.json``, ``ability_hand_right/finger_L2_hull.obj``) and the example captured scene
 (``tabletop_scene/gaussians.ply``, made by :mod:`gausstac_maniskill.splat.example_scene`).
-Files generated per user (the pad links' rigid cores) go to :func:`cache_path`.
+Files generated per user (the pad links' rigid cores) go to GaussTac's disk cache,
+:mod:`gausstac_maniskill.cache` (its :func:`cache_path` and :func:`cache_dir`, also importable here).
 
 The repository's top-level ``assets/`` is installed as the package
 ``gausstac_maniskill.assets`` (``pyproject.toml``: package-dir + package-data), so the
@@ -12,9 +13,10 @@ files are found through the package wherever it is installed (editable or from a
 """
 from __future__ import annotations
 
-import os
 from importlib.resources import files
 from pathlib import Path
+
+from ..cache import cache_dir, cache_path
 
 __all__ = ["ASSET_ROOT", "asset_path", "cache_path", "cache_dir"]
 
@@ -35,26 +37,3 @@ ASSET_ROOT: Path = _root()
 def asset_path(*parts: str) -> Path:
     """``ASSET_ROOT / parts...`` (it need not exist: some assets are written on first use)."""
     return ASSET_ROOT.joinpath(*parts)
-
-
-def cache_path(*parts: str) -> Path:
-    """A path in GaussTac's cache of generated files (the pad links' rigid-core URDFs):
-    ``$GAUSSTAC_CACHE``, else ``$XDG_CACHE_HOME/gausstac_maniskill``, else
-    ``~/.cache/gausstac_maniskill``. Nothing in it is needed twice: it may be deleted."""
-    root = os.environ.get("GAUSSTAC_CACHE") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "gausstac_maniskill")
-    return Path(root).joinpath(*parts)
-
-
-def cache_dir(*parts: str) -> Path:
-    """The folder :func:`cache_path` ``(*parts)``, created; under the temporary folder
-    instead when the cache cannot be written (a read-only home)."""
-    folder = cache_path(*parts)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        import tempfile
-
-        folder = Path(tempfile.gettempdir(), "gausstac_maniskill", *parts)
-        folder.mkdir(parents=True, exist_ok=True)
-    return folder

@@ -1,8 +1,10 @@
 """GaussTac for ManiSkill: visuo-tactile simulation for dexterous robot hands.
 
-Soft fingertip pads and deformable objects are simulated with a Taichi MLS-MPM
-co-simulator driven by rigid link poses (SAPIEN or MuJoCo); a 3D Gaussian
-Splatting camera renders them. Units are SI throughout (m, kg, s, Pa).
+Soft fingertip pads ride on rigid link poses (SAPIEN or MuJoCo). By default the pads
+are solved at equilibrium each step (:mod:`gausstac_maniskill.fem`, linear cut-cell FEM,
+``pad_solver="auto"``); Taichi MLS-MPM pads are an option (``pad_solver="mpm"``). Soft
+objects are MLS-MPM particles, rigid objects SDF colliders; a Taichi 3D Gaussian Splatting
+camera renders the scene. Units are SI throughout (m, kg, s, Pa).
 
 ``import gausstac_maniskill`` is light (no ManiSkill, torch or Taichi import): it
 registers the tasks (``GaussTac-*-v1``) with gymnasium, so ``gym.make("GaussTac-...")``
@@ -19,9 +21,9 @@ import importlib
 __version__ = "0.1.0"
 
 #: Submodules and subpackages, imported on first attribute access.
-_SUBMODULES = ("agents", "assets", "backend", "batch", "bench", "cli", "collect", "config", "cosim", "demo", "errors",
-               "experts", "mpm", "obs_wrappers", "pose", "render", "replay", "sensors", "splat", "tactile",
-               "tasks", "transforms", "urdf")
+_SUBMODULES = ("agents", "assets", "backend", "batch", "bench", "cache", "cli", "collect", "config", "cosim", "demo",
+               "environment", "errors", "experts", "fem", "geometry", "mpm", "obs_wrappers", "pose", "reference",
+               "render", "replay", "sensors", "splat", "tactile", "tasks", "transforms", "urdf")
 
 __all__ = ["__version__", "register", *_SUBMODULES]
 

@@ -1,6 +1,6 @@
 """Registration of the GaussTac tasks and agents without importing ManiSkill up front.
 
-Importing ManiSkill costs ~3 s (torch, SAPIEN, its scene builders), so
+Importing ManiSkill is slow (torch, SAPIEN, its scene builders), so
 ``import gausstac_maniskill`` does not. It registers a light gymnasium entry per task
 (:data:`TASKS`) with the arguments ManiSkill's ``register_env`` uses; its entry point
 registers the agents and tasks with ManiSkill (:func:`register_with_maniskill`, which

@@ -6,7 +6,8 @@ Metal by accident (``ti.init(arch=ti.gpu)`` silently picks Vulkan on a machine
 without CUDA, which is why we never pass ``ti.gpu``).
 
 The architecture can also be chosen with the environment variable
-``GAUSSTAC_ARCH`` (same values), which ``ensure_init()`` reads.
+``GAUSSTAC_ARCH`` (same values), which ``ensure_init()`` reads (every variable read here:
+:mod:`~gausstac_maniskill.environment`).
 
 Compile time. Taichi compiles each variant of a kernel on its first launch and keeps it in
 its offline cache (``~/.cache/taichi``), so only a machine's first run pays. Two of
@@ -29,6 +30,7 @@ from typing import Callable
 
 import taichi as ti
 
+from . import environment
 from .cpu_pinning import pin_taichi_workers, thread_ids
 
 __all__ = ["BackendError", "init", "ensure_init", "current_arch", "torch_device", "is_initialized", "before_shutdown",
@@ -71,7 +73,7 @@ def _taichi_arch_name() -> str:
 
 def _profiler_on() -> bool:
     """``GAUSSTAC_KERNEL_PROFILER=1`` turns Taichi's kernel profiler on (``bench kernels``)."""
-    return os.environ.get("GAUSSTAC_KERNEL_PROFILER", "") == "1"
+    return environment.read("GAUSSTAC_KERNEL_PROFILER") == "1"
 
 
 def _compile_options() -> dict:
@@ -79,7 +81,7 @@ def _compile_options() -> dict:
 
     The offline cache may hold 1 GiB: Taichi's 100 MB default evicts a quarter of its
     entries at exit once full, and the test suite's variants alone take 34 MB per build."""
-    build = os.environ.get("GAUSSTAC_COMPILE", "")
+    build = environment.read("GAUSSTAC_COMPILE")
     if build not in _BUILDS:
         raise BackendError(f"GAUSSTAC_COMPILE={build!r} is not one of {_BUILDS} (unset: the product build)")
     opts = dict(offline_cache=True, offline_cache_max_size_of_files=1 << 30, kernel_profiler=_profiler_on())
@@ -165,7 +167,7 @@ atexit.register(_shutdown)  # at import: it then runs after whatever registers l
 def cpu_share() -> int | None:
     """This process's share of the CPU in threads, ``GAUSSTAC_CPU_THREADS`` (a collection worker
     sets it: :mod:`~gausstac_maniskill.collect`); None where not set."""
-    return int(os.environ.get("GAUSSTAC_CPU_THREADS", "0")) or None
+    return int(environment.read("GAUSSTAC_CPU_THREADS")) or None
 
 
 def cpu_threads() -> int:
@@ -200,7 +202,7 @@ def ensure_init() -> str:
     """Initialise with ``$GAUSSTAC_ARCH`` (default ``auto``) unless already done."""
     if _arch is not None:
         return _arch
-    return init(os.environ.get("GAUSSTAC_ARCH", "auto"))
+    return init(environment.read("GAUSSTAC_ARCH"))
 
 
 def current_arch() -> str | None:

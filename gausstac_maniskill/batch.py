@@ -3,25 +3,19 @@
 Every env is a :class:`~gausstac_maniskill.cosim.GaussTacSim` built into the same
 :class:`~gausstac_maniskill.mpm.MPMWorld` as env ``b``: its particles, links and colliders
 carry the env index, the grid holds one copy of the active box per env, and a particle
-touches only its own env's colliders. All envs advance in the same kernel launches, so the
-launches per control step do not grow with B (``tests/mpm/test_envs.py`` counts them).
-Envs sleep and wake per pad, as in a scene alone.
+touches only its own env's colliders. All envs advance in the same kernel launches (their
+number does not grow with B). Envs sleep and wake per pad, as in a scene alone.
 
-Every env takes the same substeps: the number the most demanding env's CFL bound needs.
-An env then steps exactly as it would alone with that many substeps (to float rounding:
-the grid box and the order of the P2G sums may differ; the tests hold this). Not so with
-``SolverSettings(pressure="implicit")``: the envs then share one conjugate-gradient solve of
-the cell pressures (its step lengths and its stopping test sum over every env), so an env
-matches its solve alone only to the CG tolerance; that equivalence is untested.
+Every env takes the same substeps (the most demanding env's CFL bound) and then steps as
+it would alone, to float rounding; with ``SolverSettings(pressure="implicit")`` the envs share
+one conjugate-gradient pressure solve, so only to the CG tolerance (untested).
 
 Data flows one way: link poses [B, L, 4, 4] (torch or numpy, world frame, m) →
-:meth:`BatchedCosim.step` → MPM → tactile maps ``{pad: {map: [B, H, W(, 2)]}}``.
-
-Each env's state saves and restores on its own (``scenes[b].flat_state()`` /
-``load_flat_state``), in the layout of the same scene alone: a state moves between a batch
-and a single scene. :class:`~gausstac_maniskill.tasks.GaussTacEnv` builds one batch for all
-its envs. :meth:`BatchedCosim.render` draws every env's splat scene in one rasterizer call
-(each camera sees its own env's Gaussians only).
+:meth:`BatchedCosim.step` → pad and object solvers → tactile maps
+``{pad: {map: [B, H, W(, 2)]}}``. Each env's state saves and restores on its own
+(``scenes[b].flat_state()`` / ``load_flat_state``), in the layout of the same scene alone.
+:meth:`BatchedCosim.render` draws every env's splat scene in one rasterizer call (each
+camera sees its own env's Gaussians only).
 """
 from __future__ import annotations
 
@@ -35,7 +29,7 @@ from .config import PadSpec, SolverSettings
 from .cosim import GaussTacSim, default_hand_settings
 from .errors import ConfigError
 from .mpm import MPMWorld
-from .mpm.colliders import Collider
+from .geometry.colliders import Collider
 from .render import BatchScene
 from .transforms import as_pose_matrices
 from .tactile.readout import TactileReadout

@@ -1,7 +1,8 @@
 """Command line: ``gausstac demo | bench <name> | build-asset | collect``.
 
 * ``gausstac demo`` — the main demo (see README); writes PNG/MP4 files under ``out/``.
-* ``gausstac bench hertz|splat [options]`` — benchmarks that print what they measured.
+* ``gausstac bench <name> [options]`` — benchmarks (``hertz``, ``pad``, ``splat``, ...) that
+  print what they measured.
 * ``gausstac build-asset [options]`` — hand Gaussians (``gaussians.ply`` + ``links.json``)
   from a URDF's visual meshes, or aligned from a scan.
 * ``gausstac collect <env_id> [options]`` — record scripted-expert demonstrations (h5 + json),

@@ -7,7 +7,7 @@ parallelism is one process per env) wrapped in ManiSkill's ``RecordEpisode``, dr
 with the task's scripted expert (:func:`gausstac_maniskill.experts.make_expert`) and
 writes its own ``.h5`` + ``.json``; the parent shows one progress bar over all episodes
 and at the end merges the worker files into one (traj ids renumbered in seed order),
-gzip-compressing the large uncompressed datasets (mostly the MPM state).
+gzip-compressing the large uncompressed datasets (mostly the co-simulation state).
 
 With ``--ray [ADDRESS]`` the workers are Ray tasks (one CPU each) on a local Ray instance
 or on a cluster; each records on its node and sends its files back through Ray's object
@@ -26,7 +26,7 @@ Output (ManiSkill's naming ``<name>.<obs_mode>.<control_mode>.<sim_backend>.h5``
 Per trajectory ``traj_<n>``: ``actions [T, A]``, ``obs`` (``agent``, ``extra``,
 ``sensor_data/splat_camera/rgb [T+1, H, W, 3] uint8`` in rgb mode, and
 ``tactile/<pad>/depth [T+1, 16, 16]``, ``shear [T+1, 16, 16, 2]``, ``force [T+1, 16, 16]``),
-``env_states`` (SAPIEN actors/articulations plus ``gausstac/*``: the MPM state, so that
+``env_states`` (SAPIEN actors/articulations plus ``gausstac/*``: the co-simulation state, so that
 ``set_state_dict`` reproduces the tactile maps exactly), ``rewards``, ``success``,
 ``terminated``, ``truncated``. Replay with ``python -m gausstac_maniskill.replay``.
 """
@@ -48,6 +48,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from . import environment
 from .errors import ConfigError
 
 __all__ = ["CollectConfig", "collect", "merge_trajectories", "output_path", "main"]
@@ -205,7 +206,7 @@ def _limit_threads(n: int) -> None:
     """A worker's share of the CPU: ``n`` threads for Taichi (before it starts) and torch."""
     import torch
 
-    os.environ.setdefault("GAUSSTAC_CPU_THREADS", str(n))
+    environment.write_default("GAUSSTAC_CPU_THREADS", str(n))
     torch.set_num_threads(n)
 
 

@@ -162,9 +162,9 @@ class SolverSettings:
             ``"implicit"``: one value per grid cell, solved backward Euler in every substep
             (``kernels.pressure_solve``), so the substep follows √(2μ/ρ) whatever ν (3.6×
             fewer substeps at ν = 0.48, 16× at ν = 0.499). Other models stay explicit.
-            Measured on the 4 mm bonded layer at dx = 1 mm (BENCHMARKS.md, issue 10 seventh
-            step): at ν = 0.499 −0.9 % against theory in 360 substeps where F-bar is +10.9 % in
-            4320; at ν ≤ 0.48 it is softer than F-bar (−9.6 % at 0.48) and, its CG iterations
+            On the 4 mm bonded layer at dx = 1 mm it reads −0.9 % against theory at ν = 0.499
+            in 360 substeps, where F-bar is +10.9 % in 4320; at ν ≤ 0.48 it is softer than
+            F-bar (−9.6 % at 0.48) and, its CG iterations
             costing ~4 explicit substeps, not faster: the choice for ν ≥ 0.49.
         pressure_iterations: the most conjugate-gradient iterations of that solve per
             substep (it stops earlier once the residual fell by 10⁴).
@@ -272,7 +272,7 @@ def dragon_skin_10() -> "Material":
     μ = 86.7 kPa and E = 3μ ≈ 0.26 MPa. Cured silicone is nearly incompressible (bulk modulus
     about 1 GPa, ν ≈ 0.4999); ν = 0.48 is the modelling choice: F-bar keeps it free of
     locking, and its explicit substep count is 1.5× that of ν = 0.45 (4.3× at ν = 0.499,
-    which the solver also runs; see BENCHMARKS.md)."""
+    which the solver also runs)."""
     return Material(E=2.6e5, nu=0.48, density=1070.0)
 
 

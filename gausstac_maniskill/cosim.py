@@ -1,7 +1,14 @@
 """GaussTacSim: the co-simulator of one scene — soft pads on hand links, objects, Gaussians.
 
 Data flows one way: link poses (from SAPIEN or MuJoCo) → :meth:`GaussTacSim.step`
-→ MPM → tactile maps (and, via :meth:`render`, the Gaussian Splatting camera).
+→ pad and object solvers → tactile maps (and, via :meth:`render`, the Gaussian
+Splatting camera).
+
+Pads: by default (``pad_solver="auto"``) solved at equilibrium each step with linear
+cut-cell FEM (:mod:`gausstac_maniskill.fem`, no pseudo-mass); optionally MLS-MPM
+particles relaxed quasi-statically with a pseudo-mass (``pad_solver="mpm"``,
+:mod:`gausstac_maniskill.mpm.solver`). Soft objects are MPM particles with their physical
+mass; rigid objects are SDF colliders.
 
 Pads whose bounding sphere is farther than ``sleep_margin`` from every object,
 and that have relaxed (no particle more than ``REST_TOLERANCE`` from its rest place
@@ -9,11 +16,8 @@ on the link, or no longer moving), are put exactly on their rest shape and sleep
 zero maps; they are carried rigidly by their link and wake up as soon as an object
 comes near. A pad never falls asleep deformed.
 
-Time integration: pads are quasi-static (dynamic relaxation with a pseudo-mass,
-see :mod:`gausstac_maniskill.mpm.solver`; or, with ``pad_solver="fem"``, solved at
-equilibrium each step, :mod:`gausstac_maniskill.fem`); free soft objects move with their
-physical mass. Default numerics are chosen for robot control steps (20–100 Hz):
-grid spacing 1 mm (pad particles every 0.5 mm). Units: SI.
+Default numerics are chosen for robot control steps (20–100 Hz): grid spacing 1 mm
+(pad particles every 0.5 mm). Units: SI.
 """
 from __future__ import annotations
 
@@ -26,7 +30,7 @@ import torch
 from .config import Material, PadSpec, SolverSettings
 from .errors import ConfigError
 from .mpm import MPMWorld
-from .mpm.colliders import Collider
+from .geometry.colliders import Collider
 from .tactile import Pad, build_pad, pad_mesh
 from .tactile.extract import TaxelBinning, tactile_maps
 from .tactile.readout import TactileReadout
@@ -41,7 +45,7 @@ REST_TOLERANCE = 5.0e-6
 
 
 def default_hand_settings(**changes) -> SolverSettings:
-    """Solver settings for fingertip pads at control rates: dx = 1 mm; pads' pseudo-mass
+    """Solver settings for fingertip pads at control rates: dx = 1 mm; MPM pads' pseudo-mass
     ×1000 (wave speed of a 0.3 MPa silicone drops from 32 to 1 m/s; free soft objects keep
     their physical mass), no absolute damping (pads relax relative to their link)."""
     base = dict(dx=1.0e-3, mass_scaling=1000.0, damping=0.0, gravity=(0.0, 0.0, -9.81),
@@ -51,7 +55,8 @@ def default_hand_settings(**changes) -> SolverSettings:
 
 
 class GaussTacSim:
-    """Soft pads on rigid links plus rigid/soft objects in one MPM world.
+    """Soft pads on rigid links (at equilibrium by default, or MLS-MPM) plus rigid and soft
+    objects in one MPM world.
 
     Args:
         pads: pad descriptions (see :func:`gausstac_maniskill.tactile.allegro_pad_specs`).
@@ -65,7 +70,7 @@ class GaussTacSim:
             ``"particles"`` half a particle spacing beyond its outermost particles, a
             staircase that on a curved pad stands up to half a spacing off the mesh,
             differently at each resolution. Held force at the default dx = 1 mm against
-            dx = 0.5 mm of the same mode (``bench pad --curve``, 2026-11-23): mesh +5.5 %
+            dx = 0.5 mm of the same mode (``bench pad --curve``): mesh +5.5 %
             (5 mm sphere) / −3.6 % (plate); particles +10.9 % / +6.3 %, and at dx = 0.5 mm the
             particle staircase still reads 12 % (sphere) / 4 % (plate) above the mesh surface.
         world, env: build the scene as env ``env`` of a shared (batched) :class:`MPMWorld`
@@ -87,11 +92,10 @@ class GaussTacSim:
             these pads from their solution; in a batch (:class:`~gausstac_maniskill.batch.BatchedCosim`)
             every env solves its own, with one body per pad.
             A pad's first approach to an object builds its body (:meth:`prepare_pads` does it
-            at once): 1 s at the default resolution, plus about 15 s on 2 cores for its
-            compliance and its maps' response (one sweep) the first time on a machine (kept
-            under ``~/.cache/gausstac_maniskill``).
+            at once), and the first time on a machine its compliance and its maps' response
+            (one sweep, kept under ``~/.cache/gausstac_maniskill``).
         fem_model: the ``"fem"`` pads' material model, ``"linear"`` (fast; small strain) or
-            ``"neo_hookean"`` (finite strain; seconds per step at the default resolution; a
+            ``"neo_hookean"`` (finite strain; much slower per step; a
             step whose iterations stall with the layer's cut cells finite is solved with them
             linear, with a :class:`~gausstac_maniskill.errors.SimulationWarning`:
             :meth:`~gausstac_maniskill.fem.QuasiStaticBody.solve`).
@@ -100,11 +104,9 @@ class GaussTacSim:
             default (None): in full when it takes at most
             :data:`~gausstac_maniskill.fem.sensor.PRECOMPUTE_BYTES` (256 MiB: the default
             dx = 1 mm), else point by point with a
-            :class:`~gausstac_maniskill.errors.CostWarning` (a 40 mm block pad: 10–12 s per
-            press step point by point, 23–28 ms with its 1.5 GB compliance, 11 minutes once on
-            2 cores; ``bench patch --pad-solver fem``). True at dx = 0.75 mm: 532 MB and 5
-            minutes on 2 cores once per pad shape, then a press costs 15 ms (sphere) to 0.7 s
-            (plate) instead of 8–34 s.
+            :class:`~gausstac_maniskill.errors.CostWarning`. The full compliance costs memory
+            and a one-time build per pad shape and makes each press step far cheaper than
+            point by point (``bench patch --pad-solver fem`` measures both).
     """
 
     def __init__(self, pads: Sequence[PadSpec], link_poses: Mapping[str, np.ndarray], *,
@@ -253,7 +255,7 @@ class GaussTacSim:
         its link, for the soft objects to meet (friction ``settings.soft_friction``): their push
         on it, read from the particles' contact impulses, loads the pad (:meth:`_soft_load`), and
         the collider takes the pad's shape before each step (:meth:`_shape_surface_colliders`)."""
-        from .mpm.colliders import MeshCollider
+        from .geometry.colliders import MeshCollider
 
         for name, pad in self.pads.items():
             if name in self._fem and name not in self._surface_colliders:
@@ -415,10 +417,10 @@ class GaussTacSim:
         """Build the equilibrium pads' bodies now (``pad_solver="fem"``): assemble each pad's
         stiffness and compute or load its surface compliance
         (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`), which otherwise happens in
-        the first step that brings an object within ``sleep_margin`` of the pad. At the
-        default resolution: 1 s per pad shape, plus about 15 s (2 cores) for its compliance
-        and its maps' response (the default binning's, in the same sweep) the first time on a
-        machine (then read from the disk cache). Does nothing for MPM pads."""
+        the first step that brings an object within ``sleep_margin`` of the pad. The
+        compliance and its maps' response (the default binning's, in the same sweep) are
+        computed the first time on a machine, then read from the disk cache. Does nothing
+        for MPM pads."""
         for fp in self._fem.values():
             fp.body  # noqa: B018 (built on first access)
 
@@ -427,7 +429,7 @@ class GaussTacSim:
         points (one element): each point meets the nearest of them
         (:class:`~gausstac_maniskill.fem.contact.Indenters`). A pad with none within reach is
         at rest."""
-        from .mpm.colliders import signed_distance
+        from .geometry.colliders import signed_distance
 
         t0 = time.perf_counter()
         for name, fp in self._fem.items():
@@ -850,7 +852,7 @@ class GaussTacSim:
                 if prefix + "force" not in state:
                     raise ConfigError(f"load_flat_state: the state has no {prefix}* entries for pad {name!r}, "
                                       "which this scene solves at equilibrium (pad_solver='fem'); a state saved with "
-                                      "the MPM pads (the tasks' default before 2026-11-27) loads into a scene made "
+                                      "the MPM pads loads into a scene made "
                                       "with pad_solver='mpm'")
                 self._fem[name].load_flat_state({k[len(prefix):]: v for k, v in state.items()
                                                  if k.startswith(prefix)}, sorted(self._objects))
@@ -885,7 +887,7 @@ def _sweep(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, flo
 def _distance(collider: Collider, point: np.ndarray) -> float:
     """Signed distance [m] from ``point`` to ``collider`` (exact for analytic shapes, a
     bounding-sphere lower bound for meshes), in numpy: cheap enough for every step."""
-    from .mpm import colliders as col
+    from .geometry import colliders as col
 
     T = collider.pose
     q = (point - T[:3, 3]) @ T[:3, :3]

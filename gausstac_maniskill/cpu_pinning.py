@@ -6,8 +6,8 @@ Its workers sleep between loops, and the kernel's scheduler places a woken worke
 sees fit. On the project's 2-core benchmark machine (a Firecracker VM; ``sched_vcpu_pack`` on
 its kernel command line) both workers often ran on one vCPU after an env step: the splat
 camera's loops of a few milliseconds then took as long as on one thread. Pinning worker i to
-core i (what ``OMP_PROC_BIND`` does for OpenMP) keeps them apart. ``BENCHMARKS.md`` ("Taichi's
-workers pinned one per core") has the measurements.
+core i (what ``OMP_PROC_BIND`` does for OpenMP) keeps them apart. ``BENCHMARKS.md`` has
+the measurements.
 
 The pool's threads are not named, so :func:`pin_taichi_workers` finds them by what they
 do: the threads that ``ti.init`` created and that run a short parallel probe loop. It pins
@@ -19,6 +19,8 @@ scheduler) and never when ``GAUSSTAC_CPU_PIN=0``.
 import os
 
 import taichi as ti
+
+from . import environment
 
 __all__ = ["thread_ids", "pin_taichi_workers"]
 
@@ -69,7 +71,7 @@ def pin_taichi_workers(before: set[int], n_threads: int) -> list[int]:
         affinity set (empty: nothing pinned — disabled, not Linux, a pool smaller than
         the cores, or its workers not all found).
     """
-    if os.environ.get("GAUSSTAC_CPU_PIN", "1") == "0" or not hasattr(os, "sched_setaffinity"):
+    if environment.read("GAUSSTAC_CPU_PIN") == "0" or not hasattr(os, "sched_setaffinity"):
         return []
     cores = sorted(os.sched_getaffinity(0))
     if n_threads != len(cores) or n_threads < 2:

@@ -4,10 +4,11 @@ MuJoCo gives the poses of ManiSkill's Allegro right hand (the hand base is moved
 through space; the fingers hold a fixed posture). The index fingertip presses a
 rigid cube, slides across its top face, lifts, and the hand then comes down on
 an elastoplastic foam sponge glued to the table, squeezing it between the
-fingertips and the table. Every control step (50 ms) the MPM co-simulator
-updates the four soft fingertip pads and the sponge; the 3D Gaussian Splatting
-camera renders the hand (rigid Gaussians following their links), the pads and
-the sponge (soft Gaussians following the MPM deformation gradient) and the cube.
+fingertips and the table. Every control step (50 ms) the co-simulator solves
+the four soft fingertip pads at equilibrium (the default pads) and steps the
+MLS-MPM sponge; the 3D Gaussian Splatting camera renders the hand (rigid
+Gaussians following their links), the pads and the sponge (soft Gaussians
+following their deformation gradient) and the cube.
 
 Writes ``out/demo/demo.mp4`` (camera image next to the index pad's depth map
 with shear arrows, the middle pad's depth map, and the normal force per pad)
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import backend
+from . import backend, environment
 from .assets import asset_path
 
 INDEX, MIDDLE = "link_3.0_tip", "link_7.0_tip"
@@ -65,7 +66,7 @@ def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int
     """Run the demo; returns timing statistics (seconds)."""
     from .config import Material
     from .cosim import GaussTacSim, default_hand_settings
-    from .mpm import Box, box_particles
+    from .geometry import Box, box_particles
     from .pose import MujocoPoseSource
     from .render import box_gaussians
     from .splat import intrinsics_from_fov, look_at
@@ -228,7 +229,7 @@ def _write_outputs(out, frames, log):
 
 
 #: task -> its gym.make arguments in part 2 (the grasp runs its expert with absolute joint
-#: targets on a 2 mm grid: the contact loop steps the MPM after every SAPIEN step)
+#: targets on a 2 mm grid: the contact loop steps the co-simulator after every SAPIEN step)
 TASKS = {"GaussTac-Gesture-v1": {}, "GaussTac-PressCube-v1": {}, "GaussTac-SlideCube-v1": {},
          "GaussTac-SqueezeSponge-v1": {},
          "GaussTac-GraspLiftCube-v1": dict(control_mode="pd_joint_pos", mpm_dx=2e-3)}
@@ -294,8 +295,8 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="out/demo", help="output folder")
     ap.add_argument("--fine", action="store_true",
-                    help="1.5 mm grid and twice the steps (about 7 minutes on 2 cores; default: 2 mm, ~1 min)")
-    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+                    help="1.5 mm grid and twice the steps (default: 2 mm grid)")
+    ap.add_argument("--arch", default=environment.read("GAUSSTAC_ARCH"), choices=["cpu", "cuda", "auto"])
     ap.add_argument("--no-tasks", action="store_true",
                     help="skip part 2: one expert episode of each ManiSkill task (out/demo/tasks/, ~40 s)")
     args = ap.parse_args(argv)

@@ -26,7 +26,7 @@ scalars. A context cannot be reused: the launch rewrites the arrays' entries in 
 second launch from it read an invalid allocation). Measured on the index pad: the substep's
 Python time fell from 1.5 to 0.6 ms under cProfile; with Taichi's argument setting a substep
 takes 1.11–1.15× as long, with Taichi's whole call 1.20–1.29× (``python -m
-gausstac_maniskill.bench kernels --launches 6``; ``BENCHMARKS.md``, issue 10, nineteenth session). ``GAUSSTAC_KERNEL_ARGS=taichi`` (or
+gausstac_maniskill.bench kernels --launches 6``; ``BENCHMARKS.md``). ``GAUSSTAC_KERNEL_ARGS=taichi`` (or
 :data:`LEAN_ARGS` set False) hands the arguments to Taichi's own launch again.
 
 ``mpm/kernels.py`` applies it to the kernels of every substep and every step. It uses members
@@ -35,13 +35,16 @@ of Taichi's kernel object (``arguments``, ``compiled_kernels``, ``ensure_compile
 context's ``set_arg_*``, present throughout Taichi 1.7 (pinned in ``pyproject.toml``); where
 the first four are missing it falls back to the ordinary call, as it does everywhere with
 ``GAUSSTAC_KERNEL_CACHE=0`` (or :data:`ENABLED` set False: the A/B of ``BENCHMARKS.md``).
+
+:data:`NDI` and :data:`NDI2` are the declarations of int32 ndarray arguments (1-D, 2-D) that
+the kernels of both pad solvers (``mpm/kernels.py``, ``fem/neo_hookean.py``) use.
 """
 from __future__ import annotations
 
 import functools
-import os
 import weakref
 
+import taichi as ti
 from taichi._lib import core as _ti_core
 from taichi.lang import impl, runtime_ops
 from taichi.lang.argpack import ArgPackType
@@ -51,15 +54,25 @@ from taichi.types.annotations import template
 from taichi.types.ndarray_type import NdarrayType
 from taichi.types.utils import is_signed
 
-__all__ = ["CachedKernel", "cached_kernel", "ENABLED"]
+from . import environment
+
+__all__ = ["CachedKernel", "cached_kernel", "ENABLED", "NDI", "NDI2", "NDF", "NDF2", "NDV", "NDM"]
+
+# ndarray argument types shared by the kernels of every module
+NDI = ti.types.ndarray(dtype=ti.i32, ndim=1)  #: int32 [N]
+NDI2 = ti.types.ndarray(dtype=ti.i32, ndim=2)  #: int32 [N, M]
+NDF = ti.types.ndarray(dtype=ti.f32, ndim=1)  #: float32 [N]
+NDF2 = ti.types.ndarray(dtype=ti.f32, ndim=2)  #: float32 [N, M]
+NDV = ti.types.ndarray(dtype=ti.math.vec3, ndim=1)  #: float32 3-vectors [N, 3]
+NDM = ti.types.ndarray(dtype=ti.math.mat3, ndim=1)  #: float32 3x3 matrices [N, 3, 3]
 
 _LCB = _ti_core.KernelLaunchContext  # Taichi's launch context builder (set_arg_* methods)
 
 _MEMBERS = ("arguments", "compiled_kernels", "ensure_compiled", "launch_kernel")
 #: False: every CachedKernel takes Taichi's ordinary call (``GAUSSTAC_KERNEL_CACHE=0``)
-ENABLED = os.environ.get("GAUSSTAC_KERNEL_CACHE", "1") != "0"
+ENABLED = environment.read("GAUSSTAC_KERNEL_CACHE") != "0"
 #: False: the fast path sets the arguments through Taichi's own ``launch_kernel`` (``GAUSSTAC_KERNEL_ARGS=taichi``)
-LEAN_ARGS = os.environ.get("GAUSSTAC_KERNEL_ARGS", "lean") != "taichi"
+LEAN_ARGS = environment.read("GAUSSTAC_KERNEL_ARGS") != "taichi"
 
 
 class CachedKernel:

@@ -9,21 +9,12 @@
   those particles (Σ = F Σ0 Fᵀ, SH view direction rotated by polar(F)ᵀ).
 
 and renders them with :func:`gausstac_maniskill.splat.rasterize`. Gaussians the
-co-simulator does not move — a captured background, captured objects riding on SAPIEN
-actors — join as :class:`RigidLayer` s (:meth:`SceneGaussians.add_layer`): they are
-splatted in the same rasterizer pass and sorted by depth with the hand's, so each
-occludes the other correctly. Units: metres.
-
-Lighting: the hand's, objects' and soft Gaussians carry albedo (colours sampled from mesh
-materials, :data:`PAD_RGB`, :data:`SOFT_RGB`) and normals, so that a ``lighting`` passed to
-:meth:`SceneGaussians.render` (the splat camera passes the SAPIEN scene's lights) shades
-them as SAPIEN shades meshes; a layer's Gaussians keep their colours (captured lighting)
-unless it is made with ``lit=True``. See :mod:`gausstac_maniskill.splat.lighting`.
-
-All of them are kept, once, as one :class:`~gausstac_maniskill.splat.FramedGaussians`
-in their frames (links, objects, the particles the soft Gaussians ride on, the layers'
-actors): posing the scene for a picture gathers only the F frames ([F, 3, 4]), and the
-rasterizer's projection kernel moves every Gaussian with its frame.
+co-simulator does not move (a captured background, captured objects on SAPIEN actors) join
+as :class:`RigidLayer` s, splatted in the same pass and depth-sorted with the hand's.
+The hand's, objects' and soft Gaussians carry albedo and normals, shaded by a ``lighting``
+(:mod:`gausstac_maniskill.splat.lighting`); a layer keeps its colours unless ``lit=True``.
+All are kept once as one :class:`~gausstac_maniskill.splat.FramedGaussians` in their frames:
+posing the scene gathers only the F frames ([F, 3, 4]). Units: metres.
 """
 from __future__ import annotations
 
@@ -175,8 +166,8 @@ class Detail:
     whose splats are no wider than its pixel at the hand: ``IN_PLANE_SCALE · spacing``, the
     splats' in-plane σ (:mod:`gausstac_maniskill.splat.surface`), at most z / fx (z: the hand's
     root link in the camera, fx: the focal length in pixels). There the picture keeps its look
-    and its depth (BENCHMARKS.md, issue 13: at 1.09 spacings per pixel the hand's mean depth
-    error grows by 0.26 mm, at 1.3 its median by 1 mm)."""
+    and its depth (``bench look``: at 1.09 spacings per pixel the hand's mean depth error
+    grows by 0.26 mm, at 1.3 its median by 1 mm)."""
 
     def __init__(self, n_fine: int, n_rest: int, levels: Sequence[tuple[int, int, float]]):
         """``levels``: (start, stop, spacing [m]) of each coarser level, finest first."""
@@ -249,7 +240,7 @@ class SceneGaussians:
             as the outward normal (``links.json["closed_links"]``, written by ``gausstac
             build-asset`` after :func:`~gausstac_maniskill.splat.surface.closed_outward`):
             they are one-sided, i.e. not drawn when they face away from the camera (a nearer
-            front side hides them; *Back faces* in :mod:`gausstac_maniskill.splat.rasterizer`),
+            front side hides them; ``one_sided`` in :func:`gausstac_maniskill.splat.rasterizer.rasterize`),
             except on links carrying a soft pad, whose surface is open where the pad replaces it.
     """
 

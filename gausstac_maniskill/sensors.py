@@ -4,8 +4,8 @@
   (so ``obs["sensor_data"][uid]`` holds its ``rgb`` [B, H, W, 3] uint8 and ``depth``
   [B, H, W, 1] int16 millimetres, exactly like a SAPIEN camera, and ``get_params`` gives
   ``extrinsic_cv`` / ``cam2world_gl`` / ``intrinsic_cv``). Its picture is the scene's
-  Gaussians — hand links, pads and soft objects deformed by the MPM — composited with
-  depth over SAPIEN's render of the rest of the scene (the hand hidden there), or over
+  Gaussians (hand links; pads and soft objects as deformed by the co-simulator), composited
+  with depth over SAPIEN's render of the rest of the scene (the hand hidden there), or over
   a plain colour. By default the hand's, pads' and objects' Gaussians are shaded with the
   SAPIEN scene's lights, as SAPIEN shades their meshes. Configure it with
   :class:`GaussianSplatCameraConfig`, a ``CameraConfig`` with two more fields, anywhere a

@@ -45,9 +45,9 @@ def as_pose_matrices(poses, name: str = "poses") -> np.ndarray:
 
 # --------------------------------------------------------------------------- quaternions
 # The project's quaternion convention (w, x, y, z), Hamilton product, in one module: torch
-# (batched, on any device and float dtype) and numpy (batched, float64, on the host: calling
-# torch there for a single pose costs 160-290 µs against 10-26 µs). Inside Taichi
-# kernels: :func:`gausstac_maniskill.mpm.kinematics.quat_to_mat`.
+# (batched, on any device and float dtype) and numpy (batched, float64, on the host: much
+# cheaper than torch for a single pose). Inside Taichi
+# kernels: :func:`gausstac_maniskill.geometry.kinematics.quat_to_mat`.
 def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
     """Quaternions (w, x, y, z) [..., 4] -> rotation matrices [..., 3, 3]; normalised first,
     so any non-zero quaternion is accepted."""

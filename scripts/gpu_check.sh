@@ -21,7 +21,7 @@ timeout "${T_KERN:-70}" python3 -m gausstac_maniskill.bench kernels --arch cuda 
 echo "bench kernels: exit $?"; grep -A2 "^index pad" "$OUT/kernels.log"
 fi
 if [ "${T_PAD:-0}" -gt 0 ]; then  # the pad at equilibrium: compliance on all the host's cores, then bench pad
-GAUSSTAC_CACHE_DIR="$OUT/cache" timeout "$T_PAD" python3 -m gausstac_maniskill.bench pad --pad-solver fem \
+GAUSSTAC_CACHE="$OUT/cache" timeout "$T_PAD" python3 -m gausstac_maniskill.bench pad --pad-solver fem \
     --indenters sphere plate --dx 1e-3 --arch cuda --out "$OUT/pad" > "$OUT/pad.log" 2>&1; echo "bench pad fem: exit $?"
 rm -rf "$OUT/cache"; grep -E "^\| (sphere|plate)|build|ms" "$OUT/pad.log" | head -30
 fi

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from gausstac_maniskill import backend
+from gausstac_maniskill import backend, environment
 
 _PROBE = "import sapien\nsapien.render.RenderSystem()\n"
 
@@ -18,7 +18,7 @@ _PROBE = "import sapien\nsapien.render.RenderSystem()\n"
 def sapien_vulkan_device() -> tuple[bool, str]:
     """``(True, "")`` if SAPIEN can create its render system (it needs a Vulkan device even
     with ``render_backend='none'``), else ``(False, reason)``. Probed once per session, in a
-    child process (~0.5 s) so that a failing Vulkan driver cannot disturb the tests' SAPIEN."""
+    child process so that a failing Vulkan driver cannot disturb the tests' SAPIEN."""
     try:
         out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
     except subprocess.TimeoutExpired:
@@ -52,24 +52,24 @@ def pytest_runtest_setup(item):
 
 @pytest.fixture(scope="session", autouse=True)
 def compliance_cache(tmp_path_factory):
-    """The equilibrium pads' compliance cache in a directory of this run's own: no test reads
-    what an earlier run (or the user) left in ``~/.cache``. The run's pytest-xdist workers share
+    """GaussTac's disk cache (the equilibrium pads' compliances, mesh SDFs, rigid cores) in a
+    directory of this run's own: no test reads what an earlier run (or the user) left in ``~/.cache``. The run's pytest-xdist workers share
     it (their temporary folders' common parent; the cache writes each file atomically), so a
     pad shape's compliance is computed once per run, not once per worker."""
-    old = os.environ.get("GAUSSTAC_CACHE_DIR")
+    old = os.environ.get("GAUSSTAC_CACHE")
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
     folder = shared / "gausstac-cache"
     folder.mkdir(exist_ok=True)
-    os.environ["GAUSSTAC_CACHE_DIR"] = str(folder)
+    os.environ["GAUSSTAC_CACHE"] = str(folder)
     yield
     if old is None:
-        os.environ.pop("GAUSSTAC_CACHE_DIR", None)
+        os.environ.pop("GAUSSTAC_CACHE", None)
     else:
-        os.environ["GAUSSTAC_CACHE_DIR"] = old
+        os.environ["GAUSSTAC_CACHE"] = old
 
 
 @pytest.fixture(scope="session", autouse=True)
 def taichi_backend():
-    backend.init(os.environ.get("GAUSSTAC_TEST_ARCH", "cpu"))
+    backend.init(environment.read("GAUSSTAC_TEST_ARCH"))
     yield

@@ -114,7 +114,7 @@ def repeated_additions(source: str) -> list[str]:
     and writes back an entry the loop does not index (``x[i] = x[i] + ..``, ``i`` not set in the
     loop). Taichi 1.7.4 at ``opt_level=0`` (GAUSSTAC_COMPILE=fast, ``make test``'s build) keeps
     only the first addition of an iteration, and reads such an entry once before the loop; the
-    product build sums them all (BENCHMARKS.md, "eleventh session"). Local variables are not
+    product build sums them all. Local variables are not
     affected."""
     hits = []
 

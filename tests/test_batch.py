@@ -21,8 +21,8 @@ R = 6e-3
 STEPS, DT = 6, 0.02
 # Float32 rounding alone moves a scene's maps by this share of their largest value: a static
 # block 5 cm from the hand, which touches nothing and only widens the grid box (so the P2G
-# sums run in another order), changed the index pad's frictionless press by 1.1e-5 (depth),
-# 8.5e-4 (shear: its tangential motion is weakly held) and 3.0e-5 (force) (2026-11-24). The
+# sums run in another order), changes the index pad's frictionless press by 1.1e-5 (depth),
+# 8.5e-4 (shear: its tangential motion is weakly held) and 3.0e-5 (force). The
 # batch must agree with each scene alone to within a small multiple of that.
 ROUNDING = {"depth": 1e-4, "shear": 2e-3, "force": 1e-4, "pressure": 1e-4}
 

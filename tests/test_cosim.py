@@ -1,4 +1,5 @@
-"""The co-simulator on the Allegro fingertips: tactile maps of a press, sleeping pads."""
+"""The co-simulator on the Allegro fingertips with MLS-MPM pads (``pad_solver="mpm"``; the
+default pads at equilibrium are tested in tests/fem/): tactile maps of a press, sleeping pads."""
 import numpy as np
 import pytest
 
@@ -75,8 +76,8 @@ def test_force_map_sums_to_the_collider_reaction(pressed):
 
 def test_stress_reading_matches_the_contact_force(hand_poses):
     """The pad's stress, read by virtual work (pad_stress_force), against the collider's
-    reaction: two independent readings of one force, at the default dx = 1 mm (issue 10:
-    within 5 %; measured -3.6 % for a 5 mm sphere on a level pad). The pressure-map
+    reaction: two independent readings of one force, at the default dx = 1 mm (within 5 %;
+    measured -3.6 % for a 5 mm sphere on a level pad). The pressure-map
     estimate is 10-15 % low on this curved pad, so it would fail here. The hand pose turns
     the link, so the binding and sensor frames are exercised too."""
     spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
@@ -262,7 +263,7 @@ def test_pad_reads_the_force_of_a_soft_object():
 
 
 def test_maps_return_to_rest_while_the_object_stays_near(hand_poses):
-    """Issue 10's bound on the product defaults (dx = 1 mm): after a 1 mm press and a 1 mm
+    """The settle bound at the default dx = 1 mm: after a 1 mm press and a 1 mm
     slide with friction 0.5, the ball backs off to 0.3 mm clear of the pad, which stays awake;
     within 3 control steps of 50 ms every taxel's |depth| and |shear| is under 0.01 mm.
     Measured: 23 / 7.7 / 4.6 µm depth and 13.5 / 5.7 / 4.7 µm shear after 1 / 2 / 3 steps. (Single

@@ -128,7 +128,7 @@ def test_lean_arguments_fill_the_launch_context_as_taichi_does():
     """The fast path puts the arguments into the launch context itself (a nested pack, ndarrays
     inside and outside packs, float and int scalars, a return value) and must fill the same
     slots as Taichi's own launch: each call is compared with Taichi's path on the same inputs.
-    (A pack holding an ndarray beside a nested pack read the nested pack's array in place of
+    (A pack holding an ndarray beside a nested pack reads the nested pack's array in place of
     its own, on both paths: Taichi 1.7's layout; the solver's World holds packs only.)"""
     cached = CachedKernel(mixed)
 

@@ -136,8 +136,8 @@ def pressed_scene():
 
 
 def world_space(sim):
-    """The scene's Gaussians moved in world space the way SceneGaussians did before it kept
-    frames: pose_gaussians on links, objects and particles, then the layers."""
+    """The scene's Gaussians moved in world space without frames (the reference path):
+    pose_gaussians on links, objects and particles, then the layers."""
     scene = sim._scene
     x, F = sim.particles()
     link_poses = torch.as_tensor(np.array([sim._link_pose[n] for n in scene.hand_links]
@@ -281,7 +281,7 @@ def test_closed_links_skip_the_hand_faces_turned_away(pressed_scene):
     hides the far one), with fewer (Gaussian, tile) keys. Only the hand's Gaussians are
     one-sided, and not on the links that carry a pad (their surface is open where the pad
     replaces it): the ball's, the pads' and the layer's are always drawn. Whether the outlines
-    get closer to SAPIEN's is measured by ``bench look`` (BENCHMARKS.md, issue 13)."""
+    get closer to SAPIEN's is measured by ``bench look``."""
     from gausstac_maniskill.agents.base import load_hand_closed_links
     from gausstac_maniskill.demo import ASSET_DIR
     from gausstac_maniskill.render import SceneGaussians
@@ -315,7 +315,7 @@ def test_closed_links_skip_the_hand_faces_turned_away(pressed_scene):
 
 
 def test_hand_levels_of_detail_are_checked(pressed_scene):
-    """A ``hand_lod`` in the old three-item form, or with levels out of order, is a ConfigError
+    """A ``hand_lod`` in a three-item form, or with levels out of order, is a ConfigError
     that says the expected form (not a TypeError from inside the scene)."""
     from gausstac_maniskill.agents.base import load_hand_gaussians, load_hand_lod
     from gausstac_maniskill.demo import ASSET_DIR

@@ -11,7 +11,7 @@ stiffness factored lattice plane by lattice plane (:meth:`~.contact.QuasiStaticB
 dense BLAS 3 on every core). At the index pad's 0.5 mm elements (S = 1994 points, 46 743
 unknowns) that is about 11 s on 2 cores, where SuperLU's column-by-column solves in two worker
 processes took 114 s on the same host. :func:`surface_compliance` shows a progress bar and stores E·W in float32 (36 S²
-bytes: 143 MB for that pad) under :func:`cache_dir`, keyed by the body's elements, bond, points
+bytes: 143 MB for that pad) in :func:`cache_dir`, keyed by the body's elements, bond, points
 and ν: later runs, and other pads of the same shape, load it in a fraction of a second. The cache
 holds derived data only: a file that cannot be read is computed again (with a warning naming
 it), never trusted.
@@ -23,44 +23,26 @@ W with its maps' M take 13–15 s instead of 28–30 s in two sweeps.
 """
 from __future__ import annotations
 
-import hashlib
 import os
-import warnings
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from ..cache import COMPLIANCES, array_digest, cached_array, folder, load_array, store_array
 from ..errors import ConfigError
 
-__all__ = ["cache_dir", "array_digest", "cached_array", "compliance_key", "surface_compliance", "readout_responses",
-           "estimated_bytes"]
+__all__ = ["cache_dir", "compliance_key", "surface_compliance", "readout_responses", "estimated_bytes"]
 
 #: Bump when the stored layout or the way W is computed changes: old files are then ignored.
-#: (The plane-by-plane factor computes the same W as the column solves before it, to rounding.)
+#: (The plane-by-plane factor and the column-by-column solves give the same W, to rounding.)
 FORMAT = 1
 
 
 def cache_dir() -> Path | None:
-    """Where computed compliances are kept: ``$GAUSSTAC_CACHE_DIR`` if set (``off``: nowhere,
-    compute each time), else ``$XDG_CACHE_HOME/gausstac_maniskill`` (``~/.cache/gausstac_maniskill``)."""
-    env = os.environ.get("GAUSSTAC_CACHE_DIR")
-    if env is not None:
-        return None if env.strip().lower() in ("off", "0", "") else Path(env).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "gausstac_maniskill"
-
-
-def array_digest(arrays, extra: str = "") -> str:
-    """Hex SHA-256 of ``arrays`` (each with its dtype and shape, C order) and then ``extra``:
-    the key of what is computed from them (kept on disk or in this process)."""
-    h = hashlib.sha256()
-    for a in arrays:
-        a = np.ascontiguousarray(a)
-        h.update(str((a.dtype.str, a.shape)).encode())
-        h.update(a.tobytes())
-    h.update(extra.encode())
-    return h.hexdigest()
+    """The folder computed compliances and readout responses are kept in (``compliances/`` of
+    :mod:`gausstac_maniskill.cache`); None where the cache is off."""
+    return folder(COMPLIANCES)
 
 
 def compliance_key(body) -> str:
@@ -90,14 +72,14 @@ def surface_compliance(body, progress: bool = True, cache: bool = True, readouts
     """
     S = body.num_points
     stem = f"compliance-{compliance_key(body)}"
-    scaled = _load(body.name, stem, (3 * S, 3 * S), cache)
+    scaled = load_array(COMPLIANCES, body.name, stem, (3 * S, 3 * S), cache)
     if scaled is None:
         wanted = {}  # stem: the load set Aᵀ of each response computed alongside
         for A in (readouts() if callable(readouts) else readouts):
             A, rstem = _readout(body, A)
             if rstem in wanted or ("response", rstem) in body.derived:
                 continue
-            on_disk = _load(body.name, rstem, (A.shape[0], 3 * S), cache)
+            on_disk = load_array(COMPLIANCES, body.name, rstem, (A.shape[0], 3 * S), cache)
             if on_disk is not None:  # kept for readout_responses: the file is not read twice
                 body.derived[("response", rstem)] = on_disk
             else:
@@ -112,9 +94,9 @@ def surface_compliance(body, progress: bool = True, cache: bool = True, readouts
         for (rstem, _), M in zip(wanted.items(), results[1:]):
             body.derived[("response", rstem)] = M
             if cache:
-                _store_cached(M, rstem, body.name)
+                store_array(COMPLIANCES, M, rstem, body.name)
         if cache:
-            _store_cached(scaled, stem, body.name)
+            store_array(COMPLIANCES, scaled, stem, body.name)
     scaled /= np.float32(body.E)
     return scaled
 
@@ -148,64 +130,12 @@ def readout_responses(body, A, progress: bool = True, cache: bool = True, what: 
         return _products(body, [body.dofs_to_free(A), body.point_loads(np.arange(S))], [(0, 1)], [1.0], progress,
                          f"{body.name}: response of {R} {what}{_once(cache)}")[0]
 
-    return cached_array(body.name, stem, (R, 3 * S), compute, cache)
+    return cached_array(COMPLIANCES, body.name, stem, (R, 3 * S), compute, cache)
 
 
 def _once(cache: bool) -> str:
     """The progress bar's note on whether the result will be kept on disk."""
     return " (once; cached)" if cache and cache_dir() is not None else ""
-
-
-def cached_array(name: str, stem: str, shape: tuple, compute, cache: bool = True) -> np.ndarray:
-    """The float32 array ``shape`` kept under :func:`cache_dir` as ``stem``.npy, or ``compute()``
-    (then kept there). A file that cannot be used is computed again, with a warning naming it
-    (and ``name``, what it belongs to)."""
-    out = _load(name, stem, shape, cache)
-    if out is None:
-        out = compute()
-        if cache:
-            _store_cached(out, stem, name)
-    return out
-
-
-def _load(name: str, stem: str, shape: tuple, cache: bool = True) -> np.ndarray | None:
-    """The float32 array ``shape`` kept under :func:`cache_dir` as ``stem``.npy; None where there
-    is none (or ``cache`` is off), or where it cannot be used (with a warning naming it and
-    ``name``)."""
-    folder = cache_dir() if cache else None
-    path = None if folder is None else folder / f"{stem}.npy"
-    if path is not None and path.exists():
-        try:
-            out = np.load(path, allow_pickle=False)
-            if out.shape != shape or out.dtype != np.float32 or not np.isfinite(out).all():
-                raise ValueError(f"holds {out.dtype} {out.shape}, expected float32 {shape} finite")
-            return out
-        except (OSError, ValueError) as err:
-            warnings.warn(f"{name}: the cached {path} cannot be used ({err}); computing it again",
-                          stacklevel=4)
-    return None
-
-
-def _store_cached(out: np.ndarray, stem: str, name: str) -> None:
-    """Keep ``out`` under :func:`cache_dir` as ``stem``.npy (nothing where the cache is off)."""
-    folder = cache_dir()
-    if folder is not None:
-        _store(out, folder / f"{stem}.npy", name)
-
-
-def _store(scaled: np.ndarray, path: Path, name: str) -> None:
-    """Write ``scaled`` to ``path`` atomically (a partial file is never seen); a failure to
-    write only warns (the result is in memory)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as fh:
-            np.save(fh, scaled, allow_pickle=False)
-        os.replace(tmp, path)
-    except OSError as err:
-        warnings.warn(f"{name}: could not keep {path} ({err}); it will be computed again next time",
-                      stacklevel=5)
-        tmp.unlink(missing_ok=True)
 
 
 #: Memory [bytes] per entry of Pᵀ K⁻¹ Q that computing it takes at its peak: the float32 result

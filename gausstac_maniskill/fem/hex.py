@@ -141,7 +141,7 @@ def _split_stiffness(size: float, E: float, nu: float, n: int) -> tuple[np.ndarr
     """The two parts of a cube's stiffness [N/m], each [.., 576] (a flattened 24 × 24):
     ``dev`` [n³, 576], the deviatoric part of each of its n × n × n sub-cells (the order of
     :func:`subcell_points`), integrated exactly on the sub-cell's 2×2×2 Gauss points; ``vol``
-    [576], the volumetric part of the whole cube, at its centre. Cached (11 ms each; every
+    [576], the volumetric part of the whole cube, at its centre. Cached (every
     :func:`stiffness` of a body of that size and material needs it): read-only arrays."""
     mu, bulk = _moduli(E, nu)
     m = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
@@ -199,8 +199,8 @@ def dissection_order(nodes: np.ndarray, leaf: int = 64) -> np.ndarray:
     split by the lattice plane through the median of their longest extent, each side is
     ordered the same way, and the plane's nodes come last. A Q1 element couples only nodes
     one lattice step apart, so the plane separates the two sides and the factor fills in
-    only within the planes (George 1973). On the product pad at 0.5 mm elements it
-    factors 8× faster than SuperLU's minimum-degree order, with 2/3 of its fill."""
+    only within the planes (George 1973). On the product pad at 0.5 mm elements it has 2/3
+    of the fill of SuperLU's minimum-degree order, and factors faster."""
     nodes = np.asarray(nodes, np.int64)
     order: list[np.ndarray] = []
     stack: list[tuple[np.ndarray, bool]] = [(np.arange(len(nodes)), False)]
@@ -236,9 +236,9 @@ def _det3(F: np.ndarray) -> np.ndarray:
 
 #: cut cubes with less than this share of material stay linear under finite strain. In a cube
 #: that is mostly empty, the nodes across the empty part are held only by the material's small
-#: shape-function gradients at the far side: the finite-strain forces there drove them metres
-#: away (the plate's 1 mm press at 1 mm elements stalled in 1200 iterations with every cut cube
-#: finite; converged with those under half full kept linear, 11.147 N)
+#: shape-function gradients at the far side: the finite-strain forces there drive them metres
+#: away (the plate's 1 mm press at 1 mm elements stalls with every cut cube finite, and
+#: converges with those under half full kept linear)
 CUT_FINITE_SHARE = 0.5
 
 
@@ -269,7 +269,7 @@ def neo_hookean_remainder(body: VoxelBody, u: np.ndarray, E: float, nu: float, p
     less full stay linear: they only keep the mesh regular, and under finite strain they
     invert or run away where the surface moves far (the finite cell method's known weakness
     at large strain). Evaluated by a Taichi kernel (:mod:`.neo_hookean`); ``points``: the
-    body's :func:`strain_points`, when the caller keeps them (else built here, a few ms).
+    body's :func:`strain_points`, when the caller keeps them (else built here).
 
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point of its material).

@@ -3,10 +3,10 @@
 A linear pad's tactile maps (:func:`~gausstac_maniskill.tactile.extract.tactile_maps`: depth,
 shear and pressure per taxel) are linear in its nodal displacements u, and u = K⁻¹ Nᵀ f is
 linear in the contact forces f at its surface points. So the maps are r = M f, with
-M = A K⁻¹ Nᵀ [4T, 3S] (T taxels, S surface points; A the readout of the maps from u). Since K
+M = A K⁻¹ Nᵀ [4T, 3S] (T taxels, S surface points; A the readout of the maps from u). As K
 is symmetric, M = (N K⁻¹ Aᵀ)ᵀ: 4T solves once per pad shape (1024 for a 16 × 16 layout),
-instead of one solve of the whole body (40 ms at the default resolution) at every step. A
-step's maps then cost a product on the loaded points' columns only.
+instead of one solve of the whole body at every step. A step's maps then cost a product on
+the loaded points' columns only.
 
 :func:`map_readout` builds A from the same definitions as ``tactile_maps``: a particle's
 displacement is the mean of its element's eight nodes, its stress the element's at its centre
@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tactile.extract import map_tensors
-from .contact import _xyz_rows
+from .signorini import _xyz_rows
 from .hex import _gauss_gradients, _moduli
 
 __all__ = ["map_readout", "PadMaps"]

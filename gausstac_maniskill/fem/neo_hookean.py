@@ -14,17 +14,13 @@ Which points an element integrates on (:class:`StrainPoints`, built once per bod
 * a whole cube: its 2×2×2 Gauss points (where the stiffness's deviatoric part is integrated),
   each weighing an eighth of the cube;
 * a cut cube at least :data:`~.hex.CUT_FINITE_SHARE` full: the same points, each weighing the
-  material of its octant (the fill of the sub-cells there). Its material sub-cells' 64 centres
-  gave the same forces to 0.03 % and took up to twice the iterations under the plate
-  (BENCHMARKS.md, "eleventh session");
+  material of its octant (the fill of the sub-cells there; its material sub-cells' 64 centres
+  give the same forces to 0.03 % for up to twice the iterations);
 * any other cube: none (it stays linear, :func:`~.hex.neo_hookean_remainder`).
 
-The kernel replaced a NumPy evaluation of the same sums (197 ms for the index pad's 14 005
-elements at 0.5 mm: its [E, 8, 3, 3] temporaries were memory-bound; 16 ms in the kernel;
-BENCHMARKS.md, "ninth session"). One thread per element writes its own nodal forces; their sums
-on the nodes are taken on the host in a fixed order, so a run repeats to the bit. Where Taichi
-runs on CUDA the same sums run in torch on the GPU (:func:`remainder_forces_torch`): the kernel
-aborts there (:func:`_remainder`).
+One thread per element writes its own nodal forces; their sums on the nodes are taken on the
+host in a fixed order, so a run repeats to the bit. Where Taichi runs on CUDA the same sums run
+in torch on the GPU (:func:`remainder_forces_torch`): the kernel aborts there (:func:`_remainder`).
 """
 
 from dataclasses import dataclass
@@ -34,7 +30,7 @@ import taichi as ti
 import torch
 
 from .. import backend
-from ..mpm.kernels import NDI, NDI2
+from ..kernel_launch import NDI, NDI2
 
 __all__ = ["StrainPoints", "strain_points", "remainder_forces", "remainder_forces_torch"]
 
@@ -101,12 +97,11 @@ def _remainder(element_nodes: NDI2, rule: NDI, weight: _F64_2, centre_weight: _F
     u [V, 3] [m] (module docstring); inverted[0] = 1 where J ≤ 0 at a point that counts.
 
     The loops over an element's 8 points, corners and axes are all unrolled (``ti.static``): the
-    body is straight-line code. At ``opt_level=0`` (GAUSSTAC_COMPILE=fast) Taichi 1.7.4 on the CPU
-    lost repeated additions to one entry inside a run-time loop nested in the parallel one
-    (BENCHMARKS.md, "eleventh session"). On Taichi's CUDA (H100, H200) this kernel aborts with a
-    misaligned address in each form tried: a run-time loop over the points summing a local 8×3
-    matrix, the same loop adding to ``out``, and this unrolled one (BENCHMARKS.md, "twelfth
-    session"); :func:`remainder_forces` takes torch there.
+    body is straight-line code, because at ``opt_level=0`` (GAUSSTAC_COMPILE=fast) Taichi 1.7.4 on
+    the CPU loses repeated additions to one entry inside a run-time loop nested in the parallel
+    one. On Taichi's CUDA (H100, H200) this kernel aborts with a misaligned address in each of
+    these forms: a run-time loop over the points summing a local 8×3 matrix, the same loop adding
+    to ``out``, and this unrolled one; :func:`remainder_forces` takes torch there.
     """
     mu, bulk = moduli[0], moduli[1]
     eye = ti.Matrix.identity(ti.f64, 3)
@@ -164,8 +159,8 @@ def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float
     """[V, 3] remainder forces [N] (module docstring) for node displacements ``u`` [V, 3] [m],
     shear and bulk moduli ``mu``, ``bulk`` [Pa]: the Taichi kernel where Taichi runs on the CPU;
     where it runs on CUDA, the same sums in torch on the GPU (:func:`remainder_forces_torch`),
-    because the kernel aborts there with a misaligned address (Taichi 1.7.4, H100 and H200, in
-    every form tried: :func:`_remainder`'s docstring).
+    because the kernel aborts there with a misaligned address (Taichi 1.7.4, H100 and H200:
+    :func:`_remainder`'s docstring).
 
     Raises:
         FloatingPointError: an element is inverted (J ≤ 0 at a point that counts).
@@ -187,8 +182,8 @@ def remainder_forces(points: StrainPoints, u: np.ndarray, mu: float, bulk: float
 def remainder_forces_torch(points: StrainPoints, u: np.ndarray, mu: float, bulk: float,
                            device: str = "cpu") -> np.ndarray:
     """:func:`remainder_forces` in torch (float64) on ``device``; the nodal sums are taken on the
-    host, in the kernel's fixed order. On 2 CPU cores its [E, 8, 3, 3] temporaries make it
-    about 10× slower than the kernel."""
+    host, in the kernel's fixed order. On the CPU its memory-bound [E, 8, 3, 3] temporaries make
+    it much slower than the kernel."""
     sel = np.flatnonzero(points.rule == GAUSS)
     fe = np.zeros((len(points.rule), 3, 8))
     if len(sel):

@@ -5,7 +5,7 @@
   point ``depth`` along ``normal`` from each outermost particle, as
   ``GaussTacSim(pad_surface="mesh")``). By default the cubes are cut by the layer's curved
   surface and bond (:func:`pad_cells`); ``cells="voxel"``: one whole cube per soft particle,
-  bonded where it meets the kinematic particles (a staircase, the body before 2026-11-27).
+  bonded where it meets the kinematic particles (a staircase).
 * :func:`layer_body`: a flat layer of thickness h bonded to a rigid base (a quarter, with
   symmetry planes x = 0 and y = 0, or the whole layer), touched at its top face.
 """
@@ -37,7 +37,7 @@ def pad_body(pad, E: float | None = None, nu: float | None = None, model: str = 
             spacing ``pad.spacing``, as :func:`~gausstac_maniskill.tactile.pad.build_pad` makes).
         E, nu: Young's modulus [Pa] and Poisson's ratio (default: the pad's material).
         model: ``"linear"`` or ``"neo_hookean"`` (:class:`QuasiStaticBody`).
-        cells: ``"cut"`` (default, :func:`pad_cells`; for both models since finite strain
+        cells: ``"cut"`` (default, :func:`pad_cells`; for both models, as finite strain
             keeps its cut cubes' empty parts linear, :func:`~.hex.neo_hookean_remainder`) or
             ``"voxel"`` (a whole cube per soft particle: the layer's curved surface and bond as
             staircases).
@@ -103,8 +103,8 @@ def pad_cells(pad):
     at :data:`SUBCELLS`³ sub-cell centres: 1 in the layer, :data:`EMPTY_STIFFNESS` outside it
     (the fill of :class:`~.hex.VoxelBody`). The bond holds the nodes deeper than half an edge
     above it: the nearest plane of nodes, not a stiff base inside the cut cubes, whose trilinear
-    field cannot bend at the bond and would lock their soft part (tried: the layer then read
-    stiffer where the bond cuts the cubes, 0.75 mm elements 8 % above 1 mm ones). At the rim,
+    field cannot bend at the bond and would lock their soft part (the layer would read stiffer
+    where the bond cuts the cubes, 0.75 mm elements 8 % above 1 mm ones). At the rim,
     where the pad's cone ends the layer, the cubes stay whole (a staircase there, away from
     where the pad is pressed).
     """
@@ -231,14 +231,14 @@ def layer_body(h: float, half_width: float, size: float, E: float, nu: float, mo
 
 
 def collider_indenter(collider, link_pose=None) -> "Indenter":
-    """An MPM :class:`~gausstac_maniskill.mpm.colliders.Collider` (any shape, its ``pose`` in
+    """A :class:`~gausstac_maniskill.geometry.Collider` (any shape, its ``pose`` in
     the world) as the :class:`~.contact.Indenter` a pad on a link at ``link_pose`` (4x4, world;
     default identity) sees: its signed distance in its own frame (the same Taichi code the MPM
     uses), its pose in the link frame, its friction."""
     import dataclasses
 
-    from ..mpm.colliders import signed_distance
-    from .contact import Indenter
+    from ..geometry.colliders import signed_distance
+    from .indenters import Indenter
 
     local = dataclasses.replace(collider, pose=np.eye(4))
 

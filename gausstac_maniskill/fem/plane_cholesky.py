@@ -19,13 +19,8 @@ those begun by then (on average half of them).
 The planes before the middle one are swept from the first, those after it from the last, and
 the middle plane comes last (a twisted factorization): a column meets only the planes between
 its own and the middle, and each half's product is a quarter of the whole.
-
-On 2 cores this computes the index pad's compliance among its 1 994 surface points (5 982 load
-columns, 46 743 unknowns) in 17–20 s, where SuperLU's column-by-column solves in two worker
-processes took 114 s, and its maps' response (1 024 readouts) in 15 s instead of 26
-(BENCHMARKS.md, eighteenth session). :func:`inverse_products` takes both in one sweep, which
-factors K and forward-substitutes the point loads once: 13–15 s for both, with each plane's factor on
-one BLAS thread (twenty-first session).
+:func:`inverse_products` takes several products in one sweep, which factors K and
+forward-substitutes each load set once (a pad's compliance and its maps' response together).
 """
 from __future__ import annotations
 
@@ -80,7 +75,7 @@ class _Loads:
     def advance(self, i: int, rows: np.ndarray, L_inv: np.ndarray, G: np.ndarray | None) -> np.ndarray:
         """Y_i = L_ii⁻¹ M_i − G Y_i−1 on the columns begun by plane i (``rows``), where ``L_inv`` is
         L_ii⁻¹ and ``G`` is L_ii⁻¹ L_i,i−1 (None for the first plane): one dense product, and one
-        with the sparse loads (a triangular solve runs at a third of a product's speed)."""
+        with the sparse loads (a triangular solve is slower than a product)."""
         c = int(self.begun[i])
         Y = (self.rows[rows][:, :c].T @ L_inv.T).T  # (Fortran order: BLAS takes it as it is)
         last = self.Y.shape[1]
@@ -102,8 +97,8 @@ def _chol(A: np.ndarray, name: str, where: str) -> np.ndarray:
     positive definite.
 
     On one BLAS thread: OpenBLAS's threaded factorization of these ~1 100-unknown planes, right
-    after the sweep's threaded products, took 2.6 s for the index pad's 45 planes, one thread
-    0.84 s (twenty-first session; scipy.linalg.cholesky, which also copies, 2.6–3.1 s)."""
+    after the sweep's threaded products, is slower than one thread (and scipy.linalg.cholesky
+    also copies)."""
     import scipy.linalg as la
 
     from ..backend import blas_threads
@@ -140,7 +135,7 @@ SYMMETRIC_BLOCK = 512
 
 def _add_product(out: np.ndarray, Yp: np.ndarray, Yq: np.ndarray, upper: bool = False) -> None:
     """out += Ypᵀ Yq, by blocks of :data:`PRODUCT_BLOCK` columns of Yq. NumPy hands Yᵀ Y on one
-    buffer to BLAS's dsyrk, which crashed (segmentation fault) beyond 16 384 columns here (NumPy
+    buffer to BLAS's dsyrk, which crashes (segmentation fault) beyond 16 384 columns (NumPy
     2.4.6, OpenBLAS 0.3.31: 1 200 × 16 500 crashes, × 14 000 does not); the blocks stay far below
     that, and keep the product's temporary small.
 

@@ -25,9 +25,11 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..cache import array_digest
 from ..errors import ConfigError, CostWarning, SimulationWarning
-from .compliance import array_digest, estimated_bytes
-from .contact import ContactResult, Indenters
+from .compliance import estimated_bytes
+from .contact import ContactResult
+from .indenters import Indenters
 from .hex import centre_state
 from .pad import collider_indenter, pad_body, pad_elements
 
@@ -39,8 +41,8 @@ __all__ = ["EquilibriumPad", "PRECOMPUTE_BYTES", "forget_bodies"]
 PRECOMPUTE_BYTES = 256 * 2 ** 20
 #: Bodies kept in this process (the most recently used), by pad geometry, material and model: a
 #: scene rebuilt at every reset (a task's) finds its pads' factors and compliances again instead
-#: of assembling them anew (1 s per pad at the default resolution). Each holds its compliance
-#: (143 MB at the default resolution), its maps' responses (25 MB) and, once something needs a
+#: of assembling them anew. Each holds its compliance (143 MB at the default resolution), its
+#: maps' responses (25 MB) and, once something needs a
 #: solve of the whole body (the camera drawing the pad deformed, the finite-strain model, the
 #: columns of a pad solved point by point), its factor (~0.5 GB). :func:`forget_bodies` lets them go.
 BODY_CACHE = 4
@@ -92,14 +94,13 @@ class EquilibriumPad:
         model: ``"linear"`` (small strain; one factored solve per new contact point, then
             dense algebra on the contact points) or ``"neo_hookean"`` (finite strain, fixed-point
             iterations on the linear factor: accurate at the pad's tens of per cent strain,
-            seconds per step at 0.5 mm elements). See :class:`~.contact.QuasiStaticBody`.
+            much slower per step). See :class:`~.contact.QuasiStaticBody`.
         geometry: where a ``"linear"`` body reads the contact conditions, ``"deformed"``
             (default: at the displaced surface, as the MPM does) or ``"rest"``.
         precompute: compute the body's compliance among all its surface points when the body
             is built (:meth:`~.contact.QuasiStaticBody.precompute_compliance`, with a linear
-            pad's maps' response in the same sweep: about 15 s on 2 cores for the index pad at
-            the default resolution, the first time on a machine, then read from the disk cache
-            in 0.1 s), so that a press or a slide costs no sparse
+            pad's maps' response in the same sweep, the first time on a machine, then read from
+            the disk cache), so that a press or a slide costs no sparse
             solve; or (False) solve each point's column when it first comes into contact.
             Default (None): precompute when that compliance takes at most
             :data:`PRECOMPUTE_BYTES` of memory.
@@ -167,7 +168,7 @@ class EquilibriumPad:
 
     def _default_readouts(self, body):
         """A callable giving [the map readout of the pad's default binning] on ``body``
-        (:func:`~.maps.map_readout`; 0.1 s for the index pad, so built only when asked for)."""
+        (:func:`~.maps.map_readout`; built only when asked for)."""
         def readouts():
             from ..tactile.extract import TaxelBinning
             from .maps import map_readout
@@ -252,7 +253,7 @@ class EquilibriumPad:
         return 1e-4 * self.pad.spacing
 
     def _relative_motion(self, pose: dict) -> float:
-        """[m] how far the colliders' motion since the last solve (``pose``: {key: its frame in
+        """[m] how far the colliders' motion from the last solve to now (``pose``: {key: its frame in
         the link frame now}) moves the pad's surface points, at most (inf without a last solve
         or with other colliders)."""
         if self._pose is None or set(self._pose) != set(pose):
@@ -272,7 +273,7 @@ class EquilibriumPad:
     def shape(self) -> tuple[int, int]:
         """(S, V): the body's surface points and nodes, from the pad alone (no assembly)."""
         key = _body_key(self.pad, self.model)
-        if key not in _NODES:  # the same pad in every env of a batch: its cells once (0.3 s)
+        if key not in _NODES:  # the same pad in every env of a batch: its cells once
             _NODES[key] = len(pad_elements(self.pad, "cut")[0].nodes)
         return int(self.pad.surface[self.soft].sum()), _NODES[key]
 
@@ -336,7 +337,7 @@ class EquilibriumPad:
 
         self.release()
         self._surface = (None, None, None, 0.0)
-        if "surface_has" in state:  # (states saved before soft objects met these pads: none)
+        if "surface_has" in state:  # (a state without the soft-object coupling: none)
             has = np.asarray(state["surface_has"], bool)
             self._surface = tuple(np.array(state[key], np.float64) if h else None
                                   for key, h in zip(_SURFACE_KEYS, has)) + (float(first("surface_kappa")),)
@@ -363,7 +364,7 @@ class EquilibriumPad:
             np.array(state["gap"], np.float64), int(counts[0]), int(counts[1]),
             nodes=np.array(state["nodes"], np.float64) if first("has_nodes") else None,
             residual=float(first("residual")),
-            # (states saved before it existed: the cut cubes finite)
+            # (a state without it: the cut cubes finite)
             cut_cells_linear=bool(first("cut_cells_linear")) if "cut_cells_linear" in state else False,
             load=np.array(state["load"], np.float64) if "load" in state and np.any(state["load"]) else None,
             state=np.array(state["contact_state"], np.int64),

@@ -8,8 +8,8 @@ from .deform import (FramedGaussians, PosedGaussians, SoftBinding, particle_fram
                      polar_rotation, pose_gaussians, rigid_frames, rigid_transform, soft_deform)
 from .capture import Similarity, load_capture, transform_gaussians
 from .lighting import MANISKILL_DEFAULT, Lighting, surface_normals
-from .rasterizer import (RenderOutput, intrinsics_from_fov, look_at, rasterize, render,
-                         sapien_pose_to_opencv_extrinsic)
+from .cameras import intrinsics_from_fov, look_at, sapien_pose_to_opencv_extrinsic
+from .rasterizer import RenderOutput, rasterize, render
 
 __all__ = [
     "GaussianSet", "load_ply", "save_ply", "SH_C0", "rgb_to_sh_dc", "sh_dc_to_rgb",

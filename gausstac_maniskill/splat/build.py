@@ -1,35 +1,18 @@
 """Hand Gaussians assets: built from a URDF's visual meshes, or aligned from a scan.
 
-An asset is a folder with
+An asset is a folder with ``gaussians.ply`` (an INRIA 3DGS file, :mod:`.gaussians`, whose
+Gaussians lie in the local frames of their links, posed at run time by
+:func:`~gausstac_maniskill.splat.deform.rigid_transform`; extra integer properties
+``link_id``, an index into ``link_names``, and ``group``, -1 rigid or k >= 0 inside pad
+region k) and ``links.json`` (link names in ``link_id`` order, the source URDF, Gaussians per
+link, the spacing, pad names in ``group`` order and, for URDF builds, the ``closed_links``
+whose meshes bound solids with outward normals, :func:`.surface.closed_outward`).
 
-* ``gaussians.ply`` — an INRIA 3DGS file (see :mod:`.gaussians`) whose Gaussians
-  are stored in the **local frames of their links** (posed at run time by
-  :func:`~gausstac_maniskill.splat.deform.rigid_transform`), with the extra
-  integer properties ``link_id`` (index into ``links.json``'s ``link_names``) and
-  ``group`` (-1 rigid, ``k >= 0`` inside pad region ``k``);
-* ``links.json`` — link names in ``link_id`` order, the source URDF, Gaussians
-  per link, the spacing used, pad names in ``group`` order, and (URDF builds) the
-  ``closed_links`` whose meshes bound solids with outward normals
-  (:func:`.surface.closed_outward`): their Gaussians' local z is the outward normal, so
-  the splat camera may skip those facing away.
-
-Two ways to build one:
-
-1. :func:`build_from_urdf` samples each link's visual surface (meshes or
-   box/cylinder/sphere primitives) with blue-noise samples at density
-   ``1 / spacing²`` and puts one flat Gaussian on every sample (splat shape:
-   :mod:`.surface`).
-2. :func:`build_from_scan` aligns a point cloud or Gaussian scene in an
-   arbitrary frame to the URDF hand at a reference pose (:mod:`.align`:
-   centroids + principal axes matched in every proper order/sign flip, then
-   trimmed ICP, lowest residual wins), gives every point the link of the nearest
-   posed link surface and moves it into that link's frame (means, rotations and
-   SH, :mod:`.sh`).
-
-The URDF is read by :mod:`gausstac_maniskill.urdf` (mesh path rule there).
-
-Units: metres throughout. The URDF root link is the world frame of the
-reference pose.
+:func:`build_from_urdf` puts one flat Gaussian on every blue-noise sample of each link's
+visual surface (:mod:`.surface`). :func:`build_from_scan` aligns a point cloud or Gaussian
+scene to the URDF hand at a reference pose (:mod:`.align`), gives every point the link of the
+nearest posed link surface and moves it into that link's frame (means, rotations, SH).
+Units: metres; the URDF root link is the world frame of the reference pose.
 """
 from __future__ import annotations
 

@@ -2,26 +2,12 @@
 
 A capture (a scene trained with gsplat, nerfstudio or the INRIA code and exported as an
 INRIA ``.ply``, any SH degree 0..3) lives in its reconstruction's own frame: arbitrary
-scale, orientation and origin. A :class:`Similarity` ``(s, q, t)`` places it,
-``x_world = s R(q) x + t``, and changes each Gaussian as follows:
-
-=================  ====================================================================
-mean               μ' = s R μ + t                                   (metres)
-rotation           q' = q ⊗ q_g, so Σ' = s² R Σ Rᵀ
-log-scales         log σ' = log σ + log s
-SH coefficients    c' = ``rotate_sh(c, Rᵀ)``: the colour seen along a world direction
-                   d' is the capture's colour along Rᵀ d' (its own frame)
-opacity, labels    unchanged
-=================  ====================================================================
-
-Quaternions are (w, x, y, z), the project's one convention (:mod:`gausstac_maniskill.transforms`).
-
-:func:`load_capture` reads the file with the project's one reader
-(:func:`~gausstac_maniskill.splat.gaussians.load_ply`: a missing property, a NaN or a
-truncated file is an ``AssetError`` naming the file and the property), refuses more than
-``max_gaussians`` Gaussians, places it, and warns (:class:`~gausstac_maniskill.errors.AssetWarning`,
-naming the file, the field and a fix) when it looks mis-scaled or too large to render
-quickly on a CPU.
+scale, orientation and origin. A :class:`Similarity` ``x_world = s R(q) x + t`` places it
+(:func:`transform_gaussians`). :func:`load_capture` reads the file
+(:func:`~gausstac_maniskill.splat.gaussians.load_ply`: ``AssetError`` naming the file and
+the property), refuses more than ``max_gaussians`` Gaussians, places it, and warns
+(:class:`~gausstac_maniskill.errors.AssetWarning`, naming the file, the field and a fix) when
+it looks mis-scaled or too large to render quickly on a CPU. Quaternions are (w, x, y, z).
 """
 from __future__ import annotations
 
@@ -154,7 +140,16 @@ class Similarity:
 
 
 def transform_gaussians(gaussians: GaussianSet, placement: Similarity) -> GaussianSet:
-    """Move a set by a similarity (the table in the module docstring).
+    """Move a set by a similarity ``x -> s R x + t``, each Gaussian as follows:
+
+    =================  ==============================================================
+    mean               μ' = s R μ + t                                     (metres)
+    rotation           q' = q ⊗ q_g, so Σ' = s² R Σ Rᵀ
+    log-scales         log σ' = log σ + log s
+    SH coefficients    c' = ``rotate_sh(c, Rᵀ)``: the colour seen along a world
+                       direction d' is the capture's colour along Rᵀ d'
+    opacity, labels    unchanged
+    =================  ==============================================================
 
     Args:
         gaussians: N Gaussians in the source frame (means [N, 3] in source units).

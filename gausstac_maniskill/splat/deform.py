@@ -1,31 +1,18 @@
 """Moving Gaussians with the simulation: rigid links and MPM particles (torch, vectorised).
 
-Two bindings, as in GaussTac:
+Both bindings pose a Gaussian by a *frame*, an affine map ``x -> M x + t`` with an SH
+rotation R: μ = M μ⁰ + t, Σ = M Σ⁰ Mᵀ, and the SH are evaluated at Rᵀ d.
 
-* **Rigid** — Gaussian g with ``link_id[g] = l`` is stored in link l's frame
-  (rest/link-local mean μ⁰ and rotation q⁰). With the link's world pose
-  ``T_l = [R_l | t_l]``: μ = R_l μ⁰ + t_l, q = q_l ⊗ q⁰ (so Σ = R_l Σ⁰ R_lᵀ),
-  and its SH frame turns with the link (view direction seen by the SH = R_lᵀ d).
-* **Soft** — Gaussian g is bound to one MPM particle p(g) (the particle nearest
-  to its rest mean, :meth:`SoftBinding.from_nearest`), with rest offset
-  o_g = μ⁰_g − X_p (X_p the particle's rest position). With the particle's
-  current position x_p and deformation gradient F_p::
+* **Rigid** — Gaussian g with ``link_id[g] = l`` is stored in link l's frame (rest mean μ⁰,
+  rotation q⁰); its frame is the link's world pose: M = R = R_l, t = t_l (q = q_l ⊗ q⁰).
+* **Soft** — Gaussian g is bound to one MPM particle p (:meth:`SoftBinding.from_nearest`),
+  with the rest offset o_g = μ⁰_g − X_p as its local mean; its frame is M = F_p (the
+  deformation gradient), t = x_p, R = polar(F_p): μ_g = x_p + F_p o_g, Σ_g = F_p Σ⁰_g F_pᵀ.
 
-      μ_g = x_p + F_p o_g          (first-order deformation of the offset)
-      Σ_g = F_p Σ⁰_g F_pᵀ          (the ellipsoid is pushed forward by F)
-      SH evaluated at R(F_p)ᵀ d    (R = polar rotation of F_p, det R = +1)
-
-The result of :func:`pose_gaussians` is a :class:`PosedGaussians` with full
-world covariances, rendered by :func:`~gausstac_maniskill.splat.rasterizer.rasterize`
-through its ``covars`` and ``sh_rotations`` arguments.
-
-Both bindings are the same operation on a *frame*, an affine map ``x -> M x + t``
-with an SH rotation R: a link is (M = R_l, t = t_l, R = R_l), a particle is
-(M = F_p, t = x_p, R = polar(F_p)) with the rest offset o_g as the local mean and Σ⁰_g
-as the local covariance. :class:`FramedGaussians` keeps a scene's Gaussians in their
-frames once and for all and lets the rasterizer's projection kernel pose them: per
-picture only the [F, 3, 4] frames change, nothing per Gaussian is rebuilt or copied.
-Lit Gaussians also keep a normal in their frame, moved by cof(M) in the kernel
+:func:`pose_gaussians` gives world-space :class:`PosedGaussians` (full covariances, rendered
+through ``rasterize``'s ``covars`` and ``sh_rotations``); :class:`FramedGaussians` keeps the
+Gaussians in their frames and lets the rasterizer's projection kernel pose them, so a picture
+only needs the [F, 3, 4] frames. Lit Gaussians keep a normal in their frame, moved by cof(M)
 (:mod:`.lighting`).
 """
 from __future__ import annotations
@@ -321,7 +308,7 @@ class FramedGaussians:
             :mod:`~gausstac_maniskill.splat.lighting`.
         one_sided: [N] bool or None: Gaussians on closed surfaces whose ``normals`` point
             outward, culled when they face away from the camera (needs ``normals``; see
-            *Back faces* in :mod:`~gausstac_maniskill.splat.rasterizer`).
+            ``one_sided`` of :func:`~gausstac_maniskill.splat.rasterizer.rasterize`).
     """
 
     means: torch.Tensor
@@ -334,7 +321,7 @@ class FramedGaussians:
     one_sided: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
-        from .rasterizer import _gaussian_inputs
+        from .inputs import _gaussian_inputs
 
         self.n_frames = int(self.n_frames)
         self._inputs = _gaussian_inputs(self.means, None, None, self.opacities, self.sh, self.covars, None,
@@ -354,7 +341,7 @@ class FramedGaussians:
         closed surface (surfaces sampled from closed meshes, see
         :func:`~gausstac_maniskill.splat.surface.closed_outward`); culled when facing away."""
         from .lighting import surface_normals
-        from .rasterizer import _cov6
+        from .inputs import _cov6
 
         ids = gaussians.link_id if frame_ids is None else torch.as_tensor(frame_ids)
         if n_frames is None:
@@ -375,7 +362,7 @@ class FramedGaussians:
         them and the particle index of each frame ([F] int64, ascending; pose the frames with
         :func:`particle_frames` of those particles)."""
         from .lighting import surface_normals
-        from .rasterizer import _cov6
+        from .inputs import _cov6
 
         particles, frame = torch.unique(binding.particle_index, return_inverse=True)
         soft = gaussians[binding.gaussian_index]
@@ -423,7 +410,8 @@ class FramedGaussians:
         :class:`~gausstac_maniskill.splat.lighting.Lighting`, one per camera, or None) shades
         the Gaussians that have normals; the other arguments as in
         :func:`~gausstac_maniskill.splat.rasterizer.rasterize`. Returns its ``RenderOutput``."""
-        from .rasterizer import _frame_inputs, _rasterize, one_torch_thread
+        from .inputs import _frame_inputs
+        from .rasterizer import _rasterize, one_torch_thread
 
         with one_torch_thread():
             frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames,
@@ -434,7 +422,7 @@ class FramedGaussians:
     def posed(self, frames: torch.Tensor, frame_rotations: torch.Tensor | None = None) -> PosedGaussians:
         """The same Gaussians in world space (full covariances), e.g. to check a render or
         to hand them to other tools."""
-        from .rasterizer import _frame_inputs
+        from .inputs import _frame_inputs
 
         frames, frame_rotations = _frame_inputs(frames, frame_rotations, self.n_frames, self._inputs.means.device)
         f = self._inputs.frame_id.long()

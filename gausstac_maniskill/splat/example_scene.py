@@ -1,21 +1,16 @@
 """The example captured scene shipped with the package: a wooden table top in front of a
 tiled backdrop and a painted side wall, as a 3DGS capture would hand it over.
 
-It is made, not captured: three textured meshes (procedural wood, tile and paint textures)
-are sampled into flat Gaussians (:mod:`.surface`), and a degree-1 SH term gives the table a
-mild view-dependent sheen (so that placing it exercises the SH rotation). The set is then
-stored the way a reconstruction delivers one — in its own frame (y up, arbitrary units,
-origin at the table top's centre) — so it needs :data:`EXAMPLE_PLACEMENT` to sit under the
-hand of the GaussTac tasks (table top at z = -0.10 m, hand root at the origin)::
+It is made from three procedurally textured meshes sampled into flat Gaussians
+(:mod:`.surface`), with a degree-1 SH sheen on the table, and stored in its own frame (y up,
+arbitrary units, origin at the table top's centre), so it needs :data:`EXAMPLE_PLACEMENT` to
+sit under the hand of the GaussTac tasks (table top at z = -0.10 m)::
 
     from gausstac_maniskill.splat.example_scene import EXAMPLE_PLACEMENT, EXAMPLE_SCENE
     env = gym.make("GaussTac-PressCube-v1", scene_ply=EXAMPLE_SCENE, scene_pose=EXAMPLE_PLACEMENT)
 
-Regenerate it (deterministic; same bytes on the same platform)::
-
-    python -m gausstac_maniskill.splat.example_scene [OUT.ply]
-
-Units: metres in the world layout below; colours RGB in [0, 1].
+Regenerate it (deterministic): ``python -m gausstac_maniskill.splat.example_scene [OUT.ply]``.
+Units: metres in the world layout; colours RGB in [0, 1].
 """
 from __future__ import annotations
 

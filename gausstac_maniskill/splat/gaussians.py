@@ -1,41 +1,17 @@
-"""A set of 3D Gaussians and its INRIA-3DGS ``.ply`` file format.
+"""A set of 3D Gaussians (:class:`GaussianSet`) and its INRIA-3DGS ``.ply`` file format.
 
-The parameterisation is the one of Kerbl et al. (2023), "3D Gaussian Splatting
-for Real-Time Radiance Field Rendering", so that scenes trained with any 3DGS
-code load unchanged:
-
-========================  ===========  =========================================
-field                     shape        meaning
-========================  ===========  =========================================
-``means``                 [N, 3]       centres, metres (world, or link-local
-                                       rest frame for bound Gaussians)
-``quats``                 [N, 4]       unit quaternions (w, x, y, z): the
-                                       rotation R of each Gaussian's axes
-``log_scales``            [N, 3]       log of the standard deviations along the
-                                       three axes, log-metres
-``opacity_logits``        [N]          logit of the peak opacity o in (0, 1)
-``sh``                    [N, K, 3]    real spherical-harmonics colour
-                                       coefficients, K = (degree + 1)^2, degree
-                                       0..3; coefficient 0 is the DC term
-``link_id``               [N] int64    index of the rigid link a Gaussian
-                                       follows (0 if none)
-``group``                 [N] int64    free label (e.g. -1 rigid, >= 0 index of
-                                       a soft body); -1 by default
-========================  ===========  =========================================
-
-The 3D covariance is Σ = R S Sᵀ Rᵀ with S = diag(exp(log_scales)), in m².
-
-File layout (binary little endian, one ``vertex`` element, property order as
-written by the INRIA code)::
+The parameterisation is Kerbl et al.'s (2023), so that scenes trained with any 3DGS code
+load unchanged: means [N, 3] m, unit quaternions (w, x, y, z), log standard deviations
+(log-metres), opacity logits, SH colour [N, K, 3], K = (degree + 1)², degree 0..3; plus our
+``link_id`` and ``group`` labels. Σ = R S Sᵀ Rᵀ with S = diag(exp(log_scales)), m². File
+layout (binary little endian, one ``vertex`` element, the INRIA code's property order)::
 
     x y z nx ny nz f_dc_0 f_dc_1 f_dc_2 f_rest_0 ... f_rest_{3(K-1)-1}
     opacity scale_0 scale_1 scale_2 rot_0 rot_1 rot_2 rot_3 [link_id group]
 
-``f_rest`` is channel-major: ``f_rest_{c*(K-1)+k}`` is SH coefficient ``k+1``
-of colour channel ``c``. ``opacity`` is the logit, ``scale_*`` the log-scales,
-``rot_*`` the quaternion (w, x, y, z), normals are written as zeros and ignored.
-``link_id``/``group`` are our extra ``int`` properties; a plain INRIA file
-loads with link_id = 0 and group = -1.
+``f_rest`` is channel-major (``f_rest_{c*(K-1)+k}`` is SH coefficient k+1 of channel c);
+``opacity`` is the logit, ``scale_*`` the log-scales; normals are written as zeros and
+ignored; a plain INRIA file loads with link_id = 0 and group = -1.
 """
 from __future__ import annotations
 

@@ -1,36 +1,18 @@
 """Scene lighting for Gaussians: the diffuse part of SAPIEN's shading, per Gaussian.
 
-SAPIEN's rasterizing shaders (``minimal``, ManiSkill's default for cameras, and
-``default``) light a mesh point of albedo a (the material's ``base_color``, linear) and
-unit normal n with an ambient colour A and directional lights of colour Eᵢ travelling
-along dᵢ as
+A lit Gaussian, one with a normal (the flat ones: :func:`surface_normals`), is shaded like a
+mesh point in SAPIEN's rasterizing shaders (``minimal``, ManiSkill's camera default, and
+``default``): its SH colour is the linear albedo a, its shortest axis moved by its frame the
+normal n, lit by an ambient colour A and directional lights Eᵢ travelling along dᵢ::
 
-    c_lin = A·a + Σᵢ Eᵢ · a · max(0, n·lᵢ) / π  (+ a GGX specular term),   lᵢ = -dᵢ / |dᵢ|
-    pixel = clamp(c_lin^(1/2.2), 0, 1)          (display encoding)
+    c_lin = A·a + Σᵢ Eᵢ · a · max(0, n·lᵢ) / π,  lᵢ = -dᵢ / |dᵢ|,  pixel = clamp(c_lin^(1/2.2), 0, 1)
 
-(``vulkan_shader/minimal/gbuffer.frag``, ``common/lights.glsl``: Lambert's BRDF a/π).
-A *lit* Gaussian is shaded the same way every frame, with its colour (SH evaluated for
-the view direction, as without lighting) taken as the linear albedo a and its normal n
-the shortest axis of its ellipsoid moved by its frame. The specular term is left out:
-the Gaussians carry no roughness or metalness, and without it a metal's highlights are
-missing (see BENCHMARKS.md, issue 13 point 3). Shadows, point and spot lights and
-SAPIEN's environment map are not modelled either (:meth:`Lighting.from_sapien` warns
-about the lights and the map it leaves out).
-
-Which Gaussians are lit is a per-Gaussian choice: a Gaussian with a normal is lit, one
-with the zero normal keeps its colour as is. Surfaces sampled from meshes (the hand, pads,
-soft objects, box objects) carry albedo and get normals; captured 3DGS scenes and objects
-have their lighting baked into their colours and get none. Only flat Gaussians get a
-normal (:func:`surface_normals`): the normal of a round blob is undefined.
-
-Normals are two-sided: the normal is turned to face the camera before shading, so its sign
-(which a captured or point-cloud Gaussian does not know) does not matter. Under a frame
-``x -> M x + t`` a normal moves with the cofactor matrix cof(M) = det(M)·M⁻ᵀ (the normal
-of a plane pushed forward by M): for a rigid link cof(R) = R, for an MPM particle
-cof(F) keeps it perpendicular to the deformed disc.
-
-Conventions: world frame, unit-free colours (RGB, linear, >= 0), directions as SAPIEN's
-``add_directional_light`` (the direction the light travels, any length > 0).
+Normals are two-sided (turned to face the camera) and move with cof(M) = det(M)·M⁻ᵀ under a
+frame ``x -> M x + t``. A Gaussian with the zero normal (a captured scene's, lighting baked
+in) keeps its colour. Not modelled: SAPIEN's GGX specular term (Gaussians carry no roughness
+or metalness), shadows, point and spot lights, the environment map
+(:meth:`Lighting.from_sapien` warns). World frame; colours RGB, linear, >= 0; directions as
+SAPIEN's ``add_directional_light`` (the direction the light travels, any length > 0).
 """
 from __future__ import annotations
 

@@ -3,20 +3,8 @@
 :func:`load_link_meshes` gives every link's visual meshes (files or
 box/cylinder/sphere primitives) in the link frame with a colour source
 (texture > vertex/face colours > mesh material > URDF ``rgba`` > grey);
-:func:`sample_surface_blue_noise` puts roughly even samples on them and
-:func:`gaussians_from_surface` one disc Gaussian on every sample.
-
-Splat shape. Samples come from area-uniform candidates at 4/spacing² thinned so
-that no two samples with agreeing normals are closer than ``0.65·spacing``
-(this lands at ≈ 1 sample per spacing², i.e. ``N ≈ area / spacing²``). Each
-Gaussian is a disc: in-plane standard deviation ``0.9·spacing``, normal
-standard deviation ``spacing/20``, opacity ``sigmoid(4) ≈ 0.98``. The in-plane
-factor was chosen by measuring the composited opacity of such a sample set over
-a flat surface: with σ = 0.5·s (≈ half the spacing) ~10 % of the surface stays
-below α = 0.9 (visible holes); with σ = 0.9·s the worst point has α ≈ 0.94 and
-99 % of it α ≥ 0.98, at the price of a ≈ 1 σ soft fringe at silhouettes.
-``tests/splat/test_surface.py`` renders a flat box built this way and checks
-for holes.
+:func:`sample_surface_blue_noise` puts roughly even samples on them (≈ area / spacing²)
+and :func:`gaussians_from_surface` one disc Gaussian on every sample.
 
 Units: metres; colours RGB in [0, 1].
 """
@@ -49,7 +37,7 @@ __all__ = [
     "gaussians_from_points",
 ]
 
-IN_PLANE_SCALE = 0.9      #: in-plane σ / spacing (see the module docstring)
+IN_PLANE_SCALE = 0.9      #: in-plane σ / spacing (see :func:`gaussians_from_surface`)
 NORMAL_SCALE = 1.0 / 20   #: normal σ / spacing
 OPACITY_LOGIT = 4.0       #: opacity sigmoid(4) ≈ 0.982
 THIN_RADIUS = 0.65        #: blue-noise exclusion radius / spacing
@@ -263,8 +251,8 @@ def closed_outward(meshes: Sequence[ColoredMesh]) -> bool:
     every edge joins two faces, the winding is consistent, and each connected part encloses a
     positive volume. Gaussians sampled on such a surface with their face normal as local z
     (:func:`gaussians_from_surface`) may be culled when that normal faces away from the
-    camera: a nearer front side always hides them (see *Back faces* in
-    :mod:`~gausstac_maniskill.splat.rasterizer`)."""
+    camera: a nearer front side always hides them (see ``one_sided`` of
+    :func:`~gausstac_maniskill.splat.rasterizer.rasterize`)."""
     import trimesh
 
     if not meshes:
@@ -289,7 +277,15 @@ def _frames_from_normals(normals: np.ndarray) -> np.ndarray:
 
 def gaussians_from_surface(points, normals, rgb, spacing: float, link_id: int = 0,
                            group=None) -> GaussianSet:
-    """Flat disc Gaussians on surface samples (shape constants in the module docstring).
+    """Flat disc Gaussians on surface samples.
+
+    Each Gaussian is a disc: in-plane standard deviation ``0.9·spacing``, normal standard
+    deviation ``spacing/20``, opacity ``sigmoid(4) ≈ 0.98``. With samples thinned so that no
+    two with agreeing normals are closer than ``0.65·spacing`` (≈ 1 per spacing²), the
+    composited opacity over a flat surface is: σ = 0.5·spacing leaves ~10 % of it below
+    α = 0.9 (visible holes); σ = 0.9·spacing has its worst point at α ≈ 0.94 and 99 % of it at
+    α ≥ 0.98, with a ≈ 1 σ soft fringe at silhouettes (``tests/splat/test_surface.py``
+    checks a flat box for holes).
 
     Args:
         points: [n, 3] sample positions, metres.

@@ -14,27 +14,14 @@ position x:
   ``force`` it sees every contact, soft objects included.
 
 Each particle stands for a square of the sensor plane one *grid cell* wide (``Pad.footprint``:
-the MPM grid spacing dx, at least one particle spacing), centred on the projection of its
-rest position; it is shared among the taxels that square overlaps, in proportion to the
-overlap (a conservative box-filter remap). Depth and shear are the overlap-weighted means over
-the surface particles of a taxel (empty taxels read 0), pressure the same over its soft
-particles, and the force map sums the overlap-weighted component along -z of the contact force
-the colliders exert on the particles [N]. So the force map adds up to the total normal contact
-force on the pad within the layout (a particle within dx/2 of the layout's edge leaves part of
-its share outside it).
-
-Why a grid cell and not the particle's own spacing: the particles move with, and take their
-contact through, the grid, so the fields the simulation resolves vary on the scale of dx. The
-particles of one cell share its nodes' motion and impulse unevenly, by where they sit in the
-cell: a pattern of period dx that is a discretisation artefact, different at every resolution.
-A square one cell wide filters it out. Measured on the Allegro index pad (``bench pad``'s held
-scenes, relative L2 of the dx = 1 mm map against the 0.5 mm one, particle square → cell
-square; BENCHMARKS.md, 2026-11-26): force, plate pressed 1 mm 0.141 → 0.087, plate slid
-0.153 → 0.092, 5 mm sphere pressed 0.5 mm 0.148 → 0.112; shear, sphere pressed 1 mm
-0.114 → 0.082; depth, sphere slid 0.104 → 0.076. The price is a blur of one cell: the
-sphere's peak depth reads 1 % less. (Assigning each particle whole to the taxel of its
-centre aliases worse still: a 1.25 mm taxel holds 2 or 3 columns of a 0.5 mm lattice, and
-the force map beat by ±50 % between neighbouring taxels.)
+the grid spacing dx, at least one particle spacing), centred on the projection of its rest
+position and shared among the taxels it overlaps in proportion to the overlap (a conservative
+box-filter remap). Depth and shear are the overlap-weighted means over a taxel's surface
+particles (empty taxels read 0), pressure the same over its soft particles; the force map sums
+the overlap-weighted component along -z of the contact force on the particles [N], so it adds
+up to the pad's total normal contact force within the layout. A square one cell wide filters
+out the period-dx pattern the grid imprints on the particles' motion and contact, at the price
+of a one-cell blur (``bench pad`` measures the maps' L2 between resolutions).
 """
 from __future__ import annotations
 

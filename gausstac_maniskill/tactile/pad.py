@@ -1,7 +1,8 @@
 """Soft tactile pads built from a hand link's collision mesh.
 
-A :class:`Pad` is a :class:`~gausstac_maniskill.config.PadSpec` turned into MPM
-particles in the link frame: a lattice filling the link's (watertight) mesh, cut
+A :class:`Pad` is a :class:`~gausstac_maniskill.config.PadSpec` turned into
+particles in the link frame (the MPM pad's particles; the equilibrium pad's cube elements
+sit on the same lattice): a lattice filling the link's (watertight) mesh, cut
 to the region within ``cone_deg`` of the pad axis and within ``thickness`` (soft)
 plus two grid cells (kinematic, carried by the link) of the surface. Each particle
 also records its depth below the surface and the outward normal of the nearest
@@ -17,7 +18,7 @@ import numpy as np
 
 from ..config import PadSpec
 from ..errors import AssetError, ConfigError, ResolutionWarning
-from ..mpm.sampling import mesh_particles
+from ..geometry.sampling import mesh_particles
 
 __all__ = ["Pad", "build_pad", "pad_mesh", "pad_core_meshes", "allegro_pad_specs", "pad_specs_for_links", "ALLEGRO_TIPS"]
 
@@ -113,8 +114,8 @@ def pad_mesh(spec: PadSpec, urdf: str):
 
 #: Depth of a pad link's rigid core below the pad surface, as a fraction of the pad's thickness:
 #: an object that reaches the core has compressed the layer to a quarter of its thickness.
-#: With the core at the full thickness, an object stopped by it touched the bound particles
-#: behind the layer, and the last soft cells crushed between them made the pad blow up
+#: With the core at the full thickness, an object stopped by it would touch the bound particles
+#: behind the layer, and the last soft cells crushed between them make the MPM pad blow up
 #: (PressCube with the hand closed hard, 2 mm grid).
 CORE_DEPTH = 0.75
 
@@ -248,8 +249,8 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
 
 _CACHE: dict = {}
 
-#: Grid cells the soft layer must span for its contact force to converge (issue 10's bound;
-#: BENCHMARKS.md "Fingertip press" shows 1–2 cells off by 2.7–11× against theory).
+#: Grid cells the soft layer must span for its contact force to converge (with 1–2 cells the
+#: force is off by 2.7–11× against Hertz theory: ``bench hand``'s fingertip press).
 MIN_LAYER_CELLS = 4
 
 
@@ -275,7 +276,7 @@ def check_layer_resolution(spec: PadSpec, dx: float) -> None:
 
 #: Thickness of the kinematic layer in grid cells. With one cell, the grid nodes at the
 #: soft/kinematic interface get only ~half their mass from kinematic particles and stay
-#: free, and the soft layer was seen to slip 0.5 mm after a frictional slide; two cells pin them.
+#: free, and the soft layer slips 0.5 mm after a frictional slide; two cells pin them.
 KINEMATIC_CELLS = 2  # pads from the same mesh and geometry (e.g. the four Allegro tips) are built once
 
 

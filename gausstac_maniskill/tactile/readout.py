@@ -27,7 +27,7 @@ import taichi as ti
 import torch
 
 from .. import backend
-from ..mpm.kernels import NDF, NDF2, NDI, NDI2, NDM, NDV
+from ..kernel_launch import NDF, NDF2, NDI, NDI2, NDM, NDV
 from .extract import TaxelBinning
 from .pad import Pad
 

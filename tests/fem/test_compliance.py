@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from gausstac_maniskill.bench.quasistatic import sphere
+from gausstac_maniskill.bench.scenes import sphere
 from gausstac_maniskill.fem import compliance, layer_body
 
 
@@ -25,7 +25,7 @@ def _lazy_matrix(body):
 
 
 def test_full_compliance_is_the_column_by_column_one(tmp_path, monkeypatch):
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     lazy, full = _layer(), _layer()
     full.precompute_compliance(progress=False)
     W = full._compliance
@@ -41,10 +41,10 @@ def test_full_compliance_is_the_column_by_column_one(tmp_path, monkeypatch):
 
 
 def test_cache_round_trip_scales_with_E_and_keys_on_nu(tmp_path, monkeypatch):
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     first = _layer()
     first.precompute_compliance(progress=False)
-    files = os.listdir(tmp_path)
+    files = os.listdir(tmp_path / "compliances")
     assert len(files) == 1 and files[0].startswith("compliance-")
 
     stiffer = _layer(E=0.6e6)  # same shape and nu: loaded, not solved, and W ∝ 1/E
@@ -55,17 +55,18 @@ def test_cache_round_trip_scales_with_E_and_keys_on_nu(tmp_path, monkeypatch):
     np.testing.assert_allclose(stiffer._compliance, 0.5 * first._compliance, rtol=1e-6)
     monkeypatch.undo()
 
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     other = _layer(nu=0.49)  # another nu: another file
     other.precompute_compliance(progress=False)
-    assert len(os.listdir(tmp_path)) == 2
+    assert len(os.listdir(tmp_path / "compliances")) == 2
     assert compliance.compliance_key(other) != compliance.compliance_key(first)
 
 
 def test_damaged_cache_is_recomputed_with_a_warning(tmp_path, monkeypatch):
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     body = _layer()
-    path = tmp_path / f"compliance-{compliance.compliance_key(body)}.npy"
+    path = tmp_path / "compliances" / f"compliance-{compliance.compliance_key(body)}.npy"
+    path.parent.mkdir()
     path.write_bytes(b"not a numpy file")
     with pytest.warns(UserWarning, match=str(path.name)):
         body.precompute_compliance(progress=False)
@@ -75,7 +76,7 @@ def test_damaged_cache_is_recomputed_with_a_warning(tmp_path, monkeypatch):
 
 
 def test_cache_off_writes_nothing(tmp_path, monkeypatch):
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", "off")
+    monkeypatch.setenv("GAUSSTAC_CACHE", "off")
     assert compliance.cache_dir() is None
     monkeypatch.chdir(tmp_path)
     _layer().precompute_compliance(progress=False)
@@ -91,7 +92,7 @@ def test_readout_response_is_the_compliance_row_and_keyed_on_E(tmp_path, monkeyp
 
     from gausstac_maniskill.fem.hex import trilinear
 
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     body = _layer()
     d = 7  # the readout: surface point d's displacement along z
     nodes, w = trilinear(body.body, body.points[d:d + 1], body.point_elements[d:d + 1])
@@ -102,7 +103,7 @@ def test_readout_response_is_the_compliance_row_and_keyed_on_E(tmp_path, monkeyp
 
     stiffer = _layer(E=0.6e6)
     np.testing.assert_allclose(compliance.readout_responses(stiffer, A, progress=False), 0.5 * M, rtol=1e-6)
-    assert len([f for f in os.listdir(tmp_path) if f.startswith("readout-")]) == 2
+    assert len([f for f in os.listdir(tmp_path / "compliances") if f.startswith("readout-")]) == 2
 
 
 def _point_readout(body, d, axis=2):
@@ -120,7 +121,7 @@ def test_compliance_and_readout_responses_come_from_one_sweep(tmp_path, monkeypa
     responses from the compliance's own sweep (one sweep in all, counted), the same as each
     computed alone (to float32 rounding), kept on disk under the keys a lone computation uses;
     where the compliance is on disk already, the readouts are not even built."""
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     body = _layer()
     A, B = _point_readout(body, 7), _point_readout(body, 3, axis=0)
     sweeps = []
@@ -135,9 +136,9 @@ def test_compliance_and_readout_responses_come_from_one_sweep(tmp_path, monkeypa
     assert sweeps == [[(0, 0), (1, 0), (2, 0)]]
     MA, MB = (compliance.readout_responses(body, R, progress=False) for R in (A, B))
     assert len(sweeps) == 1  # taken from the compliance's sweep
-    assert len([f for f in os.listdir(tmp_path) if f.startswith("readout-")]) == 2
+    assert len([f for f in os.listdir(tmp_path / "compliances") if f.startswith("readout-")]) == 2
 
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", "off")
+    monkeypatch.setenv("GAUSSTAC_CACHE", "off")
     alone = _layer()
     W = alone.inverse_between(alone.point_loads(np.arange(alone.num_points)))
     for M, R in ((MA, A), (MB, B)):
@@ -147,7 +148,7 @@ def test_compliance_and_readout_responses_come_from_one_sweep(tmp_path, monkeypa
     np.testing.assert_allclose(body._compliance, W, rtol=0, atol=1e-6 * np.abs(W).max())
     np.testing.assert_allclose(MA[0], W[3 * 7 + 2], rtol=0, atol=1e-6 * np.abs(W).max())  # Maxwell-Betti
 
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     sweeps.clear()
     again = _layer()
     again.precompute_compliance(progress=False, readouts=lambda: pytest.fail("built although W is on disk"))
@@ -155,9 +156,9 @@ def test_compliance_and_readout_responses_come_from_one_sweep(tmp_path, monkeypa
     np.testing.assert_array_equal(compliance.readout_responses(again, A, progress=False), MA)
     assert not sweeps  # from disk
 
-    for f in os.listdir(tmp_path):  # W gone, the responses still on disk: W alone is swept
+    for f in os.listdir(tmp_path / "compliances"):  # W gone, the responses still on disk: W alone is swept
         if f.startswith("compliance-"):
-            os.remove(tmp_path / f)
+            os.remove(tmp_path / "compliances" / f)
     third = _layer()
     third.precompute_compliance(progress=False, readouts=[A, B])
     assert sweeps == [[(0, 0)]]
@@ -168,7 +169,7 @@ def test_compliance_and_readout_responses_come_from_one_sweep(tmp_path, monkeypa
 def test_a_compliance_beyond_the_memory_at_hand_is_refused_by_name(monkeypatch):
     """Asked for a compliance this machine cannot hold while computing it, the body says so
     (naming itself and the memory) before it starts, and nothing is computed."""
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", "off")
+    monkeypatch.setenv("GAUSSTAC_CACHE", "off")
     body = _layer()
     monkeypatch.setattr(compliance, "available_memory", lambda: 1000)
     monkeypatch.setattr(type(body), "inverse_products", lambda self, *a, **k: pytest.fail("computed anyway"))

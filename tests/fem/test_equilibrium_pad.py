@@ -12,7 +12,7 @@ DX = 2e-3  # 1 mm elements: the coarsest lattice, for speed
 def _scene(friction=0.5, nu=None, dx=DX, indenter="sphere"):
     import dataclasses
 
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
 
     spec = bp.index_spec()
@@ -21,7 +21,7 @@ def _scene(friction=0.5, nu=None, dx=DX, indenter="sphere"):
     with pytest.warns(Warning) if dx > 1e-3 else contextlib.nullcontext():
         sim = GaussTacSim([spec], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=dx), pad_solver="fem")
     W = bp.LINK_POSE @ sim.pads[bp.INDEX].sensor_frame
-    sim.add_rigid_object("indenter", bp._collider(indenter, bp.indenter_pose(indenter, W, bp.GAP), friction))
+    sim.add_rigid_object("indenter", bp.indenter_collider(indenter, bp.indenter_pose(indenter, W, bp.GAP), friction))
 
     def press(z, x=0.0):
         maps = sim.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"indenter": bp.indenter_pose(indenter, W, z, x)})[bp.INDEX]
@@ -36,7 +36,7 @@ def test_fem_pad_press_reads_consistent_forces_and_returns_to_rest():
     internal forces balance the contact (the solve converged). Physics: the press stiffens
     as the patch grows, the surface yields less than the press, no taxel pulls, and the pad
     is exactly at rest once the indenter has left."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
 
     sim, W, press = _scene()
     F0, m0 = press(bp.GAP)
@@ -67,7 +67,7 @@ def test_fem_pad_press_reads_consistent_forces_and_returns_to_rest():
 
 
 def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
 
     sim, W, press = _scene(friction=0.5)
     press(bp.GAP)
@@ -104,22 +104,22 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     assert {k: np.shape(v) for k, v in flat_again.items()} == {k: np.shape(v) for k, v in flat.items()}
     with pytest.raises(ConfigError, match="fem0_.*pad_solver='mpm'"):  # e.g. a state recorded with the MPM pads
         other.load_flat_state({k: v for k, v in flat.items() if not k.startswith("fem0_")})
-    with pytest.raises(ConfigError, match="lacks.*owner"):  # a state saved before pads met several objects
+    with pytest.raises(ConfigError, match="lacks.*owner"):  # a state without the points' owners
         other.load_flat_state({k: v for k, v in flat.items() if k != "fem0_owner"})
     sim._fem[bp.INDEX].result.cut_cells_linear = True  # (the flag of a finite-strain step solved by the fallback)
     flagged = sim.flat_state()
     other.load_flat_state(flagged)
     assert other._fem[bp.INDEX].result.cut_cells_linear
-    other.load_flat_state({k: v for k, v in flagged.items() if k != "fem0_cut_cells_linear"})  # saved before the flag
+    other.load_flat_state({k: v for k, v in flagged.items() if k != "fem0_cut_cells_linear"})  # a state without the flag
     assert not other._fem[bp.INDEX].result.cut_cells_linear
 
 
 def _box_scene(halves: bool, friction: float):
     """The index pad pressed by a 24 × 24 mm box face, whole or as two boxes side by side
     split off the particle lattice (their union is the whole box's volume)."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
-    from gausstac_maniskill.mpm.colliders import Box
+    from gausstac_maniskill.geometry.colliders import Box
     from gausstac_maniskill.transforms import make_pose
 
     with pytest.warns(Warning, match="spans only"):
@@ -151,7 +151,7 @@ def test_fem_pad_pressed_by_two_objects_reads_as_their_union(friction):
     side by side press and drag it as the one box they make up (the same contact problem on
     the union), and each object receives its own points' forces. Then the flat state of a
     two-object contact restores bit-exactly (each point's hold kept on its own object)."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
 
     steps = [(bp.GAP, 0.0), (-0.25e-3, 0.0), (-0.5e-3, 0.0), (-0.5e-3, 0.25e-3)]
     whole, parts = _box_scene(False, friction), _box_scene(True, friction)
@@ -179,7 +179,7 @@ def test_fem_pad_linear_model_says_when_pressed_beyond_its_range():
     SimulationWarning says so, once while it lasts, and not again after the pad came back."""
     import warnings as w
 
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.errors import SimulationWarning
 
     sim, W, press = _scene(indenter="plate")
@@ -200,7 +200,7 @@ def test_fem_precompute_reaches_the_pads(monkeypatch):
     naming the option (a CostWarning), while one asked for point by point says nothing."""
     import warnings
 
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
     from gausstac_maniskill.errors import CostWarning
     from gausstac_maniskill.fem import sensor
@@ -228,7 +228,7 @@ def test_fem_precompute_reaches_the_pads(monkeypatch):
 def test_fem_pad_held_step_keeps_the_equilibrium():
     """Guards the held-step shortcut: an unchanged relative pose keeps the last solution (no
     solve); a motion beyond the solver's tolerance solves again."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
 
     sim, W, press = _scene(friction=0.5)
     press(bp.GAP)
@@ -243,9 +243,9 @@ def test_fem_pad_held_step_keeps_the_equilibrium():
 
 def test_fem_pad_released_within_reach_reads_zero():
     """A pressed, frictional pad whose indenter backs off to just clear of it (still within one
-    element: solved, no point in contact) reads zero force and maps (a regression: the last
-    step's warm start was taken for this solve's contact points)."""
-    from gausstac_maniskill.bench import pad as bp
+    element: solved, no point in contact) reads zero force and maps (guards against the last
+    step's warm start being taken for this solve's contact points)."""
+    from gausstac_maniskill.bench import scenes as bp
 
     sim, W, press = _scene(friction=0.5)
     press(bp.GAP)
@@ -260,7 +260,7 @@ def test_fem_pad_released_within_reach_reads_zero():
 def test_fem_pad_near_incompressible_is_stable_and_stiffer():
     """ν = 0.499: no locking in the elements (selective reduced integration), a finite press;
     a bonded thin layer stiffens as ν → 0.5, so it reads more than at ν = 0.48."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
 
     out = []
     for nu in (0.48, 0.499):
@@ -273,7 +273,7 @@ def test_fem_pad_near_incompressible_is_stable_and_stiffer():
 
 
 def test_fem_pad_bad_input():
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
 
     args = ([bp.index_spec()], {bp.INDEX: bp.LINK_POSE})
@@ -301,7 +301,7 @@ def test_default_pads_stay_at_equilibrium_with_soft_objects():
     MPM pads: a soft object added before they touched anything turns them into those; one
     added after is refused with what to do. pad_surface="particles" (the equilibrium pads'
     contact is on the mesh) resolves to the MPM pads."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
 
     args = ([bp.index_spec()], {bp.INDEX: bp.LINK_POSE})
@@ -317,7 +317,7 @@ def test_default_pads_stay_at_equilibrium_with_soft_objects():
         W = bp.LINK_POSE @ sim.pads[bp.INDEX].sensor_frame
         block = g @ W[:3, :3].T + W[:3, 3] + W[:3, 2] * 1e-4
         if touched:
-            sim.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
+            sim.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
             sim.step({bp.INDEX: bp.LINK_POSE}, 0.05)
             assert sim._fem[bp.INDEX].touching
         sim.add_soft_object("block", far if touched else block, mat)
@@ -331,7 +331,7 @@ def test_default_pads_stay_at_equilibrium_with_soft_objects():
     assert nh.is_awake(bp.INDEX)  # an MPM pad, woken by the block beside it
     with pytest.warns(Warning):
         nh = GaussTacSim(*args, settings=settings, fem_model="neo_hookean")
-    nh.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
+    nh.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
     nh.step({bp.INDEX: bp.LINK_POSE}, 0.05)
     with pytest.raises(ConfigError, match="'neo_hookean' and have touched something already.*pad_solver='mpm'"):
         nh.add_soft_object("block", far, mat)
@@ -403,8 +403,8 @@ def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
 
 def test_fem_pad_held_against_an_object_as_stiff_as_itself_settles(monkeypatch):
     """The staggered pad–object coupling where the object is as stiff as the pad (the sponge of
-    ``bench soft`` made of the pad's 260 kPa): fed the pad's solved shape as it was, the held
-    force swung ±4.5 % from step to step for good (measured); relaxed
+    ``bench soft`` made of the pad's 260 kPa): fed the pad's solved shape as it is, the held
+    force swings ±4.5 % from step to step without settling; relaxed
     (:meth:`~gausstac_maniskill.fem.sensor.EquilibriumPad.relax_surface`) it settles within
     0.5 % over the last held steps, and the map reads the sponge's own stress within 6 %."""
     from gausstac_maniskill.bench import soft

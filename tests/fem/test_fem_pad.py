@@ -4,18 +4,17 @@ import pytest
 
 
 def test_product_pad_press_is_positive_monotone_and_repeatable():
-    from gausstac_maniskill.bench.quasistatic import _pad
-    from gausstac_maniskill.bench.pad import _collider, indenter_pose
+    from gausstac_maniskill.bench.scenes import index_pad, indenter_collider, indenter_pose
     from gausstac_maniskill.fem import pad_body
-    from gausstac_maniskill.mpm.colliders import signed_distance
+    from gausstac_maniskill.geometry.colliders import signed_distance
 
-    pad = _pad(1e-3)
+    pad = index_pad(1e-3)
     body = pad_body(pad)
     assert body.fixed.any(axis=1).sum() > 0
     S = pad.sensor_frame
     forces = []
     for d in (0.25e-3, 0.5e-3, 1e-3):
-        col = _collider("sphere", indenter_pose("sphere", S, -d), 0.0)
+        col = indenter_collider("sphere", indenter_pose("sphere", S, -d), 0.0)
 
         def sdf(x, col=col):
             phi, n = signed_distance(col, x)
@@ -31,7 +30,7 @@ def test_product_pad_press_is_positive_monotone_and_repeatable():
 def test_collider_indenter_matches_the_collider_and_rejects_bad_friction():
     from gausstac_maniskill.errors import ConfigError
     from gausstac_maniskill.fem import Indenter, collider_indenter
-    from gausstac_maniskill.mpm import Sphere, signed_distance
+    from gausstac_maniskill.geometry import Sphere, signed_distance
     from gausstac_maniskill.transforms import make_pose
 
     link = make_pose([0.01, -0.02, 0.03], np.eye(3))
@@ -53,14 +52,14 @@ def test_cut_cells_hold_the_layer_and_its_points():
     at the rim, where the cubes stay whole); the soft
     particles' cubes come first, in order; the nodes deeper than the bond are held. This
     guards the construction; `bench pad` measures what it does to the forces."""
-    from gausstac_maniskill.bench.quasistatic import _pad
+    from gausstac_maniskill.bench.scenes import index_pad
     from gausstac_maniskill.errors import ConfigError
     from gausstac_maniskill.fem import pad_body
     from gausstac_maniskill.fem.pad import pad_cells, pad_lattice
 
     volume, staircase = [], []
     for size in (1e-3, 5e-4):
-        pad = _pad(size)
+        pad = index_pad(size)
         body = pad_body(pad)
         b = body.body
         origin, ijk = pad_lattice(pad)
@@ -84,18 +83,17 @@ def test_cut_cells_hold_the_layer_and_its_points():
 
 
 def test_cut_cells_have_no_mechanism():
-    """Cubes that met the body along an edge only turned about it freely: at 0.75 mm elements
-    two zero pivots, which a load sent to 2·10⁹ m (the finite-strain press's second iteration).
-    The cut cells are joined face to face, and the held stiffness's smallest eigenvalue is
-    positive at every element size."""
+    """Cubes meeting the body along an edge only would turn about it freely (zero pivots, which
+    a load sends to 2·10⁹ m). The cut cells are joined face to face: the held stiffness's
+    smallest eigenvalue is positive at every element size (1 and 0.75 mm here)."""
     import scipy.sparse.linalg as sla
 
-    from gausstac_maniskill.bench.quasistatic import _pad
+    from gausstac_maniskill.bench.scenes import index_pad
     from gausstac_maniskill.fem.hex import stiffness
     from gausstac_maniskill.fem.pad import pad_cells
 
     for size in (1e-3, 7.5e-4):
-        body, fixed = pad_cells(_pad(size))
+        body, fixed = pad_cells(index_pad(size))
         free = np.repeat(~fixed, 3)
         K = stiffness(body, 0.26e6, 0.48)[free][:, free]
         low = sla.eigsh(K, k=2, sigma=0, which="LM", return_eigenvectors=False)
@@ -106,10 +104,10 @@ def test_cut_cells_have_no_mechanism():
 def test_finite_strain_plate_press_converges_on_cut_cells():
     """`bench pad --curve`'s plate, pressed 1 mm into the product pad (25 % of the layer,
     friction 0.5) in two steps and held, under finite strain on cut cells at dx = 2 mm: with
-    every cut cube finite it stalled (3 × 400 fixed-point iterations); with the cubes under half
+    every cut cube finite it stalls (3 × 400 fixed-point iterations); with the cubes under half
     full kept linear it converges. It reads stiffer than the linear model, as a bonded,
     near-incompressible layer stiffens under compression (−20 % for the linear model at this
-    press, BENCHMARKS.md); the contact and stress readings agreeing guards the equilibrium
+    press, ``bench pad --curve``); the contact and stress readings agreeing guards the equilibrium
     (the code against itself, not physics)."""
     from gausstac_maniskill.bench.pad import speed_curve
 

@@ -8,7 +8,7 @@ DX = 2e-3  # 1 mm elements: the coarsest lattice, for speed
 
 
 def _pad_and_body():
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
     from gausstac_maniskill.tactile.extract import TaxelBinning
 
@@ -60,7 +60,7 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
     uses for a linear pad with its full compliance) equal those from the particles' state (one
     solve of the whole body), pressed and slid; once both matrices are on disk a fresh body
     reads its maps without factoring its stiffness."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
     from gausstac_maniskill.fem.sensor import forget_bodies
     from gausstac_maniskill.tactile.extract import tactile_maps
@@ -68,7 +68,7 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
     forget_bodies()
     sim, pad, body, binning = _pad_and_body()
     W = bp.LINK_POSE @ pad.sensor_frame
-    sim.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, bp.GAP), 0.5))
+    sim.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, bp.GAP), 0.5))
     fp = sim._fem[bp.INDEX]
     for z, x in ((-0.5e-3, 0.0), (-1e-3, 0.0), (-1e-3, 1e-3)):
         maps = sim.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"ball": bp.indenter_pose("sphere", W, z, x)})[bp.INDEX]
@@ -84,7 +84,7 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
     with pytest.warns(Warning, match="spans only"):
         again = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
                             pad_solver="fem")
-    again.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, -1e-3, 1e-3), 0.5))
+    again.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, -1e-3, 1e-3), 0.5))
     again.load_state_dict(sim.state_dict())
     m2 = again.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"ball": bp.indenter_pose("sphere", W, -1e-3, 1e-3)})[bp.INDEX]
     assert again._fem[bp.INDEX].body is not body and not again._fem[bp.INDEX].body.factored
@@ -97,11 +97,11 @@ def test_first_contact_sweeps_the_pad_once(tmp_path, monkeypatch):
     """Guard of the first-contact cost: a linear pad's compliance and its maps' response (the
     co-simulator's default binning) come from one sweep of its stiffness, and the maps then
     read need no second one; both are kept on disk."""
-    from gausstac_maniskill.bench import pad as bp
+    from gausstac_maniskill.bench import scenes as bp
     from gausstac_maniskill.fem.contact import QuasiStaticBody
     from gausstac_maniskill.fem.sensor import forget_bodies
 
-    monkeypatch.setenv("GAUSSTAC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("GAUSSTAC_CACHE", str(tmp_path))
     sweeps = []
     real = QuasiStaticBody.inverse_products
 
@@ -113,9 +113,9 @@ def test_first_contact_sweeps_the_pad_once(tmp_path, monkeypatch):
     forget_bodies()
     sim, pad, body, _ = _pad_and_body()
     W = bp.LINK_POSE @ pad.sensor_frame
-    sim.add_rigid_object("ball", bp._collider("sphere", bp.indenter_pose("sphere", W, bp.GAP), 0.5))
+    sim.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, bp.GAP), 0.5))
     maps = sim.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"ball": bp.indenter_pose("sphere", W, -1e-3)})[bp.INDEX]
     assert float(maps["force"].sum()) > 0
     assert sweeps == [[(0, 0), (1, 0)]]
-    assert sorted(f.split("-")[0] for f in os.listdir(tmp_path)) == ["compliance", "readout"]
+    assert sorted(f.split("-")[0] for f in os.listdir(tmp_path / "compliances")) == ["compliance", "readout"]
     forget_bodies()

@@ -52,7 +52,7 @@ def test_device_maps_equal_the_numpy_reference(pressed):
         scale = np.abs(want).max()
         assert scale > 0, key  # the press reaches every map
         # the kernel works in float32 from the link's float32 pose: a 0.1 m coordinate rounds
-        # to 4 nm (shear was 6 nm off, 2e-5 of its largest value; 2026-11-24)
+        # to 4 nm (shear is about 6 nm off, 2e-5 of its largest value)
         atol = 2e-8 if key in ("depth", "shear") else 1e-5 * scale
         np.testing.assert_allclose(got, want, rtol=0, atol=atol, err_msg=key)
     assert float(maps[INDEX]["force"].sum()) > 0.05
