@@ -1,33 +1,21 @@
-"""``python -m gausstac_maniskill.bench batch`` — B envs in one MPM world against B worlds in a loop.
+"""``python -m gausstac_maniskill.bench batch [--envs 1 4 16] [--steps 6] [--dx 1e-3] [--camera W H]`` —
+B envs in one MPM world against B worlds stepped in a loop.
 
-Every env is the Allegro hand (default pads, default dx = 1 mm), a little moved, with a
-6 mm ball pressed into its index pad (0.4 to 0.9 mm, a different depth per env) over
-``--steps`` control steps of 20 ms. For each B (``--envs``) the same scenes run two ways:
-
-* **batched**: :class:`~gausstac_maniskill.batch.BatchedCosim`, one world, one set of launches;
-* **loop**: B :class:`~gausstac_maniskill.cosim.GaussTacSim` stepped one after the other
-  (what ``GaussTacEnv`` does today), each with the batch's substeps.
-
-Prints per B: wall time per control step of both (the first step, which compiles, is left
-out) and its host part (the wall time outside Taichi launches: Python's pose handling, sleep
-logic and bookkeeping; on the CPU, where a launch returns when its kernel is done), the
-ratio measured in this run, Taichi launches per step of both (kernels and ndarray copies),
-the error of the batch: the largest difference of env 0's maps from the same scene alone,
-over their largest value, and the cost of one pad of the batch falling asleep or waking up
-(done in place on the device, no rebuild). Taichi arch: ``GAUSSTAC_ARCH`` (cpu by default).
-
-With ``--camera W H`` a second table follows: every env's scene (the hand's Gaussians, the
-ball's and the pads' soft ones, lit by ManiSkill's default lights) seen by one W × H camera
-per env, rendered by :meth:`BatchedCosim.render` in one rasterizer call against each env's
-scene rendered on its own (what the splat camera did before), per picture (posing
-included), and the largest difference between the two pictures (0: bit for bit).
+Each env is the Allegro hand with a 6 mm ball pressed into its index pad (a different depth per
+env), run as one :class:`~gausstac_maniskill.batch.BatchedCosim` and as B
+:class:`~gausstac_maniskill.cosim.GaussTacSim` in turn. Prints per B the wall time per 20 ms
+control step of both (and its host part), Taichi launches per step, the batch's largest map
+difference from the same scene alone, and the cost of a pad falling asleep or waking up;
+``--camera W H`` adds the batched splat render against one render per env. Taichi arch:
+``GAUSSTAC_ARCH`` (cpu by default).
 """
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
+
+from .common import cli
 
 R = 6e-3
 DT = 0.02
@@ -79,8 +67,7 @@ class _Launches:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench batch", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("batch", __doc__)
     ap.add_argument("--envs", type=int, nargs="+", default=[1, 4, 16], help="env counts B (default: 1 4 16)")
     ap.add_argument("--steps", type=int, default=6, help="control steps of 20 ms per run (default: 6)")
     ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
@@ -94,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     from .. import backend
     from ..batch import BatchedCosim
     from ..cosim import GaussTacSim, default_hand_settings
-    from ..mpm import Sphere
+    from ..geometry import Sphere
     from ..pose import MujocoPoseSource
     from ..tactile import allegro_pad_specs
 

@@ -1,21 +1,12 @@
-"""``python -m gausstac_maniskill.bench close`` — the whole hand closed hard on a fixed cube.
+"""``python -m gausstac_maniskill.bench close [--dx 1e-3] [--steps 30] [--reaction [explicit]] [--sim-freq 100]``
+— the whole hand closed hard on a fixed cube.
 
-``GaussTac-PressCube-v1`` (``physx_cpu``, ``pd_joint_delta_pos`` at ManiSkill's Allegro
-drive gains) with every joint driven towards closing (action +1) for ``--steps`` control
-steps of 50 ms. The index pad meets the cube's face 2–4 mm in front of it in the first
-step; the fingers then curl on and drag along the face. Per step it prints each pad's normal
-force (its force map's sum) [N], how deep the deepest vertex of each pad link's rigid core
-lies inside the cube (the hard stop: PhysX's slop only, never the layer's thickness) [mm],
-the range of the particles' volume ratio J and principal stretches, the speed of the
-fastest pad link [m/s] and the wall time.
-
-``--reaction`` applies the pads' reaction to their links (``pad_reaction``: the MPM then
-steps after every SAPIEN step), folded into the hand's joint drives (the default,
-``tasks/joint_contact.py``) or, with ``--reaction explicit``, as forces one SAPIEN step
-late; ``--sim-freq`` sets SAPIEN's rate [Hz]: each coupling's stability against the time
-step (BENCHMARKS.md, issue 11).
-A ``SimulationError`` ends the run and is printed (it is what the code did before the rigid
-cores and the stretch safeguard: see BENCHMARKS.md, issue 11).
+``GaussTac-PressCube-v1`` with every joint driven towards closing. Prints per control step each
+pad's normal force [N], how deep each pad link's rigid core lies inside the cube [mm], the range
+of the particles' volume ratio J and principal stretches, the fastest pad link's speed [m/s] and
+the wall time. ``--reaction`` applies the pads' reaction to their links (folded into the joint
+drives, or ``explicit``: forces one SAPIEN step late); a ``SimulationError`` ends the run and is
+printed.
 """
 from __future__ import annotations
 
@@ -23,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import cli, write_report
+from .common import cli, write_report
 
 
 def core_depth_in_cube(env, link: str, vertices: np.ndarray) -> float:

@@ -1,29 +1,17 @@
-"""``python -m gausstac_maniskill.bench compile`` — what Taichi's compiler settings cost and save.
+"""``python -m gausstac_maniskill.bench compile [--rounds 3] [--steps 5]`` — what Taichi's compiler
+settings cost and save.
 
-Taichi compiles a kernel variant on its first launch and keeps it in its offline cache, so a
-machine's first run (and every CI run) pays the compile. Each row here runs in a child
-process of its own (Taichi's settings are per process) with an offline cache of its own,
-empty in the first round. The scene is ``bench kernels``': the Allegro index pad at the
-product's settings, a 5 mm sphere pressed 0.5 then 1 mm and held.
-
-Columns:
-  * first step [s]: the first 50 ms control step of the first round: every kernel of the
-    scene compiled, then run.
-  * step [ms]: the median over rounds of the mean of the held steps (kernels compiled).
-  * step / product: that median over the product build's, the ratio taken in this run.
-  * max |dx| [nm]: the largest difference of the pad's particle positions from the product
-    build's after the same steps (float rounding: the builds order their arithmetic apart).
-
-Builds (``GAUSSTAC_COMPILE``, read by :func:`gausstac_maniskill.backend.init`):
-  * ``taichi``: Taichi 1.7.4's own defaults.
-  * ``product`` (unset): Taichi's CFG pass off.
-  * ``fast`` (``make test``): also ``opt_level=0`` (no whole-kernel CSE).
+Each build of ``GAUSSTAC_COMPILE`` (``taichi``: Taichi's defaults; ``product``, unset: Taichi's CFG
+pass off; ``fast``: also ``opt_level=0``) runs the index pad pressed 1 mm by a 5 mm sphere in a child
+process with an offline cache of its own, empty in the first round. Prints per build the first
+control step [s] (every kernel compiled, then run), the median held step [ms], its ratio to the
+product build's, and the largest difference of the pad's particle positions from the product
+build's [nm].
 """
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -31,6 +19,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from .. import environment
+from .common import cli
 
 BUILDS = ("taichi", "product", "fast")
 
@@ -40,7 +31,7 @@ def _child(build_dir: Path, steps: int) -> None:
     from .. import backend
 
     backend.init("cpu")
-    from . import pad as P
+    from . import scenes as P
 
     sim, W = P.make_sim(1e-3, "sphere")
 
@@ -60,8 +51,8 @@ def _child(build_dir: Path, steps: int) -> None:
 
 
 def _run(build: str, build_dir: Path, steps: int) -> dict:
-    env = {**os.environ, "GAUSSTAC_COMPILE": "" if build == "product" else build,
-           "TI_OFFLINE_CACHE_FILE_PATH": str(build_dir / "ticache")}
+    env = environment.child_environ(GAUSSTAC_COMPILE="" if build == "product" else build,
+                                    TI_OFFLINE_CACHE_FILE_PATH=str(build_dir / "ticache"))
     out = subprocess.run([sys.executable, "-m", "gausstac_maniskill.bench", "compile", "--child", str(build_dir),
                           "--steps", str(steps)], env=env, capture_output=True, text=True)
     if out.returncode != 0:
@@ -70,8 +61,7 @@ def _run(build: str, build_dir: Path, steps: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench compile", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("compile", __doc__)
     ap.add_argument("--rounds", type=int, default=3, help="rounds over the builds (the first compiles)")
     ap.add_argument("--steps", type=int, default=5, help="held steps timed per round")
     ap.add_argument("--child", help=argparse.SUPPRESS)

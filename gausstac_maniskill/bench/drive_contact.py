@@ -1,18 +1,13 @@
-"""``python -m gausstac_maniskill.bench drive_contact``: how PhysX settles a fingertip
-pressed by its joint drives into a spring, per coupling scheme and solver (no MPM).
+"""How PhysX settles a fingertip pressed by its joint drives into a spring, per coupling scheme.
 
-ManiSkill's Allegro hand (fixed root, kp = 400 N·m/rad, kd = 10 N·m·s/rad, its own URDF and
-drives, every joint inside its range): the index finger's three flexion joints are driven 0.01 rad past where its tip
-touches a one-sided linear spring of stiffness ``K`` (along the direction the tip closes).
-The static balance of drives and spring (``kp (q* - q) = Jᵀ F``, solved exactly from the
-Jacobian) is the reference; the table gives the spring force after 0.05, 0.2 and 1 s of
-simulation and the wall time per SAPIEN step. Schemes:
+``python -m gausstac_maniskill.bench drive_contact [--stiffness 6e3 1e5] [--sim-freq 100]`` (no MPM).
 
-* ``fold``: the spring folded into the joint drives (:class:`~gausstac_maniskill.tasks.
-  joint_contact.JointContact`, what ``pad_reaction=True`` does);
-* ``d6``: a PhysX D6 joint with a soft linear limit on the tip link (PhysX's own implicit
-  spring; what ``pad_reaction=True`` did before);
-* ``explicit``: the force of the last step's pose applied as an external force.
+ManiSkill's Allegro hand drives its index finger 0.01 rad past where the tip touches a one-sided
+spring of stiffness K. The reference is the static balance of drives and spring,
+``kp (q* - q) = Jᵀ F``, solved from the Jacobian; the table gives the spring force after 0.05,
+0.2 and 1 s and the wall time per SAPIEN step, per scheme: ``fold`` (the spring folded into the
+joint drives, :class:`~gausstac_maniskill.tasks.joint_contact.JointContact`), ``d6`` (a PhysX D6
+joint with a soft linear limit) and ``explicit`` (the last step's force applied), and per solver.
 """
 from __future__ import annotations
 

@@ -1,42 +1,26 @@
-"""ManiSkill env benchmark: step time of every GaussTac task split into physics / MPM /
-tactile / render, reset time, and the task outcome, against SAPIEN's own camera and
-ManiSkill's FSR-tactile Allegro task.
+"""ManiSkill env benchmark: step time of every GaussTac task split into physics / MPM / tactile /
+render, reset time, and the task outcome, against SAPIEN's own camera and ManiSkill's FSR-tactile
+Allegro task.
 
 ``python -m gausstac_maniskill.bench envs [--steps N] [--settle N] [--dx 2e-3 1.5e-3] [--tasks ID ...]
 [--pad-solvers auto mpm fem] [--sweep-tasks ID ...] [--no-fsr] [--out DIR]``
 
-Rows:
-
-* every GaussTac task with the splat camera (``obs_mode="rgb"``, 128×128, ``pd_joint_pos``),
-  driven by its scripted expert through a whole episode: until it succeeds and ``--settle``
-  more steps, or the task's time limit (``--steps N``: at most N timed steps). The mean
-  step is therefore one of the episode as a user records it, approach included. These rows
-  use the tasks' default pads (``pad_solver="auto"``) at dx = 2 mm. PressCube (or the
-  ``--sweep-tasks``) also runs at finer MPM grids (``--dx``), where the "outcome" column is
-  the force error at the end (speed vs accuracy), with each of ``--pad-solvers`` (``fem``:
-  the pads solved at equilibrium, ``GaussTacEnv(pad_solver="fem")``, its time in the MPM
-  column; ``auto``: the tasks' default, fem with the linear model);
-* the same task with ``camera="sapien"`` (SAPIEN's rasterizer through lavapipe on a
-  CPU machine: rigid meshes only, no pad deformation), made in the same process and stepped
-  in turn with the splat run, so that both see the same machine load (the "camera side by
-  side" table: median render time per step and the ratio);
-* ``RotateSingleObjectInHandLevel0-v1`` with ``allegro_hand_right_touch`` (ManiSkill's
-  FSR tactile: 16 contact impulses), random actions, the same obs mode and image size.
-
-The first step of each run (Taichi compilation) is not timed. Times are means over the
-timed steps, milliseconds. "background pictures" counts the SAPIEN pictures the splat camera
-took of the scene without the hand during the timed steps (it reuses the last one while
-neither the camera nor anything SAPIEN draws there moved).
+Each task's scripted expert runs a whole episode (until success and ``--settle`` more steps) with
+the splat camera (128×128 ``rgb``, dx = 2 mm, the tasks' default pads); the ``--sweep-tasks`` also
+at the finer ``--dx`` with each of ``--pad-solvers`` (the outcome column then the force error);
+each task also with ``camera="sapien"``, stepped in turn with the splat run; and ManiSkill's
+``RotateSingleObjectInHandLevel0-v1`` with FSR tactile. Times are means over the timed steps
+[ms], the first (compiling) step not counted; writes ``envs.json``.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import platform
 import time
 
 import numpy as np
+
+from .common import cli, write_json
 
 TASKS = ["GaussTac-Gesture-v1", "GaussTac-PressCube-v1", "GaussTac-SlideCube-v1", "GaussTac-SqueezeSponge-v1",
          "GaussTac-GraspLiftCube-v1", "GaussTac-GraspSqueezeSponge-v1"]
@@ -175,8 +159,7 @@ def run_fsr(steps: int = 15) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench envs", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("envs", __doc__)
     ap.add_argument("--steps", type=int, default=None,
                     help="at most this many timed control steps per run (default: the whole expert episode; "
                          "the FSR row: 15)")
@@ -193,9 +176,9 @@ def main(argv=None) -> int:
                     help="tasks of the resolution sweep (default: PressCube)")
     ap.add_argument("--no-fsr", action="store_true", help="skip ManiSkill's FSR-tactile Allegro row")
     args = ap.parse_args(argv)
-    from .. import backend
+    from .. import backend, environment
 
-    print(f"[bench envs] Taichi backend: {backend.init(os.environ.get('GAUSSTAC_ARCH', 'auto'))}, "
+    print(f"[bench envs] Taichi backend: {backend.init(environment.read('GAUSSTAC_ARCH'))}, "
           f"machine: {platform.machine()}, {os.cpu_count()} cores")
     runs = []
     for env_id in args.tasks:
@@ -226,7 +209,5 @@ def main(argv=None) -> int:
     for (env_id, _, _, a), (_, _, _, b) in zip(runs[0:2 * len(args.tasks):2], runs[1:2 * len(args.tasks):2]):
         print(f"| {env_id} | {a['render_median']:.2f} | {b['render_median']:.2f} | "
               f"{a['render_median'] / b['render_median']:.2f} |")
-    os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, "envs.json"), "w") as f:
-        json.dump([dict(env=e, camera=c, dx=d, **r) for e, c, d, r in runs], f, indent=1)
+    write_json(args.out, "envs.json", [dict(env=e, camera=c, dx=d, **r) for e, c, d, r in runs], indent=1)
     return 0

@@ -1,18 +1,17 @@
-"""``python -m gausstac_maniskill.bench grasp`` — the grasp-and-lift expert on free cubes.
+"""``python -m gausstac_maniskill.bench grasp [--masses 0.01 0.05 0.5] [--dx 2e-3] [--obs-mode rgb]`` —
+the grasp-and-lift expert on free cubes.
 
-``GaussTac-GraspLiftCube-v1`` (``physx_cpu``, ``pd_joint_pos``, ``pad_reaction=True``,
-SAPIEN at 100 Hz) with its scripted expert, per cube mass and MPM grid spacing: whether it
-succeeds and at which control step, the cube's height [mm] at the end, the largest cube
-speed [mm/s] over the last second of the hold (the issue's bound is 1 mm/s), the thumb's
-and index pad's mean normal force [N] over that second against the expert's grip target,
-and the wall time per control step [ms] split into physics (SAPIEN and the per-SAPIEN-step
-coupling), MPM, tactile and render (the splat camera, ``--obs-mode rgb``).
+``GaussTac-GraspLiftCube-v1`` (``physx_cpu``, ``pd_joint_pos``, ``pad_reaction=True``, SAPIEN at
+100 Hz) with its scripted expert, per cube mass and grid spacing: success and its control step,
+the cube's final height [mm], its largest speed over the last second of the hold [mm/s], the
+thumb's and index pad's mean normal force against the grip target [N], and the wall time per
+control step split into physics, MPM, tactile and render [ms].
 """
 from __future__ import annotations
 
 import numpy as np
 
-from . import cli, run_expert_episode, split_cells, step_split_ms, write_report
+from .common import cli, run_expert_episode, split_cells, step_split_ms, write_report
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,21 +1,13 @@
-"""Hand benchmarks on the Allegro fingertip pads.
+"""Hand benchmarks on the Allegro fingertip pads: ``python -m gausstac_maniskill.bench hand [--quick] [--out DIR]``.
 
-``python -m gausstac_maniskill.bench hand [--quick] [--out DIR]``
-
-1. Step cost vs number of pads in contact (0–4): a flat plate touches k of the
-   four fingertip pads (1 mm indentation); wall time per 50 ms control step,
-   after warm-up. Idle pads sleep, so a step with no contact should cost a tiny
-   fraction of one with an active pad.
-2. Fingertip press vs Hertz: a rigid flat plate pressed into the index pad along
-   its axis. Hertz's estimate uses the tip's local radius (a sphere fitted to the
-   cap of the collision mesh) against a flat: F = 4/3·E*·√R·d^1.5. The pad is a
-   thin silicone layer on a rigid core, so it is stiffer than Hertz's half-space
-   once the contact radius √(R·d) approaches the layer thickness; the table shows
-   two thicknesses and three grid spacings, with the wall time per control step.
+1. Step cost against the number of pads in contact (0–4): a flat plate pressed 1 mm into k of
+   the four fingertip pads; wall time per 50 ms control step (idle pads sleep).
+2. The index pad pressed along its axis by a rigid plate, against Hertz's half-space estimate
+   with the tip's local radius (a sphere fitted to the cap of its collision mesh), at two layer
+   thicknesses and three grid spacings, with the wall time per control step.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import time
@@ -23,6 +15,7 @@ import time
 import numpy as np
 
 from .. import backend
+from .common import arch_option, cli, write_report
 
 INDEX = "link_3.0_tip"
 
@@ -45,7 +38,7 @@ def _plate_pose(sim, poses, pad, gap):
 def pads_in_contact(dx: float = 1.5e-3, repeats: int = 4) -> list[dict]:
     """Wall time per 50 ms step with k = 0..4 pads pressed by a plate each."""
     from ..cosim import GaussTacSim, default_hand_settings
-    from ..mpm import Box
+    from ..geometry import Box
     from ..tactile import allegro_pad_specs
 
     poses = _hand_poses()
@@ -86,7 +79,7 @@ def press_vs_hertz(dx: float, thickness: float, depths=(0.25e-3, 0.5e-3, 0.75e-3
     """Press a flat plate into the index pad; returns force vs depth and timing."""
     from ..config import PadSpec
     from ..cosim import GaussTacSim, default_hand_settings
-    from ..mpm import Box
+    from ..geometry import Box
 
     poses = _hand_poses()
     spec = PadSpec(link=INDEX, thickness=thickness, cone_deg=70.0)
@@ -115,10 +108,9 @@ def press_vs_hertz(dx: float, thickness: float, depths=(0.25e-3, 0.5e-3, 0.75e-3
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench hand", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("hand", __doc__)
     ap.add_argument("--quick", action="store_true", help="one spacing, one thickness")
-    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    arch_option(ap)
     ap.add_argument("--out", default="out/bench_hand")
     args = ap.parse_args(argv)
     arch = backend.init(args.arch)
@@ -149,7 +141,6 @@ def main(argv: list[str] | None = None) -> int:
                          f"{1e3 * c['step_s']:.0f} | {r['d'] * 1e3:.2f} | {r['a_hertz'] * 1e3:.2f} | {r['F']:.3f} | "
                          f"{r['F_hertz']:.3f} | {r['F'] / r['F_hertz']:.2f} | {r['F_map']:.3f} | {r['F_stress']:.3f} |")
     print("\n".join(press))
-    with open(os.path.join(args.out, "hand.md"), "w") as f:
-        f.write("\n".join(lines + press) + "\n")
+    write_report(args.out, "hand.md", "\n".join(lines + press))
     print(f"\nwrote {args.out}/hand.md")
     return 0

@@ -1,40 +1,16 @@
-"""Hertz contact benchmark: a rigid sphere pressed into a thick elastic pad.
+"""Hertz contact: a rigid frictionless sphere pressed into a thick MPM block (R = 5 mm, E = 0.3 MPa, ν = 0.45).
 
-``python -m gausstac_maniskill.bench hertz [--quick] [--dx 1e-3 7.5e-4 ...] [--out DIR]``
+``python -m gausstac_maniskill.bench hertz [--quick] [--dx 1e-3 7.5e-4 ...] [--grid-contact] [--out DIR]``
 ``python -m gausstac_maniskill.bench hertz --nu 0.3 0.4 0.45 0.48 0.49 0.499 [--plain]``
 
-Set-up (SI units): sphere radius R = 5 mm, pad E = 0.3 MPa, ν = 0.45, block
-10·a_max wide and thick (a_max = √(R·d_max)), the bottom two cells kinematic
-(bound to a fixed link). The indenter and the pad are symmetric about the planes
-x = 0 and y = 0, so one quarter is simulated with frictionless slip walls on
-those planes (the exact symmetry condition) and forces are multiplied by 4.
-
-Loading is quasi-static: the sphere descends at a constant rate with grid
-damping and holds at each measurement depth d; over the second half of each
-hold we average
-
-* the total normal force F (the collider's reaction),
-* the contact radius a = √(A/π), A = (top-layer particles in contact) · h²,
-* the pressure p(r) = (normal contact force of a surface particle) / h²,
-
-and compare them with Hertz: F = 4/3·E*·√R·d^1.5, a = √(R·d),
-p(r) = p0·√(1 − r²/a²), p0 = 3F/(2πa²). Sneddon's exact linear-elastic solution
-for a sphere (valid for a/R not small) is printed alongside.
-
-``--nu``: the Poisson-ratio sweep (volumetric locking). The same sphere is pressed to
-d = 1 mm into a block 10·a thick and 5·a wide (a = √(R·d)) at each ν, with F-bar (the
-default) and, with ``--plain``, with plain MLS-MPM (``SolverSettings.fbar=False``). The
-loading is :func:`~gausstac_maniskill.bench.thinlayer.run_point`'s quasi-static press
-(ramp and hold counted in the block's shear relaxation time, which ν → 0.5 does not
-shorten, unlike the P-wave's). Two references: Sneddon's half-space, and the bonded
-layer solution of the block's thickness (laterally infinite). The block lies between
-them: its base is bonded (stiffer than a half-space, more so as ν → 0.5) and its sides
-are free (softer than an infinite layer).
+A quarter block with slip walls (forces ×4), pressed quasi-statically and held at each depth
+(:func:`run_case`). Prints the force, contact radius and pressure profile against Hertz (and
+Sneddon's force, :mod:`gausstac_maniskill.reference`) with the cost per 10 ms control step, per
+grid spacing. ``--nu``: the Poisson-ratio sweep (volumetric locking, F-bar and with ``--plain``
+plain MLS-MPM) at d = 1 mm, against Sneddon and the bonded layer of the block's thickness.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import time
@@ -42,6 +18,9 @@ import time
 import numpy as np
 
 from .. import backend
+from ..reference import hertz_contact_radius, hertz_force, hertz_peak_pressure, hertz_pressure, sneddon
+from .common import arch_option, cli, progress_bar, warmup, write_json, write_report
+from .scenes import run_point
 
 R_SPHERE = 5e-3
 E_PAD = 3e5
@@ -49,25 +28,17 @@ NU_PAD = 0.45
 DEPTHS = (0.2e-3, 0.5e-3, 0.75e-3, 1.0e-3, 1.25e-3, 1.5e-3)
 
 
-def hertz_force(E_star: float, R: float, d):
-    """Hertz normal force [N] of a rigid sphere at depth d [m]."""
-    return 4.0 / 3.0 * E_star * math.sqrt(R) * np.asarray(d) ** 1.5
-
-
-def sneddon(E_star: float, R: float, d: float) -> tuple[float, float]:
-    """Sneddon's exact (linear elastic) force [N] and contact radius [m] for a sphere."""
-    from scipy.optimize import brentq
-
-    a = brentq(lambda a: a / 2 * math.log((R + a) / (R - a)) - d, 1e-9, R * (1 - 1e-9))
-    F = E_star / 2 * ((a * a + R * R) * math.log((R + a) / (R - a)) - 2 * a * R)
-    return F, a
-
-
 def run_case(dx: float, depths=DEPTHS, contact: str = "particle", ramp_transits: float = 4.0,
              hold_transits: float = 4.0, progress: bool = True) -> dict:
-    """Press the sphere to each depth at grid spacing ``dx`` [m]; return measurements."""
+    """Press the sphere to each depth of ``depths`` [m] at grid spacing ``dx`` [m] (``contact``: MPMWorld's
+    contact mode): a block 10·a_max wide and thick (a_max = √(R·d_max)) on two kinematic cells, grid damping
+    near critical, the sphere descending over ``ramp_transits`` P-wave crossings per depth and held
+    ``hold_transits``; over the second half of each hold the mean force F, contact radius a = √(A/π)
+    (A: top-layer particles in contact × h²) and pressure profile p(r), beside Hertz and Sneddon.
+    Returns ``{"dx", "h", "particles", "substeps", "wall", "rate", "rows": [...], ...}`` (SI units)."""
     from ..config import Material, SolverSettings
-    from ..mpm import MPMWorld, Sphere, box_particles
+    from ..geometry import Sphere, box_particles
+    from ..mpm import MPMWorld
     from ..transforms import make_pose
 
     material = Material(E=E_PAD, nu=NU_PAD, density=1100.0)
@@ -103,7 +74,7 @@ def run_case(dx: float, depths=DEPTHS, contact: str = "particle", ramp_transits:
     r_top = np.linalg.norm(pts[top][:, :2], axis=1)
     rows, wall, substeps = [], 0.0, 0
     depth = 0.0
-    bar = _progress(len(depths), f"dx={dx * 1e3:.2f} mm", progress)
+    bar = progress_bar(len(depths), f"dx={dx * 1e3:.2f} mm", progress)
     for d in depths:
         n_ramp = max(int(math.ceil((d - depth) * steps_ramp_per_m)), 1)
         for k in range(n_ramp):
@@ -127,9 +98,9 @@ def run_case(dx: float, depths=DEPTHS, contact: str = "particle", ramp_transits:
         a_sim = math.sqrt(float(np.mean(areas)) / math.pi)
         p_sim = np.mean(prof, axis=0)
         F_h = float(hertz_force(E_star, R_SPHERE, d))
-        a_h = math.sqrt(R_SPHERE * d)
-        p0 = 3 * F_h / (2 * math.pi * a_h ** 2)
-        p_h = p0 * np.sqrt(np.clip(1 - (r_top / a_h) ** 2, 0, None))
+        a_h = hertz_contact_radius(R_SPHERE, d)
+        p0 = hertz_peak_pressure(F_h, a_h)
+        p_h = hertz_pressure(p0, a_h, r_top)
         sel = r_top <= 1.2 * a_h
         rmse = float(np.sqrt(np.mean((p_sim[sel] - p_h[sel]) ** 2)) / p0)
         F_sn, a_sn = sneddon(E_star, R_SPHERE, d)
@@ -150,15 +121,14 @@ NU_SWEEP = (0.3, 0.4, 0.45, 0.48, 0.49, 0.499)
 def nu_sweep(nus=NU_SWEEP, dx: float = 1e-3, d: float = 1e-3, fbar_modes=(True,), progress: bool = True,
              ramp: float = 6.0, hold: float = 8.0) -> list[dict]:
     """Press the sphere to ``d`` [m] into the thick block at each Poisson ratio in ``nus``,
-    for each F-bar mode in ``fbar_modes``; rows of :func:`thinlayer.run_point` (forces in N,
+    for each F-bar mode in ``fbar_modes``; rows of :func:`~gausstac_maniskill.bench.scenes.run_point`
+    (a block 10·a thick and 5·a wide, a = √(R·d); the bonded layer of that thickness its reference; forces in N,
     times in s) with ``fbar`` added. ``ramp``/``hold`` are in shear relaxation times 1/ζ."""
-    from .thinlayer import run_point
-
     a = math.sqrt(R_SPHERE * d)
     thick = math.ceil(10.0 * a / dx - 1e-9) * dx
     half_w = math.ceil(5.0 * a / dx - 1e-9) * dx
     rows = []
-    bar = _progress(len(nus) * len(fbar_modes), f"nu sweep dx={dx * 1e3:.2f} mm", progress)
+    bar = progress_bar(len(nus) * len(fbar_modes), f"nu sweep dx={dx * 1e3:.2f} mm", progress)
     for fbar in fbar_modes:
         for nu in nus:
             row = run_point(R_SPHERE, d, h=thick, dx=dx, nu=nu, half_width=half_w, fbar=fbar, ramp=ramp, hold=hold)
@@ -190,33 +160,6 @@ def format_nu_sweep(rows: list[dict]) -> str:
         lines.append(f"{'F-bar' if fbar else 'plain'}: max |err| against Sneddon "
                      f"{100 * abs(worst['F_sim'] / worst['F_sneddon'] - 1):.1f} % (at ν = {worst['nu']:g}; target 5 %)")
     return "\n".join(lines)
-
-
-def warmup(contact: str = "particle") -> None:
-    """Compile the solver's kernels on a tiny world so timings exclude Taichi's JIT."""
-    from ..config import Material, SolverSettings
-    from ..mpm import MPMWorld, Sphere, box_particles
-    from ..transforms import make_pose
-
-    world = MPMWorld(SolverSettings(dx=2e-3, gravity=(0, 0, 0)), contact=contact)
-    world.add_link("ground", np.eye(4))
-    pts = box_particles([0, 0, -4e-3], [4e-3, 4e-3, 0], 1e-3)
-    world.add_group("pad", pts, Material(), link="ground", kinematic=pts[:, 2] < -3e-3)
-    world.add_slip_wall(0, 0.0)
-    world.add_collider(Sphere(radius=2e-3, pose=make_pose([0, 0, 1.9e-3])))
-    world.step(1e-5)
-
-
-def _progress(total, desc, enabled):
-    try:
-        from tqdm import tqdm
-
-        return tqdm(total=total, desc=desc, disable=not enabled, leave=False)
-    except ImportError:  # pragma: no cover
-        class _Null:
-            def update(self, n): ...
-            def close(self): ...
-        return _Null()
 
 
 def summarize(case: dict, d_lo: float = 0.5e-3, d_hi: float = 1.5e-3) -> dict:
@@ -277,7 +220,7 @@ def plot(cases: list[dict], path: str) -> None:
     last = cases[-1]["rows"][-1]
     a = last["a_hertz"]
     rr = np.linspace(0, 1.2 * a, 100)
-    ax2.plot(rr * 1e3, last["p0"] * np.sqrt(np.clip(1 - (rr / a) ** 2, 0, None)) / 1e3, "k-", label="Hertz")
+    ax2.plot(rr * 1e3, hertz_pressure(last["p0"], a, rr) / 1e3, "k-", label="Hertz")
     for c in cases:
         r = c["rows"][-1]
         ax2.plot(np.array(r["profile_r"]) * 1e3, np.array(r["profile_p"]) / 1e3, ".", ms=3,
@@ -292,13 +235,12 @@ def plot(cases: list[dict], path: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench hertz", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("hertz", __doc__)
     ap.add_argument("--quick", action="store_true", help="one coarse resolution (about a minute)")
     ap.add_argument("--dx", type=float, nargs="+", help="grid spacings [m] to sweep")
     ap.add_argument("--grid-contact", action="store_true",
                     help="also run the coarsest dx with grid-node contact, for comparison")
-    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    arch_option(ap)
     ap.add_argument("--out", default="out/hertz", help="folder for hertz.png, hertz.md, hertz.json")
     ap.add_argument("--nu", type=float, nargs="+", metavar="NU",
                     help="Poisson-ratio sweep (volumetric locking) at the first --dx (default 1 mm) instead")
@@ -310,9 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = nu_sweep(args.nu, dx=(args.dx or [1e-3])[0], fbar_modes=(True, False) if args.plain else (True,))
         table = format_nu_sweep(rows)
         print(f"Poisson-ratio sweep on {arch} ({os.cpu_count()} cores), {time.time() - t0:.0f} s\n\n{table}")
-        os.makedirs(args.out, exist_ok=True)
-        with open(os.path.join(args.out, "nu_sweep.md"), "w") as f:
-            f.write(table + "\n")
+        write_report(args.out, "nu_sweep.md", table)
         return 0
     dxs = args.dx or ([1.0e-3] if args.quick else [1.0e-3, 0.75e-3, 0.5e-3])
     os.makedirs(args.out, exist_ok=True)
@@ -333,10 +273,8 @@ def main(argv: list[str] | None = None) -> int:
     table = format_tables(cases)
     print()
     print(table)
-    with open(os.path.join(args.out, "hertz.md"), "w") as f:
-        f.write(table + "\n")
-    with open(os.path.join(args.out, "hertz.json"), "w") as f:
-        json.dump(cases, f)
+    write_report(args.out, "hertz.md", table)
+    write_json(args.out, "hertz.json", cases)
     plot(cases, os.path.join(args.out, "hertz.png"))
     print(f"\nwrote {args.out}/hertz.png, hertz.md, hertz.json  (total {time.time() - t0:.0f} s)")
     return 0

@@ -1,20 +1,13 @@
-"""``python -m gausstac_maniskill.bench hold`` — the statics of a held object: do the pads'
-MPM forces carry the cube's weight, and only that?
+"""``python -m gausstac_maniskill.bench hold [--mass 0.01 0.05 0.5 1.0] [--dx 2e-3]`` — the statics of a
+held object: do the pads' MPM forces carry the cube's weight, and only that?
 
-Two parts:
-
-1. **Two pads on one free box, off the hand** (no MPM, one PGS step, no gravity). A 10 g box
-   pinched by the thumb's and the index pad's forces of the held cube (0.115 N and 1.897 N,
-   with their contact stiffnesses) should move to the implicit balance
-   ``(F1 - F2) / (m/dt² + K1 + K2)`` in one step. Rows: each pad's PhysX soft limit alone,
-   one soft limit per pad together (the coupling before
-   :class:`~gausstac_maniskill.tasks.contact_spring.ObjectSpring`), and the one spring per
-   object.
-2. **The held cube, on the hand.** The ``GaussTac-GraspLiftCube-v1`` expert (``pd_joint_pos``,
-   SAPIEN 100 Hz, ``pad_reaction=True``) lifts and holds cubes of each ``--mass`` until the task
-   succeeds (2 s held). At the end, each pad's MPM force on the cube, their sum against the
-   cube's weight (a still cube: they must add up to ``m g`` upward), and the cube's largest
-   speed over the last second of the hold (the issue's bound: 1 mm/s).
+1. Two pads on one free 10 g box (no MPM, one PGS step, no gravity): the box's motion under each
+   coupling (each pad's PhysX soft limit alone, one per pad, one
+   :class:`~gausstac_maniskill.tasks.contact_spring.ObjectSpring` per object) against the implicit
+   balance ``(F1 - F2) / (m/dt² + K1 + K2)``.
+2. The ``GaussTac-GraspLiftCube-v1`` expert holding cubes of each ``--mass``: each pad's force on
+   the cube, their sum against the cube's weight, and the cube's largest speed over the last
+   second of the hold.
 """
 from __future__ import annotations
 
@@ -23,12 +16,12 @@ import time
 import numpy as np
 import sapien
 
-from . import cli, write_report
+from .common import cli, write_report
 
 #: the pads of the pinch and their links (Allegro)
 PADS = {"thumb": "link_15.0_tip", "index": "link_3.0_tip"}
 #: the thumb's and the index pad's force [N] and indentation [m] on the held 10 g cube at
-#: dx = 2 mm with one PhysX spring per pad (BENCHMARKS.md, issue 11 seventh step)
+#: dx = 2 mm with one PhysX spring per pad
 PINCH = ((0.115, 0.10e-3), (1.897, 0.57e-3))
 
 
@@ -55,7 +48,7 @@ def _pinch_scene(dt: float):
 
 
 def _per_pad_limits(scene, box, pads, which=(0, 1)):
-    """One PhysX D6 soft limit per pad in ``which`` (the former coupling), preloaded with its
+    """One PhysX D6 soft limit per pad in ``which`` (the per-pad coupling), preloaded with its
     force. Returns the drives (a dropped drive is removed)."""
     from ..tasks.contact_spring import OBJECT_GAIN, frame_along
     from ..transforms import matrix_to_quat
@@ -127,7 +120,7 @@ def held_row(mass: float, dx: float, seed: int) -> str:
 
     import gausstac_maniskill.tasks  # noqa: F401  (registers the tasks with ManiSkill)
 
-    from . import run_expert_episode
+    from .common import run_expert_episode
 
     env = gym.make("GaussTac-GraspLiftCube-v1", sim_backend="physx_cpu", obs_mode="state",
                    control_mode="pd_joint_pos", mpm_dx=dx, cube_mass=mass)

@@ -1,54 +1,25 @@
-"""``python -m gausstac_maniskill.bench kernels`` — where the MPM time goes on the product pad.
+"""``python -m gausstac_maniskill.bench kernels [--arch cpu|cuda] [--steps N] [--probe] [--ir] [--launches N]``
+— where the MPM time goes on the product pad.
 
-The Allegro index pad (default :class:`~gausstac_maniskill.config.PadSpec`) is pressed 1 mm
-by a 5 mm sphere (the pad benchmark's set-up, ``bench pad``); one held 50 ms control step is
-then run under Taichi's kernel profiler (``--arch cpu``, the default, or ``cuda``). Prints the particle count, substeps, wall
-time, throughput in particle-substeps per second, and Taichi's per-task table: every
-parallel loop of a kernel is one task (``advance_..._kernel_<k>_range_for``), in source
-order of :func:`~gausstac_maniskill.mpm.kernels.advance` (clear grid, F-bar volume scatter,
-P2G for the two slab colours, grid update, contact scatter for the two colours, contact
-apply, G2P) and :func:`~gausstac_maniskill.mpm.kernels.prepare` (frames, kinematic
-particles, bounds, slab sort). The time not in any task is Python launch overhead.
-
-``--steps N`` runs N held steps instead of one and adds each task's spread over all of their
-substeps: minimum, 10th percentile, median, mean and 90th percentile [ms], and the sums of each
-column over the substep's tasks with the throughput each sum implies. On a shared host the
-spread is mostly the host's (``--probe`` says how much): the same task on the same data took
-from its minimum to twice that on the 2-core host of BENCHMARKS' twentieth session. The
-minimum's sum is then what the kernels cost when nothing else slows the cores, and the mean's
-what this host gave them.
-
-``--probe`` instead measures the host (:mod:`~gausstac_maniskill.bench.host_probe`): four small
-kernels taking turns 200 times, a dependent chain of square roots (arithmetic only), a
-read-modify-write sweep over 16 KB (in L1) and over 1 MB (in L2) on one thread, and the 1 MB
-sweep on both threads; it prints each one's minimum, median and 90th percentile. Where the
-sweeps' median is well above their minimum and the chain's is not, the host's load/store side is
-shared (a busy neighbour); where the two-thread sweep's is above the one-thread sweep's, one
-core ran slower than the other, and every parallel loop of the MPM waits for it.
-
-``--ir`` also counts the instructions of every task of ``advance`` in the optimized LLVM IR that Taichi
-compiled for this machine (loads, stores, float operations with a vector's lanes counted each, and all). A
-scatter's or gather's body is one particle's code with its 27-node stencil unrolled, every branch included, so
-its count is an upper bound of what one particle executes; against the task's fastest time it says how close the
-loop runs to the core's instruction rate (the twenty-second session of BENCHMARKS reads it).
-
-``--launches N`` instead times the three ways of launching the kernels in one process, without
-the profiler: Taichi's own call, :class:`~gausstac_maniskill.kernel_launch.CachedKernel` with
-Taichi's argument setting, and CachedKernel with its planned launch context (the default).
-They take turns step by step over N held steps each (the host's noise then falls on all three
-alike); it prints each one's median ms per substep and the median of its ratio to the
-default's step of the same turn.
+The index pad pressed 1 mm by a 5 mm sphere (``bench pad``'s scene); held control steps run under
+Taichi's kernel profiler. Prints particles, substeps, wall time, throughput [particle-substeps/s]
+and Taichi's per-task table (each parallel loop of ``advance`` and ``prepare``; the rest is launch
+overhead); ``--steps N`` also each task's spread over the substeps (min, p10, median, mean, p90).
+``--probe`` instead measures the host's noise (:mod:`~gausstac_maniskill.bench.host_probe`);
+``--ir`` counts each task's instructions in Taichi's optimized LLVM IR; ``--launches N`` times
+the three kernel launch paths (:mod:`~gausstac_maniskill.kernel_launch`) against each other.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
+from .. import environment
+from .common import cli
+
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench kernels", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("kernels", __doc__)
     ap.add_argument("--dx", type=float, default=1e-3, help="grid spacing [m] (default: 1 mm, the product's)")
     ap.add_argument("--indenter", default="sphere", choices=["plate", "sphere"])
     ap.add_argument("--arch", default="cpu", choices=["cpu", "cuda"], help="Taichi backend (default: cpu)")
@@ -64,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.probe and args.arch != "cpu":
         ap.error("--probe measures the CPU host: use it with --arch cpu")
     if args.launches <= 0 and not args.probe:  # the probe times whole launches: no profiler in them
-        os.environ["GAUSSTAC_KERNEL_PROFILER"] = "1"
+        environment.write("GAUSSTAC_KERNEL_PROFILER", "1")
     from .. import backend
 
     arch = backend.init(args.arch)  # raises BackendError if cuda was asked for and does not work
@@ -75,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
 
         return probe_host()
 
-    from . import pad as P
+    from . import scenes as P
 
     ir_dir = None
     if args.ir:  # Taichi writes each kernel's optimized IR to the working directory as it compiles it

@@ -1,19 +1,12 @@
 """Consistent look: the hand's Gaussians against SAPIEN's lit render of the same hand.
 
-``python -m gausstac_maniskill.bench look [--sizes 128x128 320x240] [--out DIR]`` (about 35 s on 2 cores)
+``python -m gausstac_maniskill.bench look [--sizes 128x128 320x240] [--out DIR]``
 
-For each of the six gestures of ``GaussTac-Gesture-v1`` the gesture expert drives the hand to
-its gesture (same seed) in envs that differ only in the camera: ``camera="sapien"`` (SAPIEN's
-rasterizer, the task's lighting) and ``camera="splat"`` (our Gaussians over SAPIEN's render of
-the rest of the scene), once per ``splat_lighting`` mode: ``"baked"`` (the Gaussians' colours
-as stored, unlit) and ``"scene"`` (shaded with the scene's lights,
-:mod:`gausstac_maniskill.splat.lighting`). All images come from the task's default camera at
-the same pose and intrinsics. The hand's pixels are those SAPIEN's segmentation gives to the
-robot's links; PSNR [dB] is over those pixels, MS-SSIM (pytorch-msssim, window 7 at 128 px)
-over the hand's bounding box with the background made equal in both images. The splat
-camera's time per frame (capture + render, SAPIEN's background reused as in the task, median
-of 7 with the modes taking turns, :func:`_frame_ms`) is measured at each gesture. Writes a side-by-side PNG per size (SAPIEN | splat per
-mode | |difference| × 4 per mode) to ``--out``.
+For each gesture of ``GaussTac-Gesture-v1`` the gesture expert drives the hand there (same seed)
+in envs that differ only in the camera: ``camera="sapien"`` and ``camera="splat"`` with each
+``splat_lighting`` mode (``"baked"``, ``"scene"``). Prints the PSNR [dB] over the hand's pixels,
+MS-SSIM over its bounding box and the splat camera's time per frame; writes a side-by-side PNG
+per size.
 """
 from __future__ import annotations
 
@@ -24,7 +17,7 @@ import time
 import numpy as np
 import torch
 
-from . import cli, write_report
+from .common import cli, write_report
 
 CAMERA = "splat_camera"
 

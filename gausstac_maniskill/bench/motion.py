@@ -1,21 +1,12 @@
-"""``python -m gausstac_maniskill.bench motion`` — what the pads' pseudo-mass does to a force read while the contact moves.
+"""``python -m gausstac_maniskill.bench motion [--mass-scaling 15.625 ... 4000] [--indenter plate|sphere]
+[--mover object|link] [--press-steps 2]`` — what the pads' pseudo-mass does to a force read while the
+contact moves.
 
-The pads are integrated explicitly with their mass scaled by ``mass_scaling`` s and a
-relaxation damping of rate ζ ∝ 1/√s (:func:`~gausstac_maniskill.cosim.default_hand_settings`,
-``mpm.solver``): held still they settle to the quasi-static state whatever s is (the
-``bench pad --curve`` hold). While the contact moves, the damping force on the layer, about
-s·m·ζ·v ∝ √s·v, adds to the contact force: a rate artifact that a real 1 g pad does not
-have (its own inertia is negligible at these speeds).
-
-The index pad (``bench pad``'s set-up, dx = 1 mm) meets the ``--indenter`` (default the
-plate). ``--mover object``: the indenter, 0.2 mm clear, presses 1 mm in two 50 ms control steps
-(to 0.5 mm, then on to 1 mm at 10 mm/s), is held five steps, slides 2 mm along the sensor's x
-in two steps (20 mm/s) and is held five more; ``--mover link``: the indenter stands still and
-the finger's link makes the same moves. For each pseudo-mass factor the table gives the normal
-force of the press's second step (in motion, mean over the step), of the first held step and
-of the last one, and the tangential force of the slide's second step and of the last held
-step. ``F0`` is the value extrapolated to s → 0 by F(s) = F0 + c·√s through the two smallest
-factors; each row's error is against it.
+The index pad (``bench pad``'s scene, dx = 1 mm) is pressed 1 mm, held, slid 2 mm and held, by the
+indenter moving (``--mover object``) or by the finger's link (``link``), at each pad pseudo-mass
+factor s. Prints the normal force in motion, at the first and the last held step, and the
+tangential force in the slide and after it, each against F0, extrapolated to s → 0 by
+F(s) = F0 + c·√s through the two smallest factors.
 """
 from __future__ import annotations
 
@@ -24,7 +15,7 @@ import time
 
 import numpy as np
 
-from . import arch_option, cli, write_report
+from .common import arch_option, cli, write_report
 
 FIELDS = ("Fn_moving", "Fn_first_held", "Fn_held", "Ft_moving", "Ft_held")
 LABELS = {"Fn_moving": "Fn, pressing", "Fn_first_held": "Fn, first held step", "Fn_held": "Fn, held",
@@ -38,7 +29,7 @@ def run(mass_scaling: float, dx: float = 1e-3, indenter: str = "plate", mover: s
     closes the 0.2 mm gap); returns ``{"mass_scaling", "substeps", "step_ms", **FIELDS}`` (forces on the
     indenter in N, sensor axes: Fn along -z into the pad, Ft along the slide; "Fn_moving" is
     the press's last step)."""
-    from . import pad as P
+    from . import scenes as P
 
     sim, W = P.make_sim(dx, indenter, mass_scaling=mass_scaling)
     R = W[:3, :3]
@@ -117,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = [run(s, args.dx, args.indenter, args.mover, press_steps=args.press_steps)
             for s in tqdm(args.mass_scaling, desc="mass scaling")]
     f0 = extrapolate(rows)
-    from .pad import DT
+    from .scenes import DT
 
     speed = 1e3 * 1e-3 / (args.press_steps * DT)  # mm/s in the press's steps after the first
     text = table(rows, f0, f"Index pad, {args.indenter}, the {args.mover} moving, dx = {args.dx * 1e3:g} mm, press "

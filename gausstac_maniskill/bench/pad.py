@@ -1,65 +1,30 @@
-"""Grid convergence of the product's fingertip pad (Allegro index tip, default PadSpec).
+"""Grid convergence of the product's fingertip pad (the Allegro index tip, default PadSpec).
 
 ``python -m gausstac_maniskill.bench pad [--quick] [--dx 1e-3 7.5e-4 5e-4] [--depths 5e-4 1e-3]
-[--thickness 2e-3] [--out DIR]``
+[--indenters plate sphere] [--pad-solver mpm|fem] [--curve] [--out DIR]``
 
-Set-up (SI units): the index pad (``link_3.0_tip`` of :func:`allegro_pad_specs`) in a
-:class:`GaussTacSim` with :func:`default_hand_settings` (only ``dx`` changes), its link
-fixed at a world pose with identity rotation (the particle lattice is aligned with the
-MPM grid). Two rigid indenters, friction coefficient 0.5:
-
-* ``plate``: a :class:`HalfSpace` whose surface is normal to the sensor z axis;
-* ``sphere``: a :class:`Sphere` of radius 5 mm centred on the sensor z axis.
-
-Protocol, in 50 ms control steps (``sim.step``): one step at rest with the indenter
-0.2 mm away (JIT, not timed); then for each depth d (past first contact at the sensor
-origin, which lies on the pad's particle surface at its apex) the indenter moves along
--z to z = -d over ``press`` steps and holds for ``hold`` steps ("press" phase); from that
-state it slides 2 mm along +x at constant z over ``slide`` steps and holds ("slide"
-phase); the pressed state is then restored and the next depth starts from it.
-
-Measured over the hold steps (means): normal force Fn = reaction on the indenter along
-sensor z, tangential force Ft = reaction along -x (resisting the slide), the force-map
-sum, the maps (depth, shear, force), contact area (taxels whose force exceeds 1 mN ×
-taxel area; and the projected area of the pad particles with a contact force, at their
-rest positions, binned on the particle lattice), peak depth. Against the finest run:
-relative L2 of each map, ‖m − m_finest‖ / ‖m_finest‖ on the layout's taxel grid, and a
-Richardson extrapolation of Fn and Ft from the three finest grids.
+The index pad (:func:`~gausstac_maniskill.bench.scenes.make_sim`) is pressed by a plate and a
+5 mm sphere to each depth, held, slid 2 mm and held (:func:`~gausstac_maniskill.bench.scenes.press_pad`),
+at each grid spacing. Prints the forces, contact areas and tactile maps against the finest grid
+(relative L2) with a Richardson extrapolation of the forces, and the verdict for the default dx;
+``--curve`` instead gives the speed-vs-error curve of the held force over grids, pseudo-mass
+factors, patch radii and Courant numbers.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 
 from .. import backend
+from .common import arch_option, cli, write_json, write_report
+from .scenes import FRICTION, FULL, MAPS, SLIDE, SPHERE_RADIUS, Protocol, index_spec
+from .scenes import press_pad as run_case  # the pad's experiment (looked up here: speed_curve and run call it)
 
-INDEX = "link_3.0_tip"
-SPHERE_RADIUS = 5e-3  # m
-FRICTION = 0.5
-SLIDE = 2e-3  # m, along sensor x
-GAP = 0.2e-3  # m, indenter clearance at rest
-DT = 0.05  # s, control step
-AREA_FORCE = 1e-3  # N, a taxel above this force is in contact
-LINK_POSE = np.array([[1.0, 0, 0, 0.0], [0, 1.0, 0, 0.0], [0, 0, 1.0, 0.1], [0, 0, 0, 1.0]])
-MAPS = ("depth", "shear", "force")
-
-
-@dataclass
-class Protocol:
-    """Control steps of each stage: ramp per depth, slide, and hold (measured)."""
-
-    press: int = 3
-    slide: int = 4
-    hold: int = 3
-
-
-FULL, QUICK = Protocol(3, 4, 3), Protocol(2, 2, 2)
+QUICK = Protocol(2, 2, 2)  # --quick
 CURVE = Protocol(press=2, slide=0, hold=2)  # press and hold only (speed-vs-error curve)
 
 
@@ -108,160 +73,6 @@ def richardson(h, f) -> dict:
     if p <= 0.0:
         return {"p": p, "f_star": None, "status": "not converging"}
     return {"p": p, "f_star": f1 + (f1 - f2) / math.expm1(p * a), "status": "ok"}
-
-
-# ---------------------------------------------------------------------------- simulation
-def index_spec(thickness: float | None = None):
-    """The product's default PadSpec of the index tip (optionally another soft thickness [m])."""
-    from ..tactile import allegro_pad_specs
-
-    kw = {} if thickness is None else {"thickness": float(thickness)}
-    return next(s for s in allegro_pad_specs(**kw) if s.link == INDEX)
-
-
-def indenter_pose(kind: str, W: np.ndarray, z: float, x: float = 0.0) -> np.ndarray:
-    """World pose of indenter ``kind`` whose surface point nearest the pad is at sensor
-    coordinates (x, 0, z) [m]; ``W`` is the sensor frame's world pose (4x4)."""
-    from ..transforms import make_pose
-
-    p = W[:3, :3] @ np.array([x, 0.0, z]) + W[:3, 3]
-    if kind == "plate":  # half-space solid along +z_sensor: its local z points at the pad
-        return make_pose(p, W[:3, :3] @ np.diag([1.0, -1.0, -1.0]))
-    return make_pose(p + W[:3, 2] * SPHERE_RADIUS, W[:3, :3])
-
-
-def _collider(kind: str, pose: np.ndarray, friction: float):
-    from ..mpm.colliders import HalfSpace, Sphere
-
-    if kind == "plate":
-        return HalfSpace(pose=pose, friction=friction)
-    return Sphere(radius=SPHERE_RADIUS, pose=pose, friction=friction)
-
-
-def _contact_area(sim, pad) -> float:
-    """Projected area [m²] of the pad particles with a contact force: their rest sensor
-    coordinates binned on the particle lattice (h × h cells)."""
-    f = sim.pad_contact_forces(INDEX)
-    s = pad.sensor_coords()[np.linalg.norm(f, axis=1) > 0]
-    if not len(s):
-        return 0.0
-    cells = np.unique(np.round((s[:, :2] - pad.sensor_coords()[0, :2]) / pad.spacing).astype(np.int64), axis=0)
-    return len(cells) * pad.spacing ** 2
-
-
-def make_sim(dx: float, indenter: str, thickness: float | None = None, friction: float = FRICTION,
-             mass_scaling: float | None = None, pad_surface: str = "mesh", patch_radius=False,
-             cfl: float | None = None, pad_solver: str = "mpm", fem_model: str = "linear",
-             fem_precompute: bool | None = None):
-    """The benchmark's scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
-    :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
-    factor ``mass_scaling``, ``patch_radius`` [m] or None (False: the default's) and Courant
-    number ``cfl``;
-    ``pad_surface``, ``pad_solver``, ``fem_model`` and ``fem_precompute`` as in :class:`GaussTacSim`) and
-    ``indenter``
-    ("plate" | "sphere") 0.2 mm clear of its apex. Returns (sim, W): W the sensor frame's
-    world pose (4x4)."""
-    from ..cosim import GaussTacSim, default_hand_settings
-
-    extra = {} if mass_scaling is None else {"mass_scaling": float(mass_scaling)}
-    if patch_radius is not False:
-        extra["patch_radius"] = patch_radius
-    if cfl is not None:
-        extra["cfl"] = float(cfl)
-    sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra),
-                      pad_surface=pad_surface, pad_solver=pad_solver, fem_model=fem_model,
-                      fem_precompute=fem_precompute)
-    W = LINK_POSE @ sim.pads[INDEX].sensor_frame
-    sim.prepare_pads()  # the equilibrium pad's factor and compliance: set-up, not a step's cost
-    sim.add_rigid_object("indenter", _collider(indenter, indenter_pose(indenter, W, GAP), friction))
-    return sim, W
-
-
-def run_case(dx: float, indenter: str, depths, thickness: float | None = None, protocol: Protocol = FULL,
-             friction: float = FRICTION, bar=None, mass_scaling: float | None = None,
-             pad_surface: str = "mesh", patch_radius=False, cfl: float | None = None, pad_solver: str = "mpm",
-             fem_model: str = "linear", fem_precompute: bool | None = None) -> dict:
-    """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
-    (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
-    (default: :func:`default_hand_settings`'); ``patch_radius`` [m] the active patch (None: off,
-    False: the default's); ``cfl`` the Courant number (default: the settings'); ``pad_solver``
-    ``"fem"`` solves the pad at equilibrium instead (with ``fem_model``, ``fem_precompute``): its ``step_ms`` is
-    the equilibrium solve's wall time plus the MPM world's (which then holds no particles).
-
-    Returns ``{"dx", "indenter", "particles", "soft", "substeps", "step_ms", "build_s",
-    "phases": [...]}``; each phase (``"press"`` / ``"slide"`` at depth ``d`` [m]) holds
-    hold-step means of ``Fn``, ``Ft``, ``Fy``, ``F_map`` [N], ``F_spread`` (max−min)/mean
-    of Fn, ``Fn_end``, ``F_stress_end`` and ``F_pressure_end`` (means over the second half of the
-    hold: the settled end), ``area_taxel``, ``area_particle`` [m²], ``peak_depth`` [m] and ``maps``
-    (``depth`` [H, W] m, ``shear`` [H, W, 2] m, ``force`` [H, W] N, numpy).
-    """
-    t0 = time.perf_counter()
-    sim, W = make_sim(dx, indenter, thickness, friction, mass_scaling, pad_surface, patch_radius, cfl,
-                      pad_solver, fem_model, fem_precompute)
-    pad = sim.pads[INDEX]
-    spec = pad.spec
-    build_s = time.perf_counter() - t0
-    lay = spec.layout
-    taxel_area = lay.pitch[0] * lay.pitch[1]
-    walls, subs, active = [], [], []
-
-    def step(z: float, x: float):
-        maps = sim.step({INDEX: LINK_POSE}, DT, {"indenter": indenter_pose(indenter, W, z, x)})[INDEX]
-        walls.append(sim.world.last_step.wall_time + sim.pad_solve_time)
-        subs.append(sim.world.last_step.substeps)
-        active.append(sim.world.last_step.active_particles)
-        if bar is not None:
-            bar.update(1)
-        F = W[:3, :3].T @ sim.object_wrench("indenter")[0]  # on the indenter, sensor axes
-        return F, {k: maps[k].cpu().numpy().astype(np.float64) for k in MAPS}
-
-    def hold(phase: str, d: float, z: float, x: float) -> dict:
-        Fs, ms, areas, Fstress = [], [], [], []
-        first = len(walls)
-        for _ in range(protocol.hold):
-            F, m = step(z, x)
-            Fs.append(F)
-            ms.append(m)
-            areas.append(_contact_area(sim, pad))
-            Fstress.append((-sim.pad_stress_force(INDEX)[2], sim.pad_pressure_force(INDEX)))
-        Fs = np.array(Fs)
-        maps = {k: np.mean([m[k] for m in ms], axis=0) for k in MAPS}
-        Fn = float(Fs[:, 2].mean())
-        end = len(Fs) // 2
-        stress, pressure = np.array(Fstress).T
-        held_walls, held_subs = walls[first + end:], subs[first + end:]
-        return dict(phase=phase, d=d, Fn=Fn, Ft=float(-Fs[:, 0].mean()), Fy=float(Fs[:, 1].mean()),
-                    F_map=float(maps["force"].sum()), F_stress=float(stress.mean()), F_pressure=float(pressure.mean()),
-                    Fn_end=float(Fs[end:, 2].mean()), F_stress_end=float(stress[end:].mean()),
-                    F_pressure_end=float(pressure[end:].mean()),
-                    wall_end=1e3 * float(np.mean(held_walls)), substeps_end=float(np.mean(held_subs)),
-                    F_spread=float(np.ptp(Fs[:, 2]) / Fn) if Fn else float("nan"),
-                    area_taxel=float((maps["force"] > AREA_FORCE).sum() * taxel_area),
-                    area_particle=float(np.mean(areas)), peak_depth=float(maps["depth"].max()), maps=maps)
-
-    step(GAP, 0.0)  # at rest: JIT compile and settle, not timed
-    walls.clear()
-    subs.clear()
-    active.clear()
-    phases, z = [], GAP
-    for d in depths:
-        for k in range(protocol.press):
-            step(z + (-d - z) * (k + 1) / protocol.press, 0.0)
-        z = -d
-        phases.append(hold("press", d, z, 0.0))
-        if not protocol.slide:
-            continue
-        pressed = sim.state_dict()
-        for k in range(protocol.slide):
-            step(z, SLIDE * (k + 1) / protocol.slide)
-        phases.append(hold("slide", d, z, SLIDE))
-        sim.load_state_dict(pressed)
-    return dict(dx=dx, indenter=indenter, pad_solver=pad_solver, spacing=pad.spacing,
-                mass_scaling=sim.settings.mass_scaling, particles=pad.num_particles,
-                soft=int((~pad.kinematic).sum()), patch_radius=sim.settings.patch_radius, cfl=sim.settings.cfl,
-                active=float(np.mean(active)),
-                substeps=float(np.mean(subs)), step_ms=1e3 * float(np.mean(walls)), build_s=build_s,
-                thickness=spec.thickness, phases=phases)
 
 
 # ---------------------------------------------------------------------------- analysis
@@ -415,7 +226,7 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
     the index pad (:data:`CURVE` protocol, with ``hold`` held steps) and records the held normal
     force Fn [N] (mean over the second half of the hold, and its spread over the whole hold), the
     MPM wall time per 50 ms step [ms], and the normal force read from the pad's stress
-    (:meth:`GaussTacSim.pad_stress_force`, virtual work; and the older pressure-map
+    (:meth:`GaussTacSim.pad_stress_force`, virtual work; and the pressure-map
     estimate :meth:`GaussTacSim.pad_pressure_force`), for the consistency of the readings.
     The reference is the Richardson extrapolation of Fn over the three finest grids at the
     default mass scaling when it gives an order in (0.5, 4), else the finest run; errors
@@ -505,15 +316,14 @@ def main(argv: list[str] | None = None) -> int:
     from ..cosim import default_hand_settings
 
     default_dx, default_ms = default_hand_settings().dx, default_hand_settings().mass_scaling
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench pad", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("pad", __doc__)
     ap.add_argument("--quick", action="store_true", help="dx 2, 1.5, 1 mm and fewer control steps")
     ap.add_argument("--dx", type=float, nargs="+", help="grid spacings [m] (default: %g, 7.5e-4, 5e-4)" % default_dx)
     ap.add_argument("--depths", type=float, nargs="+", default=[0.5e-3, 1.0e-3], help="press depths [m]")
     ap.add_argument("--thickness", type=float, help="soft layer thickness [m] (default: PadSpec's)")
     ap.add_argument("--indenters", nargs="+", default=["plate", "sphere"], choices=["plate", "sphere"])
     ap.add_argument("--friction", type=float, default=FRICTION)
-    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    arch_option(ap)
     ap.add_argument("--out", default="out/bench_pad")
     ap.add_argument("--curve", action="store_true",
                     help="speed-vs-error curve instead: --dx grids at the default mass scaling, plus the "
@@ -553,9 +363,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"total {time.perf_counter() - t0:.0f} s\n\n"
                 + format_curve(curve, args.indenters[0], args.depths[-1]))
         print(text)
-        os.makedirs(args.out, exist_ok=True)
-        with open(os.path.join(args.out, "curve.md"), "w") as f:
-            f.write(text + "\n")
+        write_report(args.out, "curve.md", text)
         return 0
     dxs = args.dx or ([2e-3, 1.5e-3, 1e-3] if args.quick else [default_dx, 0.75e-3, 0.5e-3])
     protocol = QUICK if args.quick else FULL
@@ -573,12 +381,11 @@ def main(argv: list[str] | None = None) -> int:
             f"(50 ms steps), total {time.perf_counter() - t0:.0f} s")
     text = head + "\n\n" + format_tables(cases, ana, default_dx)
     print(text)
-    with open(os.path.join(args.out, "pad.md"), "w") as f:
-        f.write(text + "\n")
+    write_report(args.out, "pad.md", text)
     plain = [{**c, "phases": [{**ph, "maps": {k: v.tolist() for k, v in ph["maps"].items()}} for ph in c["phases"]]}
              for c in cases]
-    with open(os.path.join(args.out, "pad.json"), "w") as f:
-        json.dump(dict(arch=arch, default_dx=default_dx, protocol=asdict(protocol), cases=plain, **ana), f, indent=1)
+    write_json(args.out, "pad.json", dict(arch=arch, default_dx=default_dx, protocol=asdict(protocol), cases=plain, **ana),
+               indent=1)
     images = plot_maps(cases, args.out)
     print(f"\nwrote {args.out}/pad.md, pad.json and {len(images)} map images")
     return 0

@@ -1,32 +1,14 @@
-"""Cost against pad size and contact area, with and without the active patch (issue 10, point 7).
+"""``python -m gausstac_maniskill.bench patch [--pad-solver mpm|fem] [--dx 1e-3] [--patch-radius 4e-3 6e-3]
+[--out DIR]``
+— cost against pad size and contact area, with and without the active patch.
 
-``python -m gausstac_maniskill.bench patch [--pad-solver mpm|fem] [--dx 1e-3] [--patch-radius 4e-3 6e-3] [--out DIR]``
-(about 3 min on 2 cores for the MPM, 5 min for the pads at equilibrium)
-
-A square block pad (4 mm soft layer of the product's silicone on one cell of bound
-particles, the product's solver settings: :func:`~gausstac_maniskill.cosim.default_hand_settings`)
-is pressed 1 mm by a rigid sphere over two 50 ms steps and held one step. Two sweeps:
-
-* pad width 10, 20 and 40 mm under a 5 mm sphere (one contact patch, a ≈ 2.2 mm);
-* sphere radius 2.5, 5, 10 and 20 mm on the 40 mm pad (contact radius a = √(Rδ)).
-
-Each case runs on the whole pad and with ``SolverSettings.patch_radius`` set
-(:mod:`gausstac_maniskill.mpm.patch`: only the pad within that distance of the contact is
-simulated, the rest rides with the link). Reported per run: particles, those simulated in
-the held step, grid cells, substeps, MPM wall time of the held step, the normal force and,
-for the patch, its error against the whole pad of the same case (what clamping the layer
-at the patch's edge costs).
-
-``--pad-solver fem``: the same block pads and presses, solved at equilibrium
-(:func:`~gausstac_maniskill.fem.layer_body`, the whole layer, elements of the particle
-spacing; frictionless, as the MPM runs). A press then costs the new contact points'
-compliance columns and a contact problem among the loaded points. Two ways to get the
-columns, each a row: solved point by point on the whole pad's factor (what a pad gets whose
-full compliance exceeds :data:`~gausstac_maniskill.fem.sensor.PRECOMPUTE_BYTES`), or read from
-the compliance among all surface points computed first (``W``; run where it takes at most
-``--fem-w-max`` MiB). Reported: the one-time cost (assembling, factoring or computing W, with
-the memory it holds), each step's wall time, the loaded points and the normal force; both
-rows of a case must read the same force.
+A square block pad (4 mm layer of the product's silicone) pressed 1 mm by a rigid sphere and held:
+pad widths 10, 20, 40 mm under a 5 mm sphere, and sphere radii 2.5–20 mm on the 40 mm pad. MPM:
+each case on the whole pad and with ``SolverSettings.patch_radius``; prints particles, those
+simulated, grid cells, substeps, MPM wall time of the held step, the normal force and the patch's
+error against the whole pad. ``fem``: the pads solved at equilibrium, compliance point by point
+and from the full compliance W; prints the one-time cost and memory, each step's wall time, the
+loaded points and the normal force (both rows of a case read the same force).
 """
 from __future__ import annotations
 
@@ -35,7 +17,7 @@ import time
 
 import numpy as np
 
-from . import arch_option, cli, write_report
+from .common import arch_option, cli, write_report
 
 THICKNESS = 4e-3  # m, the product pad's soft layer
 DEPTH = 1e-3  # m
@@ -45,7 +27,8 @@ def run(width: float, radius: float, dx: float, patch: float | None = None) -> d
     """Press a sphere of ``radius`` [m] 1 mm into a ``width`` [m] square pad, with the active
     patch ``patch`` [m] (None: the whole pad); see the module."""
     from ..cosim import default_hand_settings
-    from ..mpm import MPMWorld, Sphere, box_particles
+    from ..geometry import Sphere, box_particles
+    from ..mpm import MPMWorld
     from ..tactile import allegro_pad_specs
     from ..transforms import make_pose
 

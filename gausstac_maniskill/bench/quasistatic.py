@@ -1,76 +1,34 @@
-"""Pads solved at equilibrium (:mod:`gausstac_maniskill.fem`): thin-layer theory and the product pad.
+"""Pads solved at equilibrium (:mod:`gausstac_maniskill.fem`): the thin layer against theory, and the product pad.
 
 ``python -m gausstac_maniskill.bench quasistatic [--sizes 1e-3 5e-4] [--nu 0.45 0.48 0.499]
-[--pad-sizes 1e-3 5e-4] [--depths 2.5e-4 5e-4 1e-3] [--friction 0.5] [--mpm-dx 1e-3 | --no-mpm]
-[--out DIR]``
+[--pad-sizes 1e-3 5e-4] [--depths 2.5e-4 5e-4 1e-3] [--models linear neo_hookean] [--friction 0.5]
+[--mpm-dx 1e-3 | --no-mpm] [--no-layer] [--out DIR]``
 
-The pad solved at equilibrium instead of relaxed by the explicit MPM: cube elements on the
-particle lattice (the pad's cut by its curved surface and bond; selective reduced integration,
-no volumetric locking), its linear stiffness factored
-once in the link frame, contact solved on the surface points near the collider
-(:mod:`gausstac_maniskill.fem.contact`). No time step, no pseudo-mass.
-
-1. **Thin layer** (the set-up of ``bench thinlayer``: h = 4 mm bonded to a rigid base,
-   E = 0.3 MPa, δ = 0.1·h, a/h = 0.3 … 3, a quarter with symmetry planes), pressed by the
-   theory's own indenter: a frictionless paraboloid in small-displacement contact, the gap
-   δ − r²/(2R) − u_z read at the rest surface. So the comparison is with the layer solution
-   under its own assumptions (linear elasticity, small strain and slope); the explicit MPM's
-   rows in ``bench thinlayer`` carry the Neo-Hookean layer's finite strain besides.
-2. **The product pad** (the Allegro index pad, Dragon Skin 10: E = 0.26 MPa, ν = 0.48), the
-   5 mm sphere and the plate of ``bench pad`` pressed to 0.25, 0.5 and 1 mm in turn,
-   frictionless (``--friction MU``: Coulomb friction, for both solvers), at the given element sizes (a pad built at particle spacing = element size),
-   as a linear body (``--models linear``, small strain, contact read at the rest surface) and
-   as a finite-strain Neo-Hookean one (``neo_hookean``, contact read at the displaced surface,
-   each depth started from the last). Each depth is solved twice: the press (it also computes
-   the compliance of the surface points the contact reaches for the first time, three linear
-   solves per point), then a held step. With ``--mpm-dx`` the explicit MPM presses the same pad
-   in the same run, frictionless, and its held force is shown beside (about 1 min to compile,
-   then 0.6 s per step).
+1. The bonded thin layer of ``bench thinlayer`` pressed by a frictionless paraboloid in
+   small-displacement contact (:func:`layer_point`): the force error against the bonded-layer
+   solution (:func:`~gausstac_maniskill.reference.layer_force`) per element size, ν and a/h.
+2. The index pad pressed by the sphere and the plate of ``bench pad`` to each depth in turn
+   (:func:`pad_rows`), per element size and material model: the normal force against the finest
+   size, the contact iterations and the solve time per press and held step; with ``--mpm-dx`` the
+   explicit MPM's held force on the same pad beside it.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import time
-import warnings
 
 import numpy as np
 
-from .thinlayer import A_OVER_H, E_LAYER, H_LAYER, STRAIN, layer_force
+from ..reference import layer_force
+from .common import arch_option, cli, write_json
+from .scenes import (A_OVER_H, E_LAYER, H_LAYER, STRAIN, Protocol, index_pad, indenter_collider, indenter_pose,
+                     paraboloid, press_pad)
 
-__all__ = ["paraboloid", "sphere", "layer_point", "layer_table", "pad_rows", "main"]
+__all__ = ["layer_point", "layer_table", "pad_rows", "main"]
 
 PAD_DEPTHS = (0.25e-3, 0.5e-3, 1e-3)
 PRESS_STEPS = 4  # solves per press increment when there is friction
-
-
-def paraboloid(R: float, apex) -> callable:
-    """The layer solution's indenter as an ``sdf`` for :meth:`QuasiStaticBody.solve`: a
-    paraboloid of radius R [m] with its apex at ``apex`` [3] m, opening along +z, in
-    small-displacement form: φ(x) = apex_z + r²/(2R) − x_z with r measured at the points
-    given and the normal −z (only u_z closes the gap)."""
-    apex = np.asarray(apex, float)
-
-    def sdf(x):
-        r2 = ((x[:, :2] - apex[:2]) ** 2).sum(1)
-        return apex[2] + r2 / (2.0 * R) - x[:, 2], np.tile([0.0, 0.0, -1.0], (len(x), 1))
-
-    return sdf
-
-
-def sphere(R: float, centre) -> callable:
-    """A rigid sphere of radius R [m] centred at ``centre`` [3] m as an ``sdf`` for
-    :meth:`QuasiStaticBody.solve` (exact distance and outward normal)."""
-    centre = np.asarray(centre, float)
-
-    def sdf(x):
-        v = x - centre
-        r = np.linalg.norm(v, axis=1)
-        return r - R, v / r[:, None]
-
-    return sdf
 
 
 def layer_point(a_over_h: float, size: float, nu: float, h: float = H_LAYER, E: float = E_LAYER) -> dict:
@@ -118,17 +76,6 @@ def layer_table(sizes, nus, a_over_h=A_OVER_H, progress: bool = True) -> tuple[s
     return "\n".join(lines), rows
 
 
-def _pad(size: float):
-    from ..cosim import default_hand_urdf
-    from ..tactile.pad import build_pad, pad_mesh
-    from .pad import index_spec
-
-    spec = index_spec()
-    with warnings.catch_warnings():  # a 1 mm lattice is a 2 mm MPM grid's: the warning is about the MPM
-        warnings.simplefilter("ignore")
-        return build_pad(spec, pad_mesh(spec, default_hand_urdf()), size, 2.0 * size)
-
-
 def pad_rows(sizes, indenters=("sphere", "plate"), depths=PAD_DEPTHS, models=("linear",), friction: float = 0.0,
              progress: bool = True) -> list[dict]:
     """The index pad pressed by each indenter through ``depths`` in turn (Coulomb ``friction``),
@@ -138,13 +85,12 @@ def pad_rows(sizes, indenters=("sphere", "plate"), depths=PAD_DEPTHS, models=("l
     from tqdm import tqdm
 
     from ..fem import collider_indenter, pad_body
-    from .pad import _collider, indenter_pose
 
     rows = []
     total = len(sizes) * len(indenters) * len(depths) * len(models)
     with tqdm(total=total, desc="product pad", disable=not progress) as bar:
         for size in sizes:
-            pad = _pad(size)
+            pad = index_pad(size)
             S = pad.sensor_frame  # the link frame is the world frame here
             for model in models:
                 for kind in indenters:
@@ -159,7 +105,7 @@ def pad_rows(sizes, indenters=("sphere", "plate"), depths=PAD_DEPTHS, models=("l
                         steps = np.linspace(last, d, PRESS_STEPS + 1)[1:] if friction > 0 else [d]
                         times, its = [0.0], [0]
                         for k, z in enumerate(list(steps) + [d]):  # the press to this depth, then a held step
-                            sdf = collider_indenter(_collider(kind, indenter_pose(kind, S, -z), friction))
+                            sdf = collider_indenter(indenter_collider(kind, indenter_pose(kind, S, -z), friction))
                             t0 = time.perf_counter()
                             res = body.solve(sdf, geometry=geometry, warm=warm, max_iterations=300)
                             held = k == len(steps)
@@ -183,13 +129,11 @@ def mpm_forces(dx: float, indenters, depths, friction: float = 0.0, progress: bo
     """The explicit MPM's held force [N] and ms per step on the same pad, by (indenter, depth)."""
     from tqdm import tqdm
 
-    from .pad import Protocol, run_case
-
     out = {}
     with tqdm(total=len(indenters) * len(depths), desc=f"MPM dx={dx * 1e3:g} mm", disable=not progress) as bar:
         for kind in indenters:
             for d in depths:
-                case = run_case(dx, kind, [d], protocol=Protocol(press=2, slide=0, hold=4), friction=friction)
+                case = press_pad(dx, kind, [d], protocol=Protocol(press=2, slide=0, hold=4), friction=friction)
                 out[(kind, d)] = (case["phases"][0]["Fn_end"], case["step_ms"])
                 bar.update(1)
     return out
@@ -218,8 +162,7 @@ def pad_table(rows: list[dict], mpm: dict | None, mpm_dx: float | None) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gausstac_maniskill.bench quasistatic", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = cli("quasistatic", __doc__)
     ap.add_argument("--sizes", type=float, nargs="+", default=[1e-3, 5e-4], help="thin layer: element edges [m]")
     ap.add_argument("--nu", type=float, nargs="+", default=[0.45, 0.48, 0.499], help="thin layer: Poisson's ratios")
     ap.add_argument("--pad-sizes", type=float, nargs="+", default=[1e-3, 5e-4],
@@ -233,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-mpm", action="store_true", help="skip the explicit MPM")
     ap.add_argument("--no-layer", action="store_true", help="skip the thin layer")
     ap.add_argument("--out", default="out/bench_quasistatic", help="directory for results.json")
-    ap.add_argument("--arch", default=os.environ.get("GAUSSTAC_ARCH", "auto"), choices=["cpu", "cuda", "auto"])
+    arch_option(ap)
     args = ap.parse_args(argv)
     from .. import backend
 
@@ -250,7 +193,6 @@ def main(argv: list[str] | None = None) -> int:
     print(pad_table(rows, mpm, None if args.no_mpm else args.mpm_dx))
     if mpm:
         out["mpm"] = [dict(indenter=k[0], d=k[1], Fn=v[0], step_ms=v[1]) for k, v in mpm.items()]
-    with open(os.path.join(args.out, "results.json"), "w") as f:
-        json.dump(out, f, indent=1)
+    write_json(args.out, "results.json", out, indent=1)
     print(f"\n{time.perf_counter() - t0:.0f} s; results in {args.out}/results.json")
     return 0

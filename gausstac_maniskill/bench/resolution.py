@@ -1,25 +1,15 @@
-"""``python -m gausstac_maniskill.bench resolution`` — do the tasks hold across MPM grids?
+"""``python -m gausstac_maniskill.bench resolution [--tasks ID ...] [--dx 2e-3 1e-3] [--settle 10]`` — do
+the tasks hold across MPM grids?
 
-For each task and each grid spacing ``--dx``, one episode with the same seed:
-
-* **expert**: the task's scripted expert, until success and ``--settle`` more steps. Its
-  success is the servo doing its job (the targets are physical: a force in N, a compression
-  ratio); it shows the task is solvable at that grid, not that the physics agrees.
-* **replay**: the actions the expert took at the first ``--dx``, played open loop at each
-  finer grid. The same joint commands give the same press, so what differs is the MPM's
-  answer to it: the measured forces and compression against the first grid's run. This is
-  the physics check (the pad's force under refinement on the hand itself).
-
-Measured at the last step of each run (per task: the pad force [N] and the apex depth
-behind the face [mm] for the cube tasks; the compression and the pads' touch forces [N]
-for the sponge tasks), with the wall time per control step split into physics / MPM /
-tactile / render [ms] (the first step, where Taichi compiles, not counted).
+Per task and grid spacing, one episode with the same seed: the scripted expert until success
+(``--settle`` more steps), and the actions it took at the first ``--dx`` replayed open loop at
+each finer grid (the same press: what differs is the MPM's answer). Prints each run's task
+measures at the last step (pad forces [N], apex depth [mm] or compression) and the wall time
+per control step split into physics / MPM / tactile / render [ms].
 """
 from __future__ import annotations
 
-import numpy as np
-
-from . import cli, run_expert_episode, split_cells, step_split_ms, write_report
+from .common import cli, run_expert_episode, split_cells, step_split_ms, write_report
 
 TASKS = ["GaussTac-PressCube-v1", "GaussTac-GraspSqueezeSponge-v1"]
 

@@ -1,32 +1,20 @@
-"""``python -m gausstac_maniskill.bench scale`` — env-steps per second of GaussTac tasks with
-``num_envs = B`` on one simulator (``physx_cuda``), and where the step's time goes.
+"""``python -m gausstac_maniskill.bench scale [--tasks ID ...] [--envs 1 16 64 256] [--obs state_dict rgb]
+[--backend physx_cuda]``
+— env-steps per second of GaussTac tasks with ``num_envs = B`` on one simulator.
 
-For each task (``--tasks``), obs mode (``--obs``: ``state_dict`` carries the tactile maps,
-``rgb`` adds the splat camera) and env count B (``--envs``): ``gym.make(task, num_envs=B,
-sim_backend=..., obs_mode=..., control_mode="pd_joint_pos")`` at the product's defaults
-(MPM dx = 1 mm, 128×128 splat camera), ``reset(seed=0)``, the task's scripted expert acting
-for every env. The first ``--warmup`` steps (Taichi compiles its kernels, the splat camera
-takes its background) are not timed; then up to ``--steps`` control steps, or as many as
-fit in ``--budget`` seconds.
-
-Prints per run: the build time (``gym.make`` + reset, compiling included), ms per control
-step and its split from ``GaussTacEnv.step_timing`` (``physics``: SAPIEN and ManiSkill,
-``mpm``: the co-simulator with its pose upload, ``tactile``: the maps and their copy into the
-observation, ``render``: the cameras), env-steps/s = B / step time, and the part that limits
-it. A run that fails prints its error instead of a row; the others go on. The table is also
-written to ``--out``/scale.md and scale.json.
-
-``num_envs > 1`` needs ``sim_backend='physx_cuda'`` (an NVIDIA GPU). On a CPU machine,
-``--backend physx_cpu --envs 1`` runs the same code path for one env.
+Per task, obs mode and B: build time, ms per control step split by ``GaussTacEnv.step_timing``
+(physics, mpm, tactile, render), env-steps/s and the limiting part, over up to ``--steps`` steps
+or ``--budget`` seconds after ``--warmup`` untimed steps; writes ``scale.md`` and ``scale.json``.
+``num_envs > 1`` needs ``physx_cuda`` (an NVIDIA GPU); ``--backend physx_cpu --envs 1`` runs the
+same path for one env.
 """
 from __future__ import annotations
 
-import json
 import os
 import time
 import traceback
 
-from . import STEP_PARTS, cli, step_split_ms, write_report
+from .common import STEP_PARTS, cli, step_split_ms, write_json, write_report
 
 TASKS = ("GaussTac-PressCube-v1", "GaussTac-SqueezeSponge-v1")
 PARTS = STEP_PARTS[:-1]  # without the total
@@ -121,6 +109,5 @@ def main(argv: list[str] | None = None) -> int:
         _row(r["task"], r["obs"], r["num_envs"], r) for r in results)
     print("\n" + text)
     write_report(args.out, "scale.md", text)
-    with open(os.path.join(args.out, "scale.json"), "w") as f:
-        json.dump(results, f, indent=1)
+    write_json(args.out, "scale.json", results, indent=1)
     return 0

@@ -1,29 +1,14 @@
-"""Soft contact benchmark: a pad and a soft object as two bodies (two velocity fields).
+"""``python -m gausstac_maniskill.bench soft [--dx 1e-3 ...] [--pad-solvers mpm fem] [--no-blocks]
+[--reference SIZE ...]``
+— a pad and a soft object as two bodies (two velocity fields).
 
-``python -m gausstac_maniskill.bench soft [--dx 1e-3 ...] [--pad-solvers mpm fem] [--arch cpu|cuda] [--out DIR]``
-(about 3 min on 2 cores at the default dx = 1 mm)
-
-Two scenes, each run with the soft object in its own velocity field (the default of
-:meth:`GaussTacSim.add_soft_object`, multi-field MPM) and, for comparison, in the pads'
-field (one continuum where they touch: what the co-simulator did before). The sponge also
-meets the pad solved at equilibrium (``pad_solver="fem"``: the pad's surface a collider of the
-sponge, lowered by the pad's solved displacement, loaded by the sponge's push), at every
-``--dx``, so that the readings' convergence under refinement shows for both pads:
-
-* **sponge**: the default index pad (dx = 1 mm, the product's settings) and a foam sponge
-  (12 × 12 × 6 mm, E = 50 kPa, ν = 0.3, 60 kg/m³) whose far 1 mm is bound to a holder link.
-  The sponge's face starts 0.3 mm clear of the pad's apex and is pressed 1.3 mm into it over
-  three 50 ms steps, then held. Three readings of the same force, which must agree: the
-  pad's contact force map (summed), the pad's stress (virtual work,
-  :meth:`GaussTacSim.pad_stress_force`), and the sponge's own stress (virtual work with
-  φ = 1 on its face, 0 at its bond, :meth:`MPMWorld.virtual_work_force`). Also the closest
-  approach of a sponge particle to a pad particle (touching surfaces keep their centres
-  about one particle spacing apart) and the MPM time per step.
-* **blocks**: two free 10 × 8 × 8 mm blocks (100 kPa, ν = 0.3, 1000 kg/m³, dx = 1 mm, no
-  gravity) 1 mm apart, closing at 0.1 m/s and at 1 m/s. Reported: the closest approach of
-  particles of the two blocks (in particle spacings), the coefficient of restitution (their
-  separation speed over the approach speed, 12 ms after the start) and the change of total
-  momentum relative to one block's momentum.
+* sponge: a foam sponge (12 × 12 × 6 mm, 50 kPa) pressed 1.3 mm into the index pad
+  (:func:`sponge_scene`), with the sponge in its own field and in the pads', and against the pad
+  solved at equilibrium: three readings of the same force (the force map, the pad's stress, the
+  sponge's stress), the closest approach of the two bodies' particles and the time per step.
+  ``--reference``: the held force with the pad rigid, solved at equilibrium (:func:`rigid_pad_reference`).
+* blocks: two free 10 × 8 × 8 mm blocks closing at 0.1 and 1 m/s (:func:`collide`): closest
+  approach, coefficient of restitution and momentum change.
 """
 from __future__ import annotations
 
@@ -32,7 +17,7 @@ import time
 
 import numpy as np
 
-from . import arch_option, cli, write_report
+from .common import arch_option, cli, write_report
 
 INDEX = "link_3.0_tip"
 SPONGE = dict(E=5e4, nu=0.3, density=60.0)  # Pa, -, kg/m³
@@ -52,7 +37,7 @@ def sponge_scene(field: int = 1, dx: float = 1e-3, pad_solver: str = "mpm", **si
     normal force in three readings (pressing positive)."""
     from ..config import Material
     from ..cosim import GaussTacSim, default_hand_settings
-    from ..mpm.sampling import box_particles
+    from ..geometry import box_particles
     from ..tactile import allegro_pad_specs
     from ..transforms import make_pose
 
@@ -93,10 +78,11 @@ def rigid_pad_reference(size: float, friction: float = 0.5) -> float:
     bond at BOND, Coulomb ``friction``, the contact read at the deformed surface): an
     independent solver's value of what the sponge pushes with when the pad does not yield.
     The pads that do yield read below it, by their share of the compression."""
-    from ..fem.contact import Indenters, QuasiStaticBody
+    from ..fem.contact import QuasiStaticBody
+    from ..fem.indenters import Indenters
     from ..fem.hex import voxel_body
     from ..fem.pad import collider_indenter
-    from ..mpm.colliders import MeshCollider
+    from ..geometry import MeshCollider
     from ..tactile import allegro_pad_specs, build_pad, pad_mesh
     from ..transforms import make_pose
     from ..urdf import default_hand_urdf
@@ -156,7 +142,8 @@ def collide(field_b: int, speed: float = 0.1, steps: int = 12, dx: float = 1e-3)
     after [kg m/s], one block's momentum [kg m/s], the closest approach [m] and the particle
     spacing [m]."""
     from ..config import Material, SolverSettings
-    from ..mpm import MPMWorld, box_particles
+    from ..geometry import box_particles
+    from ..mpm import MPMWorld
 
     s = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0))
     w = MPMWorld(s)

@@ -1,25 +1,11 @@
-"""``python -m gausstac_maniskill.bench splat`` — speed and quality of the 3DGS camera.
+"""``python -m gausstac_maniskill.bench splat [--quick] [--skip-speed] [--skip-quality] [--out DIR]`` —
+speed and quality of the 3DGS camera.
 
-Speed: ms per frame (median over repeats, after JIT warm-up) of the three
-stages of :func:`~gausstac_maniskill.splat.rasterize` for 50k/100k/300k
-Gaussians at 128×128, 320×240 and 640×480, in two scenes:
-
-* ``object``: surface Gaussians on a lumpy sphere whose silhouette covers about
-  1/3 of the image area (a hand or an object in view);
-* ``full``: a wavy wall of surface Gaussians filling the whole view, with 20 %
-  of the Gaussians as semi-transparent 1-3 mm "floaters" 0.2-0.9 m in front of
-  it (a room scan; the camera is 1 m from the wall).
-
-Gaussians are flat discs (two scales ~ the sample spacing, the third 5 % of
-it), opacity sigmoid(N(2, 1)), SH degree 3.
-
-Quality: a procedurally textured cube rendered by SAPIEN (ambient light 1, no
-other lights, so the image is the albedo gamma-encoded by SAPIEN's camera:
-``out = albedo^(1/2.2)``; rendered at 4× resolution and box-downsampled, i.e.
-anti-aliased) against the Gaussians sampled on its surface (one per cell of a
-jittered grid, colour = the display colour albedo^(1/2.2) averaged over the
-cell, SH DC = (c - 0.5)/0.28209479). Same pose and intrinsics. PSNR and
-MS-SSIM (pytorch-msssim) over the full frame, for a sweep of Gaussians per cm².
+Speed: ms per frame of the three stages of :func:`~gausstac_maniskill.splat.rasterize` for
+50k/100k/300k Gaussians at 128×128, 320×240 and 640×480, in an ``object`` scene (a lumpy sphere
+covering about 1/3 of the view) and a ``full`` one (a wall filling the view, 20 % floaters).
+Quality: a textured cube rendered by SAPIEN (ambient light only, anti-aliased) against Gaussians
+sampled on its surface, PSNR and MS-SSIM over a sweep of Gaussians per cm².
 """
 from __future__ import annotations
 

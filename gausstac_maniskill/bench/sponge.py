@@ -1,15 +1,12 @@
-"""``python -m gausstac_maniskill.bench sponge`` — the grasp-and-squeeze expert on the free sponge.
+"""``python -m gausstac_maniskill.bench sponge [--dx 2e-3] [--nu 0.2 0.45] [--obs-mode rgb]`` — the
+grasp-and-squeeze expert on the free sponge.
 
-``GaussTac-GraspSqueezeSponge-v1`` (``physx_cpu``, ``pd_joint_pos``, ``pad_reaction=True``,
-SAPIEN at 100 Hz) with its scripted expert, per MPM grid spacing and sponge Poisson's
-ratio: whether it succeeds and at which control step, the compression reached against the
-target, the sponge's height [mm], the thumb's and index pad's normal force [N] (the grid
-contact force the sponge passes them), the sponge's volume change (mean det F - 1) against
-linear elasticity's bound for a squeeze to that compression, (1 - 2ν)·c, the smallest det F,
-the MPM substeps per SAPIEN step (the sponge keeps its physical mass: its P-wave speed
-sets them), and the wall time per control step [ms] split into physics, MPM, tactile and
-render (``--obs-mode rgb``: the splat camera draws the deformed sponge; its last frame is
-written to ``sponge_<dx>_<nu>.png``).
+``GaussTac-GraspSqueezeSponge-v1`` with its scripted expert, per grid spacing and sponge Poisson
+ratio: success and its control step, the compression reached against the target, the sponge's
+height [mm], the thumb's and index pad's normal force [N], the sponge's volume change against
+linear elasticity's bound (1 − 2ν)·c, the smallest det F, the MPM substeps per SAPIEN step, and
+the wall time per control step split into physics, MPM, tactile and render [ms]; with ``rgb``
+the last frame is written to ``sponge_<dx>_<nu>.png``.
 """
 from __future__ import annotations
 
@@ -17,7 +14,7 @@ import os
 
 import numpy as np
 
-from . import cli, run_expert_episode, split_cells, step_split_ms, write_report
+from .common import cli, run_expert_episode, split_cells, step_split_ms, write_report
 
 
 def main(argv: list[str] | None = None) -> int:

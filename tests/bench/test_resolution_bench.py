@@ -1,16 +1,15 @@
-"""Resolution-independent tasks (issue 11, point 7): PressCube with the same seed at
+"""Resolution-independent tasks: PressCube with the same seed at
 dx = 2 mm and at the default 1 mm.
 
 What guards what:
 * both expert runs succeed: the force target (N) and the expert's gain (m/N) are physical,
   so the servo reaches the target at either grid. This alone is the servo doing its job;
 * the 2 mm run's actions replayed at 1 mm press the pad to the same depth and read a force
-  within 10 %: the MPM pad gives the same answer to the same press on both grids (before
-  the resolved pads, 1.5 mm gave about 3x the 2 mm force).
+  within 10 %: the MPM pad gives the same answer to the same press on both grids.
 
 The MPM pads are asked for explicitly: the task's default for a rigid cube, the pads at
 equilibrium, reads its 1 mm elements at dx = 2 mm 13 % above dx = 1 mm here (1.654 and
-1.461 N, 2026-11-27), as on the product pad's curve (+12 to +16 %, BENCHMARKS.md); their
+1.461 N), as on the product pad's curve (+12 to +16 %, BENCHMARKS.md); their
 convergence is tested on the pad itself (tests/bench/test_pad_bench.py, tests/fem).
 """
 import pytest
