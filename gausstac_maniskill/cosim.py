@@ -427,7 +427,7 @@ class GaussTacSim:
     def _solve_pads(self) -> None:
         """Each awake equilibrium pad against the rigid objects within reach of its surface
         points (one element): each point meets the nearest of them
-        (:class:`~gausstac_maniskill.fem.contact.Indenters`). A pad with none within reach is
+        (:class:`~gausstac_maniskill.fem.indenters.Indenters`). A pad with none within reach is
         at rest."""
         from .geometry.colliders import signed_distance
 

@@ -232,7 +232,7 @@ def layer_body(h: float, half_width: float, size: float, E: float, nu: float, mo
 
 def collider_indenter(collider, link_pose=None) -> "Indenter":
     """A :class:`~gausstac_maniskill.geometry.Collider` (any shape, its ``pose`` in
-    the world) as the :class:`~.contact.Indenter` a pad on a link at ``link_pose`` (4x4, world;
+    the world) as the :class:`~.indenters.Indenter` a pad on a link at ``link_pose`` (4x4, world;
     default identity) sees: its signed distance in its own frame (the same Taichi code the MPM
     uses), its pose in the link frame, its friction."""
     import dataclasses

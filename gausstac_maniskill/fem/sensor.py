@@ -187,7 +187,7 @@ class EquilibriumPad:
         """Equilibrium with ``colliders`` (``{key: MPM Collider}``, each at its world pose, with
         its friction coefficient; the key names it; may be empty where ``load`` is given) and
         the link at world pose ``link_pose`` [4, 4]. Each surface point meets the collider
-        nearest it (:class:`~.contact.Indenters`); the last solution warms the next one, and a
+        nearest it (:class:`~.indenters.Indenters`); the last solution warms the next one, and a
         point's friction hold carries over while it stays on the same collider. ``load``: [S, 3]
         forces [N] on the surface points, link frame, besides the colliders' (a soft object's
         push: :meth:`soft_load`); linear pads only."""

@@ -1,35 +1,15 @@
-"""Frictionless contact at equilibrium: the complementarity solver, the thin-layer theory,
-and the product pad."""
+"""A body at equilibrium under rigid colliders: the thin-layer theory, finite strain (its
+stall detector and fallback), friction on a layer, and the product pad."""
 import itertools
 import math
 
 import numpy as np
 import pytest
 
-from gausstac_maniskill.bench.quasistatic import layer_point, sphere
+from gausstac_maniskill.bench.quasistatic import layer_point
+from gausstac_maniskill.bench.scenes import sphere
 from gausstac_maniskill.errors import ConfigError
-from gausstac_maniskill.fem import layer_body, solve_lcp
-
-
-def test_lcp_matches_enumeration():
-    """Against every active set of a small problem: the one satisfying all conditions is the answer."""
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        G = rng.normal(size=(6, 6))
-        A = G @ G.T + 0.1 * np.eye(6)
-        b = rng.normal(size=6)
-        lam = solve_lcp(A, b)
-        found = None
-        for k in range(7):
-            for S in itertools.combinations(range(6), k):
-                x = np.zeros(6)
-                if S:
-                    x[list(S)] = np.linalg.solve(A[np.ix_(S, S)], -b[list(S)])
-                w = A @ x + b
-                if (x >= -1e-12).all() and (w >= -1e-10).all():
-                    found = x
-        assert found is not None
-        assert np.allclose(lam, found, atol=1e-9)
+from gausstac_maniskill.fem import layer_body
 
 
 @pytest.mark.parametrize("nu", [0.48, 0.499])
@@ -115,7 +95,7 @@ def test_finite_strain_relative_tolerance_leaves_little_in_the_force():
     as at 1e-4 of an element (FINITE_RTOL): on the 4 mm layer pressed 25 % by a sphere, that
     moves the force by 2.4e-4 of a solve to 1e-4 of an element alone, in fewer iterations
     (16 against 18; on the product pad's plate press at dx = 1 mm, 54 against 93 over three
-    steps: BENCHMARKS.md, "thirteenth session")."""
+    steps)."""
     h, E, nu, strain = 4e-3, 0.3e6, 0.48, 0.25
     d = strain * h
     R = (0.5 * h) ** 2 / d
@@ -160,20 +140,19 @@ def test_a_stalled_finite_strain_solve_stops_early_and_says_so(monkeypatch):
 
 
 def test_a_stalled_finite_strain_step_falls_back_to_linear_cut_cubes(monkeypatch):
-    """Guards the fallback's wiring, not physics (the plate's slide that needs it takes minutes:
-    BENCHMARKS.md). On the product pad's cut cells at dx = 2 mm, the fixed point is made to stall
+    """Guards the fallback's wiring, not physics (the plate's slide that needs it is too slow
+    for a unit test). On the product pad's cut cells at dx = 2 mm, the fixed point is made to stall
     while the cut cubes are finite: the step is solved again with them linear, says so (the
     result's flag, a SimulationWarning), and reads what a body whose cut cubes are always linear
     reads, to its residual. The next step tries the cut cubes finite again."""
-    from gausstac_maniskill.bench.pad import _collider, indenter_pose
-    from gausstac_maniskill.bench.quasistatic import _pad
+    from gausstac_maniskill.bench.scenes import index_pad, indenter_collider, indenter_pose
     from gausstac_maniskill.errors import SimulationWarning
     from gausstac_maniskill.fem import contact, pad_body
     from gausstac_maniskill.fem import hex as fem_hex
     from gausstac_maniskill.fem.pad import collider_indenter
 
-    pad = _pad(2e-3)
-    ball = collider_indenter(_collider("sphere", indenter_pose("sphere", pad.sensor_frame, -0.5e-3), 0.0))
+    pad = index_pad(2e-3)
+    ball = collider_indenter(indenter_collider("sphere", indenter_pose("sphere", pad.sensor_frame, -0.5e-3), 0.0))
     reference = pad_body(pad, model="neo_hookean")
     monkeypatch.setattr(fem_hex, "CUT_FINITE_SHARE", math.inf)
     always_linear = reference.solve(ball, max_iterations=400)
@@ -198,61 +177,6 @@ def test_a_stalled_finite_strain_step_falls_back_to_linear_cut_cubes(monkeypatch
     monkeypatch.setattr(contact._Anderson, "next", real_next)
     again = body.solve(ball, warm=res, max_iterations=400)
     assert laws[0] is True and not again.cut_cells_linear
-
-
-def _coulomb_violations(W, n, gap0, slip0, mu, f, state):
-    """Largest violations of the contact conditions: gap, pull, cone [N], stuck slip [m], and the
-    largest cosine between a slipping point's slip and its friction force (should be −1)."""
-    from gausstac_maniskill.fem.contact import tangent_bases
-
-    frame = np.concatenate([n[:, None, :], tangent_bases(n)], axis=1)
-    fl = np.einsum("pai,pi->pa", frame, f)
-    disp = np.einsum("pai,piqj,qj->pa", frame, W, f)
-    gap, slip = gap0 + disp[:, 0], slip0 + disp[:, 1:]
-    ft = np.linalg.norm(fl[:, 1:], axis=1)
-    sliding = state == 2
-    cos = np.einsum("pa,pa->p", slip[sliding], fl[sliding, 1:]) / np.maximum(
-        np.linalg.norm(slip[sliding], axis=1) * ft[sliding], 1e-300)
-    return dict(penetration=max(0.0, -gap.min()), open_gap=np.abs(gap[fl[:, 0] > 0]).max(initial=0.0),
-                pull=max(0.0, -fl[:, 0].min()), cone=max(0.0, (ft - mu * fl[:, 0]).max()),
-                stuck_slip=np.linalg.norm(slip[state == 1], axis=1).max(initial=0.0), cos=cos.max(initial=-1.0))
-
-
-@pytest.mark.parametrize("method", ["newton", "tresca"])
-def test_frictional_solver_meets_every_coulomb_condition(method, monkeypatch):
-    """Both solvers: semismooth Newton (the default) and the Tresca iterations it falls back on."""
-    from gausstac_maniskill.fem import contact, solve_frictional
-    from gausstac_maniskill.fem.contact import BOUND_TOL
-
-    if method == "tresca":
-        monkeypatch.setattr(contact, "NEWTON_ITERATIONS", 0)
-
-    rng = np.random.default_rng(1)
-    m = 12
-    G = rng.normal(size=(3 * m, 3 * m))
-    W = (G @ G.T / (3 * m) + 0.5 * np.eye(3 * m)).reshape(m, 3, m, 3) * 1e-4
-    n = rng.normal(size=(m, 3))
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    gap0 = rng.normal(size=m) * 1e-5 - 5e-6
-    slip0 = rng.normal(size=(m, 2)) * 5e-6
-    for mu in (0.2, 1.0):
-        f, state = solve_frictional(W, n, gap0, slip0, mu, tol=1e-10)
-        v = _coulomb_violations(W, n, gap0, slip0, mu, f, state)
-        assert v["penetration"] < 1e-9 and v["open_gap"] < 1e-9 and v["pull"] == 0.0
-        # the cone holds exactly for Newton (its forces are projected on it), to the bound's
-        # settling tolerance (BOUND_TOL of the largest bound) for the Tresca iterations
-        cone = 1e-12 if method == "newton" else BOUND_TOL
-        assert v["cone"] <= cone * mu * np.abs(f).max() and v["stuck_slip"] < 1e-8
-        assert v["cos"] < -0.999  # a slipping point is pulled back along its slip
-        assert (state == 2).any() and (state == 1).any()
-        # a warm start with no point loaded (the last step's points all came open) finds the same contact
-        f_warm, state_warm = solve_frictional(W, n, gap0, slip0, mu, tol=1e-10, f0=np.zeros((m, 3)))
-        np.testing.assert_allclose(f_warm, f, atol=1e-6 * np.abs(f).max())
-        assert (state_warm == state).all()
-    for f0 in (np.zeros((m, 3)), f):  # nothing touches, from rest or from the last contact (its forces
-        # all come open at once: GaussTac-Touch-v1 under random actions crashed there once)
-        f_open, state = solve_frictional(W, n, np.abs(gap0) + 1e-6, slip0, 0.5, tol=1e-10, f0=f0)
-        assert not f_open.any() and not state.any()
 
 
 def _plate_indenter(z, mu, x=0.0):
@@ -312,10 +236,9 @@ def _sphere_slide(size, half_width=8e-3):
 def test_a_sliding_sphere_on_a_flat_layer_converges():
     """Convergence of the frictional slide at coarse settings, on the flat layer (no voxel
     staircase): 1 mm and 0.5 mm elements (four and eight through the layer) agree within
-    2 % pressed and 7 % slid. Measured (throwaway script, 10 mm half width): 0.5 mm elements
-    are within 0.9 % of 0.333 mm ones in Fn and Ft after the slide, 1 mm ones +6.3 % and
-    +4.9 %; on the curved product pad the same 0.5 mm elements read +3.9 % and +5.2 %
-    (BENCHMARKS.md). The sphere ploughs the surface it drags ahead of it, so the drag
+    2 % pressed and 7 % slid. Measured at 10 mm half width: 0.5 mm elements are within 0.9 %
+    of 0.333 mm ones in Fn and Ft after the slide, 1 mm ones +6.3 % and +4.9 %; on the curved
+    product pad the same 0.5 mm elements read +3.9 % and +5.2 % (``bench pad``). The sphere ploughs the surface it drags ahead of it, so the drag
     exceeds μ·Fn."""
     coarse, fine = _sphere_slide(1e-3), _sphere_slide(5e-4)
     assert coarse[0] == pytest.approx(fine[0], rel=0.02)
@@ -330,22 +253,22 @@ def test_newton_agrees_with_tresca_iterations_on_a_pressed_layer(monkeypatch):
     semismooth Newton solve converges without falling back, also from the last step's forces,
     and its forces and states are the Tresca iterations' (two independent algorithms for the
     same conditions) to their tolerances (1e-7 m in the points' motion)."""
-    from gausstac_maniskill.fem import contact
+    from gausstac_maniskill.fem import signorini
 
     h = 4e-3
     results = {}
     calls = []
-    tresca = contact._solve_tresca
-    monkeypatch.setattr(contact, "_solve_tresca", lambda *a, **k: calls.append(1) or tresca(*a, **k))
-    for method, iterations in (("newton", contact.NEWTON_ITERATIONS), ("tresca", 0)):
-        monkeypatch.setattr(contact, "NEWTON_ITERATIONS", iterations)
+    tresca = signorini._solve_tresca
+    monkeypatch.setattr(signorini, "_solve_tresca", lambda *a, **k: calls.append(1) or tresca(*a, **k))
+    for method, iterations in (("newton", signorini.NEWTON_ITERATIONS), ("tresca", 0)):
+        monkeypatch.setattr(signorini, "NEWTON_ITERATIONS", iterations)
         results[method] = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.48).solve(_plate_indenter(h - 0.2e-3, 0.5))
         assert len(calls) == (0 if method == "newton" else 1)
     new, ref = results["newton"], results["tresca"]
     assert {1, 2} <= set(new.state.tolist()) and (new.state == ref.state).all()
     np.testing.assert_allclose(new.total_force, ref.total_force, rtol=0, atol=1e-3 * np.abs(ref.total_force).max())
     np.testing.assert_allclose(new.force, ref.force, rtol=0, atol=1e-2 * np.abs(ref.force).max())
-    monkeypatch.setattr(contact, "NEWTON_ITERATIONS", 40)
+    monkeypatch.setattr(signorini, "NEWTON_ITERATIONS", 40)
     deeper = layer_body(h, 6e-3, 1e-3, 0.3e6, 0.48).solve(_plate_indenter(h - 0.4e-3, 0.5), warm=new)
     assert len(calls) == 1 and deeper.total_force[2] < 1.5 * new.total_force[2]
 
@@ -353,8 +276,8 @@ def test_newton_agrees_with_tresca_iterations_on_a_pressed_layer(monkeypatch):
 def test_a_solve_from_its_own_solution_takes_one_pass():
     """Guard of the warm start on the deformed geometry (contact read where the surface is):
     a sphere pressed into a bonded layer, then solved again from that result with nothing
-    moved, reads the same forces in one outer pass (it took two or three when every solve
-    started from the rest surface), with friction or without; and without friction (a unique
+    moved, reads the same forces in one outer pass (a solve started from the rest surface takes
+    two or three), with friction or without; and without friction (a unique
     solution) a deeper press from it matches the same press from rest."""
     from gausstac_maniskill.fem import Indenter
 

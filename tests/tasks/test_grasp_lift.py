@@ -45,16 +45,16 @@ def test_expert_lifts_and_holds_the_cube_still(mass, pad_solver, monkeypatch):
     Newton solves every one of their friction problems: this hold used to leave 16 of them to
     the slower, coarser Tresca iterations, Newton cycling between an iterate and its projection
     at points on the stick/slip boundary.)"""
-    from gausstac_maniskill.fem import contact
+    from gausstac_maniskill.fem import signorini
 
     fallbacks = []
-    tresca = contact._solve_tresca
+    tresca = signorini._solve_tresca
 
     def counted(*args, **kwargs):
         fallbacks.append(1)
         return tresca(*args, **kwargs)
 
-    monkeypatch.setattr(contact, "_solve_tresca", counted)
+    monkeypatch.setattr(signorini, "_solve_tresca", counted)
     env = _make(control_mode="pd_joint_pos", cube_mass=mass, pad_solver=pad_solver)
     try:
         obs, _ = env.reset(seed=0)
