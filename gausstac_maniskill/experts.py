@@ -45,8 +45,9 @@ def joint_targets_to_action(base, q_target: torch.Tensor) -> torch.Tensor:
     if not getattr(cfg, "use_delta", False):
         return q_target
     ref = ctrl._target_qpos if getattr(cfg, "use_target", False) else base.qpos_in_action_order()
-    low = torch.as_tensor(np.broadcast_to(cfg.lower, q_target.shape[-1:]), dtype=torch.float32, device=base.device)
-    high = torch.as_tensor(np.broadcast_to(cfg.upper, q_target.shape[-1:]), dtype=torch.float32, device=base.device)
+    # np.broadcast_to gives a read-only view, which torch would share and warn about: copy it
+    low = torch.from_numpy(np.array(np.broadcast_to(cfg.lower, q_target.shape[-1:]), np.float32)).to(base.device)
+    high = torch.from_numpy(np.array(np.broadcast_to(cfg.upper, q_target.shape[-1:]), np.float32)).to(base.device)
     delta = torch.minimum(torch.maximum(q_target - ref, low), high)
     if getattr(cfg, "normalize_action", True):
         delta = (delta - low) / (high - low) * 2 - 1

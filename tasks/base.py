@@ -46,7 +46,9 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
+import numbers
 import os
+import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -62,13 +64,13 @@ from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import common
 from mani_skill.utils.structs.pose import Pose
 
-from .. import backend
+from .. import backend, environment
 from ..agents.base import GaussTacAgent, load_hand_closed_links, load_hand_gaussians, load_hand_lod
 from ..config import Material
 from ..batch import BatchedCosim
 from ..cosim import GaussTacSim, default_hand_settings
 from ..errors import AssetWarning, ConfigError
-from ..mpm.colliders import Collider
+from ..geometry.colliders import Collider
 from ..pose.sapien_source import SapienPoseSource
 from ..transforms import vec7_to_matrix
 from ..render import RigidLayer
@@ -78,7 +80,7 @@ from .contact_spring import ObjectSpring
 from .joint_contact import JointContact
 
 __all__ = ["GaussTacEnv", "RigidObject", "SoftObject", "CapturedObject", "batched_pose", "SCENE_BACKGROUND",
-           "PAD_REACTION_MIN_FREQ"]
+           "PAD_REACTION_MIN_FREQ", "check_range", "check_pair", "check_flag", "check_choice", "check_size"]
 
 #: SAPIEN rate [Hz] from which ``pad_reaction="explicit"`` held a hand closed hard on a fixed
 #: cube (``bench close --reaction explicit``: flung fingers at 100, 500 and 1000 Hz, none at 2000 Hz)
@@ -127,19 +129,21 @@ class GaussTacEnv(BaseEnv):
         mpm_dx: MPM grid spacing [m] (pads: 2 particles per cell). The default 1 mm
             resolves the 4 mm pads (4 cells); 2 mm is 8× cheaper but under-resolved (a
             ``ResolutionWarning`` says so; forces are not converged, see BENCHMARKS.md).
-        mpm_sleep_margin: a pad farther than this from every object sleeps [m].
-        splat_size: (width, height) of the default splat camera ``splat_camera``.
+        mpm_sleep_margin: a pad farther than this from every object sleeps [m], in [0, 1].
+        splat_size: (width, height) of the default splat camera ``splat_camera`` [pixels].
         splat_lod: a splat camera draws the coarsest of the hand asset's levels of detail
             (``links.json`` ``levels``: 2.5 and 3 mm for the Allegro hand, against 2 mm) whose
             splats (in-plane σ = 0.9 spacing) are no wider than its pixels at the hand: the
             2.5 mm hand in PressCube, SlideCube and SqueezeSponge (2.3 mm pixels), the 3 mm
             hand in the other tasks' 128 × 128 cameras (3.5–3.8 mm). Nearly the same look and
-            depth against SAPIEN, 1.1–1.3× less time (BENCHMARKS.md, issue 13). ``False``:
+            depth against SAPIEN, 1.1–1.3× less time (BENCHMARKS.md). ``False``:
             always the fine hand.
         splat_cull: the splat camera skips the hand's Gaussians that face away from it, on the
             links the asset marks closed (``links.json`` ``closed_links``): a nearer front side
-            hides them (BENCHMARKS.md, issue 13). ``False``: draw every Gaussian.
-        render_size: (width, height) of the human render camera (``render_mode="rgb_array"``).
+            hides them (BENCHMARKS.md). ``False``: draw every Gaussian.
+        render_size: (width, height) of the human render camera (``render_mode="rgb_array"``)
+            [pixels]. ``render_mode="human"`` (SAPIEN's viewer window) needs a display: on Linux
+            without ``DISPLAY`` or ``WAYLAND_DISPLAY`` it is a ``ConfigError`` naming ``rgb_array``.
         splat_background: ``"sapien"`` (composite over SAPIEN's render), an RGB triple in
             [0, 1], or ``None`` (default): ``"sapien"`` without a ``scene_ply``,
             :data:`SCENE_BACKGROUND` (black) with one.
@@ -195,7 +199,7 @@ class GaussTacEnv(BaseEnv):
             and loads it: :meth:`~gausstac_maniskill.cosim.GaussTacSim.add_soft_object`);
             its normal forces within 4.3 % of its finest grid on the product pad at the default
             ``mpm_dx`` (the sphere's sliding friction force +5.7 %),
-            about 10× faster than the MPM pads (BENCHMARKS.md, issue 10). Its linear model
+            about 10× faster than the MPM pads (BENCHMARKS.md). Its linear model
             warns where a pad is pressed beyond half its layer. At the default ``mpm_dx`` a pad
             shape's first contact on a machine computes its compliance and its maps' response
             (about 55 s on 2 cores, with progress bars; then kept under
@@ -221,8 +225,17 @@ class GaussTacEnv(BaseEnv):
                  **kwargs):
         backend.ensure_init()
         _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
+        task = self._env_id()
+        _check_render_mode(task, kwargs.get("render_mode"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
+        check_range(task, "mpm_sleep_margin", mpm_sleep_margin, 0.0, 1.0, "m")
+        check_size(task, "splat_size", splat_size)
+        check_size(task, "render_size", render_size)
+        for name, flag in (("record_mpm_state", record_mpm_state), ("splat_lod", splat_lod),
+                           ("splat_cull", splat_cull)):
+            check_flag(task, name, flag)
+        _check_splat_look(task, splat_background, splat_lighting)
         self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
         if pad_solver not in ("auto", "mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
             raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'auto', 'mpm' "
@@ -277,6 +290,19 @@ class GaussTacEnv(BaseEnv):
                           f"measured stable from {PAD_REACTION_MIN_FREQ} Hz on a hand closed hard on an object; "
                           "below, a hard press can fling a finger (pass sim_config=dict(sim_freq=...))",
                           UserWarning, stacklevel=2)
+
+    @classmethod
+    def check_range(cls, name: str, value, low: float, high: float, unit: str = "") -> None:
+        """``ConfigError`` naming the task and argument ``name`` unless ``value`` is a number
+        in [low, high] (:func:`check_range`)."""
+        check_range(cls._env_id(), name, value, low, high, unit)
+
+    @classmethod
+    def _env_id(cls) -> str:
+        """The id the task is registered under (``"GaussTac-PressCube-v1"``), or the class name."""
+        from mani_skill.utils.registration import REGISTERED_ENVS
+
+        return next((k for k, v in REGISTERED_ENVS.items() if v.cls is cls), cls.__name__)
 
     @property
     def pad_reaction(self) -> bool:
@@ -586,8 +612,10 @@ class GaussTacEnv(BaseEnv):
         return out
 
     def get_info(self) -> dict:
+        """ManiSkill's info (``evaluate()`` and ``elapsed_steps``), every tensor a copy: a
+        kept info never changes with later steps."""
         self._ensure_cosims()  # after _initialize_episode placed the hand and objects
-        return super().get_info()
+        return _copied(super().get_info())
 
     @property
     def mpm_every_sim_step(self) -> bool:
@@ -686,12 +714,9 @@ class GaussTacEnv(BaseEnv):
 
     # ------------------------------------------------------------------ step / obs
     def step(self, action):
-        if action is not None and not isinstance(action, dict):
-            a = common.to_tensor(action)
-            if not torch.is_floating_point(a) or not torch.isfinite(a).all():
-                bad = torch.nonzero(~torch.isfinite(a.float())).tolist()
-                raise ConfigError(f"{self.spec.id if self.spec else type(self).__name__}: action contains NaN or "
-                                  f"inf at {bad[:8]} (shape {list(a.shape)}); nothing was stepped")
+        """ManiSkill's step, after checking ``action`` (:meth:`_checked_action`): an array of
+        real numbers (integers are cast to float32) of shape ``[A]`` or ``[B, A]``, finite."""
+        action = self._checked_action(action)
         t0 = time.perf_counter()
         self.step_timing.update(mpm=0.0, tactile=0.0, render=0.0)
         out = super().step(action)
@@ -702,7 +727,43 @@ class GaussTacEnv(BaseEnv):
         self.step_timing["physics"] = total - sum(self.step_timing[k] for k in ("mpm", "tactile", "render"))
         return out
 
+    def _checked_action(self, action):
+        """``action`` as a float32 tensor on the env's device, or a ``ConfigError`` naming
+        what is wrong (ManiSkill's own answers are a bare ``AssertionError`` for a wrong
+        shape and a NaN complaint for an integer array). Accepted: real numbers (int and
+        float dtypes; integers cast to float32) of shape ``[A]`` or ``[B, A]``, A the control
+        mode's action size, all finite. ``None`` and dict actions pass unchanged."""
+        if action is None or isinstance(action, dict):
+            return action
+        task = self.spec.id if self.spec else self._env_id()
+        try:
+            a = action if isinstance(action, torch.Tensor) else torch.as_tensor(np.asarray(action))
+        except (TypeError, ValueError, RuntimeError) as err:
+            raise ConfigError(f"{task}: action of type {type(action).__name__} is not an array of numbers "
+                              f"({err}); nothing was stepped") from err
+        if a.dtype == torch.bool or a.is_complex() or not (a.is_floating_point() or _is_integer(a.dtype)):
+            raise ConfigError(f"{task}: action of dtype {a.dtype} (shape {tuple(a.shape)}) is not an array of real "
+                              "numbers; use float32 (integer arrays are cast to float32); nothing was stepped")
+        single = getattr(self._orig_single_action_space, "shape", None)
+        if single is not None:
+            single = tuple(single)
+            batched = (self.num_envs, *single)
+            if tuple(a.shape) not in (single, batched):
+                raise ConfigError(f"{task}: action of shape {tuple(a.shape)}; control_mode {self.control_mode!r} "
+                                  f"expects shape {single} or {batched} (num_envs={self.num_envs}); "
+                                  "nothing was stepped")
+        a = a.to(device=self.device, dtype=torch.float32)
+        if not torch.isfinite(a).all():
+            bad = torch.nonzero(~torch.isfinite(a)).tolist()
+            raise ConfigError(f"{task}: action contains NaN or inf at {bad[:8]} (shape {list(a.shape)}); "
+                              "nothing was stepped")
+        return a
+
     def get_obs(self, info=None, unflattened: bool = False):
+        """ManiSkill's observation plus ``obs["tactile"]``. Every leaf is a copy: no tensor of
+        it shares memory with the env's state (task targets, the tactile maps
+        :meth:`tactile` keeps, the controller's targets) or with another observation, so a
+        kept observation never changes with later resets or steps."""
         obs = super().get_obs(info, unflattened=True)
         if self._obs_mode != "none":
             t0 = time.perf_counter()
@@ -713,6 +774,7 @@ class GaussTacEnv(BaseEnv):
                 tactile = {p: {k: v.reshape(v.shape[0], -1) for k, v in m.items()} for p, m in tactile.items()}
             obs["tactile"] = tactile
             self.step_timing["tactile"] = self.step_timing.get("tactile", 0.0) + time.perf_counter() - t0
+        obs = _copied(obs)
         return obs if unflattened else self._flatten_raw_obs(obs)
 
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
@@ -812,6 +874,107 @@ def _load_scene_capture(scene_ply, scene_pose, camera: str):
     return load_capture(scene_ply, Similarity.coerce(scene_pose, "scene_pose"))
 
 
+def check_range(task: str, name: str, value, low: float, high: float, unit: str = "") -> None:
+    """``ConfigError`` ``"<task>: <name>=<value> must be a number in [low, high] unit"`` unless
+    ``value`` is a real number (not a bool) with ``low <= value <= high`` (NaN is refused)."""
+    if not _is_real(value) or not low <= value <= high:
+        raise ConfigError(f"{task}: {name}={value!r} must be a number in [{low:g}, {high:g}] {unit}".rstrip())
+
+
+def check_pair(task: str, name: str, value, low: float, high: float, unit: str = "") -> tuple[float, float]:
+    """``value`` as ``(lo, hi)`` floats, or a ``ConfigError`` naming ``name`` unless it is two real
+    numbers with ``low <= lo <= hi <= high``."""
+    try:
+        pair = tuple(value)
+    except TypeError:
+        pair = ()
+    if len(pair) != 2 or not all(_is_real(v) for v in pair) or not low <= pair[0] <= pair[1] <= high:
+        raise ConfigError(f"{task}: {name}={value!r} must be two numbers (lo, hi) with {low:g} <= lo <= hi <= "
+                          f"{high:g} {unit}".rstrip())
+    return float(pair[0]), float(pair[1])
+
+
+def check_flag(task: str, name: str, value) -> None:
+    """``ConfigError`` naming ``name`` unless ``value`` is a bool (``bool("no")`` would be True)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"{task}: {name}={value!r} must be True or False")
+
+
+def check_choice(task: str, name: str, value, choices) -> None:
+    """``ConfigError`` naming ``name`` and the choices unless ``value`` is one of them."""
+    if not isinstance(value, str) or value not in choices:
+        raise ConfigError(f"{task}: {name}={value!r} must be one of {', '.join(repr(c) for c in choices)}")
+
+
+def check_size(task: str, name: str, value) -> None:
+    """``ConfigError`` naming ``name`` unless ``value`` is (width, height), two integers in [1, 8192] pixels."""
+    try:
+        wh = tuple(value)
+    except TypeError:
+        wh = ()
+    if len(wh) != 2 or not all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+                               and 1 <= v <= 8192 for v in wh):
+        raise ConfigError(f"{task}: {name}={value!r} must be (width, height), two integers in [1, 8192] pixels")
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_integer(dtype: torch.dtype) -> bool:
+    return not dtype.is_floating_point and not dtype.is_complex and dtype != torch.bool
+
+
+def _copied(tree):
+    """``tree`` (nested dicts of tensors and arrays, as ManiSkill's obs and info) with every
+    tensor cloned and every array copied; other leaves as they are."""
+    if isinstance(tree, dict):
+        return {k: _copied(v) for k, v in tree.items()}
+    if isinstance(tree, torch.Tensor):
+        return tree.clone()
+    if isinstance(tree, np.ndarray):
+        return tree.copy()
+    return tree
+
+
+def _check_render_mode(task: str, render_mode) -> None:
+    """``ConfigError`` for a render mode ManiSkill does not know, and for ``"human"`` (SAPIEN's
+    viewer window) on a Linux machine without a display (neither ``DISPLAY`` nor
+    ``WAYLAND_DISPLAY`` set), where SAPIEN fails deep inside ``gym.make``."""
+    if render_mode is None:
+        return
+    modes = BaseEnv.SUPPORTED_RENDER_MODES
+    if render_mode not in modes:
+        raise ConfigError(f"{task}: render_mode={render_mode!r} must be None or one of "
+                          f"{', '.join(repr(m) for m in modes)}")
+    if render_mode == "human" and sys.platform.startswith("linux") and not (
+            environment.read("DISPLAY") or environment.read("WAYLAND_DISPLAY")):
+        raise ConfigError(f"{task}: render_mode='human' opens SAPIEN's viewer window, and this machine has no "
+                          "display (DISPLAY and WAYLAND_DISPLAY are unset); use render_mode='rgb_array', which "
+                          "draws without a window (env.render() returns the frames, [B, H, W, 3] uint8)")
+
+
+def _check_splat_look(task: str, splat_background, splat_lighting) -> None:
+    """``ConfigError`` naming ``splat_background`` or ``splat_lighting`` unless they are what
+    :class:`GaussTacEnv` documents (checked for ``camera="sapien"`` too)."""
+    from ..splat.lighting import Lighting
+
+    if not isinstance(splat_lighting, Lighting) and not (isinstance(splat_lighting, str)
+                                                         and splat_lighting in ("scene", "baked")):
+        raise ConfigError(f"{task}: splat_lighting={splat_lighting!r} must be 'scene', 'baked' or a "
+                          "gausstac_maniskill.splat.lighting.Lighting")
+    if splat_background is None or (isinstance(splat_background, str) and splat_background == "sapien"):
+        return
+    try:
+        rgb = np.asarray(splat_background, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        rgb = np.zeros(0)
+    if isinstance(splat_background, str) or rgb.shape != (3,) or not np.all(np.isfinite(rgb)) \
+            or rgb.min() < 0 or rgb.max() > 1:
+        raise ConfigError(f"{task}: splat_background={splat_background!r} must be None, 'sapien' or an RGB "
+                          "triple in [0, 1]")
+
+
 def _check_sim_backend(num_envs, sim_backend) -> None:
     """``ConfigError`` for what ManiSkill or SAPIEN would refuse with a bare error: ``num_envs
     > 1`` where ManiSkill simulates on the CPU (it runs one env per process there, and says
@@ -839,8 +1002,8 @@ def _check_sim_backend(num_envs, sim_backend) -> None:
 
 def _enable_physx_gpu(sim_backend) -> None:
     """Load SAPIEN's PhysX GPU library now, so that a failure names the file. SAPIEN fetches
-    it from GitHub into ``~/.sapien/physx/<version>/`` on first use (measured 2026-11-24:
-    on a machine without internet this is a ConnectionError inside ``gym.make``)."""
+    it from GitHub into ``~/.sapien/physx/<version>/`` on first use (on a machine without
+    internet, a ConnectionError inside ``gym.make``)."""
     from pathlib import Path
 
     import sapien.physx

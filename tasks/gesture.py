@@ -48,8 +48,9 @@ class GestureEnv(GaussTacEnv):
     """
 
     def __init__(self, *args, gesture: str | None = None, tolerance: float = 0.05, **kwargs):
-        if gesture is not None and gesture not in GESTURES:
+        if gesture is not None and not (isinstance(gesture, str) and gesture in GESTURES):
             raise ConfigError(f"gesture={gesture!r} is not a known gesture; choose from {sorted(GESTURES)}")
+        self.check_range("tolerance", tolerance, 1e-4, 1.0, "rad")
         self.gesture_names = sorted(GESTURES)
         self.fixed_gesture = gesture
         self.tolerance = float(tolerance)

@@ -23,7 +23,7 @@ import sapien
 import torch
 from mani_skill.utils.registration import register_env
 
-from ..mpm.colliders import Box
+from ..geometry.colliders import Box
 from .base import batched_pose
 from .pinch_grasp import OPEN_HAND, PinchGraspEnv
 

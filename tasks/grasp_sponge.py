@@ -22,10 +22,10 @@ import torch
 from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
 
-from ..config import Material
+from ..config import MODELS, Material
 from ..errors import ConfigError
-from ..mpm import box_particles
-from ..mpm.colliders import HalfSpace
+from ..geometry import HalfSpace, box_particles
+from .base import check_choice, check_pair
 from .pinch_grasp import PinchGraspEnv
 
 __all__ = ["GraspSqueezeSpongeEnv"]
@@ -39,7 +39,8 @@ class GraspSqueezeSpongeEnv(PinchGraspEnv):
         sponge_E: Young's modulus [Pa] (kitchen sponge: 10–100 kPa).
         sponge_nu: Poisson's ratio (foams: 0–0.3).
         sponge_density: density [kg/m^3] (foams: 20–100).
-        sponge_model: ``"neo_hookean"`` (elastic) or ``"foam"`` (elastoplastic, keeps a dent).
+        sponge_model: ``"neo_hookean"`` (elastic), ``"fixed_corotated"`` or ``"foam"``
+            (elastoplastic, keeps a dent).
         sponge_size: full extents [m] (x, y across the pinch, z up), each in [10, 40] mm.
         sponge_friction: Coulomb friction of the sponge on the ground.
         compression_range: target compression range (fraction of the width across the pinch).
@@ -60,13 +61,12 @@ class GraspSqueezeSpongeEnv(PinchGraspEnv):
         self.check_range("sponge_E", sponge_E, 1.0e3, 1.0e6, "Pa")
         self.check_range("sponge_nu", sponge_nu, 0.0, 0.45, "")
         self.check_range("sponge_density", sponge_density, 10.0, 1000.0, "kg/m^3")
+        check_choice(self._env_id(), "sponge_model", sponge_model, MODELS)
         size = self._triple("sponge_size", sponge_size, 3)
         for i, v in enumerate(size):
             self.check_range(f"sponge_size[{i}]", v, 0.01, 0.04, "m")
         self.check_range("sponge_friction", sponge_friction, 0.0, 3.0, "")
-        lo, hi = self._triple("compression_range", compression_range, 2)
-        self.check_range("compression_range[0]", lo, 0.0, 0.6, "")
-        self.check_range("compression_range[1]", hi, lo, 0.6, "")
+        lo, hi = check_pair(self._env_id(), "compression_range", compression_range, 0.0, 0.6)
         self.check_range("tolerance", tolerance, 1.0e-3, 0.5, "")
         self.sponge_material = Material(E=sponge_E, nu=sponge_nu, density=sponge_density, model=sponge_model)
         self.sponge_size = tuple(float(v) for v in size)

@@ -14,8 +14,7 @@ import sapien
 import torch
 from mani_skill.utils import common
 
-from ..errors import ConfigError
-from .base import GaussTacEnv
+from .base import GaussTacEnv, check_range
 
 __all__ = ["PinchGraspEnv", "OPEN_HAND", "check_range"]
 
@@ -51,17 +50,6 @@ class PinchGraspEnv(GaussTacEnv):
         self.lift_height, self.hold_time = float(lift_height), float(hold_time)
         self.grasp_force, self.approach_height, self.xy_range = float(grasp_force), float(approach_height), float(xy_range)
         super().__init__(*args, robot_uids=robot_uids, pad_reaction=pad_reaction, **kwargs)
-
-    @classmethod
-    def check_range(cls, name: str, value, low: float, high: float, unit: str) -> None:
-        """``ConfigError`` naming the task and the argument unless ``low <= value <= high``."""
-        check_range(cls._env_id(), name, value, low, high, unit)
-
-    @classmethod
-    def _env_id(cls) -> str:
-        from mani_skill.utils.registration import REGISTERED_ENVS
-
-        return next((k for k, v in REGISTERED_ENVS.items() if v.cls is cls), cls.__name__)
 
     def _splat_camera_pose(self):
         from mani_skill.utils import sapien_utils
@@ -180,9 +168,3 @@ class PinchGraspEnv(GaussTacEnv):
         lift = (info["height"] / self.lift_height).clamp(0.0, 1.0) * grasp if self.lift_height > 0 else grasp
         hold = (info["hold_time"] / self.hold_time).clamp(max=1.0) if self.hold_time > 0 else info["lifted"].float()
         return reach + grasp + 2 * lift + 2 * hold
-
-
-def check_range(task: str, name: str, value, low: float, high: float, unit: str) -> None:
-    """``ConfigError`` ``"<task>: <name>=<value> must be a number in [low, high] unit"``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
-        raise ConfigError(f"{task}: {name}={value!r} must be a number in [{low}, {high}] {unit}".rstrip())

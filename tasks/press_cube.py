@@ -21,8 +21,8 @@ import torch
 from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
 
-from ..mpm.colliders import Box
-from .base import GaussTacEnv, batched_pose
+from ..geometry.colliders import Box
+from .base import GaussTacEnv, batched_pose, check_pair
 
 __all__ = ["PressCubeEnv", "IndexCubeTask", "INDEX_READY"]
 
@@ -108,13 +108,14 @@ class PressCubeEnv(IndexCubeTask):
     """Press the index pad onto the cube until the pad's normal force is on target.
 
     Args:
-        tolerance: success when |F - F_target| < tolerance * F_target.
-        force_range: target force range [N].
+        tolerance: success when |F - F_target| < tolerance * F_target (in [0.001, 1]).
+        force_range: target force range (lo, hi) [N], 0.01 <= lo <= hi <= 50.
     """
 
     def __init__(self, *args, tolerance: float = 0.15, force_range=(0.8, 2.0), **kwargs):
+        self.check_range("tolerance", tolerance, 1e-3, 1.0)
         self.tolerance = float(tolerance)
-        self.force_range = tuple(float(v) for v in force_range)
+        self.force_range = check_pair(self._env_id(), "force_range", force_range, 0.01, 50.0, "N")
         super().__init__(*args, **kwargs)
 
     def _load_scene(self, options: dict):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import torch
 from mani_skill.utils.registration import register_env
 
+from .base import check_pair
 from .press_cube import IndexCubeTask
 
 __all__ = ["SlideCubeEnv"]
@@ -20,13 +21,15 @@ class SlideCubeEnv(IndexCubeTask):
     """Slide the index fingertip across the cube's face without losing contact.
 
     Args:
-        contact_force: force [N] above which the pad counts as touching.
-        distance_range: slide distance range [m].
+        contact_force: force [N] above which the pad counts as touching (in [0.001, 10]).
+        distance_range: slide distance range (lo, hi) [m], 1e-4 <= lo <= hi <= 0.02 (the
+            face is 40 mm wide).
     """
 
     def __init__(self, *args, contact_force: float = 0.1, distance_range=(0.006, 0.010), **kwargs):
+        self.check_range("contact_force", contact_force, 1e-3, 10.0, "N")
         self.contact_force = float(contact_force)
-        self.distance_range = tuple(float(v) for v in distance_range)
+        self.distance_range = check_pair(self._env_id(), "distance_range", distance_range, 1e-4, 0.02, "m")
         super().__init__(*args, **kwargs)
 
     def _load_scene(self, options: dict):

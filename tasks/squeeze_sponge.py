@@ -15,9 +15,9 @@ import sapien
 import torch
 from mani_skill.utils.registration import register_env
 
-from ..config import Material
-from ..errors import ConfigError
-from ..mpm import box_particles
+from ..config import MODELS, Material
+from ..geometry import box_particles
+from .base import check_choice, check_pair
 from .press_cube import IndexCubeTask
 
 __all__ = ["SqueezeSpongeEnv"]
@@ -31,13 +31,18 @@ class SqueezeSpongeEnv(IndexCubeTask):
     """Squeeze the sponge with the index fingertip to a target compression.
 
     Args:
-        sponge_E: Young's modulus [Pa] (kitchen sponge: 10–100 kPa).
-        sponge_nu: Poisson's ratio.
-        sponge_density: density [kg/m^3].
-        sponge_model: ``"neo_hookean"`` (elastic) or ``"foam"`` (elastoplastic, keeps a dent).
-        sponge_thickness: thickness [m] along the squeeze direction.
-        compression_range: target compression range (fraction of the thickness).
-        tolerance: success when |compression - target| < tolerance.
+        sponge_E: Young's modulus [Pa], in [1 kPa, 1 MPa] (kitchen sponge: 10–100 kPa).
+        sponge_nu: Poisson's ratio, in [0, 0.45] (foams: 0–0.3).
+        sponge_density: density [kg/m^3], in [10, 1000].
+        sponge_model: ``"neo_hookean"`` (elastic), ``"fixed_corotated"`` or ``"foam"``
+            (elastoplastic, keeps a dent).
+        sponge_thickness: thickness [m] along the squeeze direction, in [4, 30] mm.
+        compression_range: target compression range (lo, hi) (fraction of the thickness),
+            0 <= lo <= hi <= 0.6.
+        tolerance: success when |compression - target| < tolerance, in [0.001, 0.5].
+
+    Every argument is checked before anything is built: a ``ConfigError`` names it, the
+    value given and the range.
     """
 
     probe_radius = 4.0e-3
@@ -45,11 +50,16 @@ class SqueezeSpongeEnv(IndexCubeTask):
     def __init__(self, *args, sponge_E: float = 3.0e4, sponge_nu: float = 0.2, sponge_density: float = 60.0,
                  sponge_model: str = "neo_hookean", sponge_thickness: float = 0.010,
                  compression_range=(0.15, 0.30), tolerance: float = 0.04, **kwargs):
+        task = self._env_id()
+        self.check_range("sponge_E", sponge_E, 1.0e3, 1.0e6, "Pa")
+        self.check_range("sponge_nu", sponge_nu, 0.0, 0.45)
+        self.check_range("sponge_density", sponge_density, 10.0, 1000.0, "kg/m^3")
+        check_choice(task, "sponge_model", sponge_model, MODELS)
+        self.check_range("sponge_thickness", sponge_thickness, 0.004, 0.03, "m")
+        self.compression_range = check_pair(task, "compression_range", compression_range, 0.0, 0.6)
+        self.check_range("tolerance", tolerance, 1e-3, 0.5)
         self.sponge_material = Material(E=sponge_E, nu=sponge_nu, density=sponge_density, model=sponge_model)
-        if not (0.004 <= sponge_thickness <= 0.03):
-            raise ConfigError(f"sponge_thickness={sponge_thickness!r} m must be in [0.004, 0.03]")
         self.sponge_thickness = float(sponge_thickness)
-        self.compression_range = tuple(float(v) for v in compression_range)
         self.tolerance = float(tolerance)
         self.block_half = HOLDER_HALF
         super().__init__(*args, **kwargs)

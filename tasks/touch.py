@@ -18,7 +18,7 @@ Two-way coupling is implicit by default: with a two-way cube, ``pad_reaction`` d
 renewed after every SAPIEN step. Pushed at 20 mm/s, the default 62 g steel cube then moves
 with the hand and peaks at 0.013 m/s (the hand: 0.02 m/s).
 
-``pad_reaction=False`` keeps the older explicit coupling: the wrench of one MPM step acts on
+``pad_reaction=False`` selects the explicit coupling: the wrench of one MPM step acts on
 the cube as a force during the next SAPIEN step. That is stable only if the cube's mass
 m > k·dt²/4 (k the contact stiffness of a pad on a cube face, dt the SAPIEN timestep), and
 even above it the cube moves in stick–slip lurches: 0.088 m/s peaks on the Ability index
@@ -42,9 +42,9 @@ from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
 
 from ..errors import ConfigError
-from ..mpm.colliders import Box
+from ..geometry.colliders import Box
 from ..transforms import matrix_to_quat
-from .base import GaussTacEnv, batched_pose
+from .base import GaussTacEnv, batched_pose, check_flag
 
 __all__ = ["TouchEnv"]
 
@@ -71,7 +71,7 @@ class TouchEnv(GaussTacEnv):
         cube_density: [kg/m^3] (free cube; default steel, see above).
         cube_friction: Coulomb friction of the cube, in SAPIEN (with the pedestal) and
             against the pads in the MPM.
-        ground: a ground plane at ``ground_altitude`` [m] (below the hand; looks only).
+        ground: a ground plane at ``ground_altitude`` [m] (in [-1, 0]: below the hand; looks only).
         force_threshold: touch pad normal force [N] above which ``success`` is true.
         init_qpos: initial joint positions (articulation qpos order) overriding the
             hand's ``rest`` keyframe.
@@ -84,11 +84,26 @@ class TouchEnv(GaussTacEnv):
                  cube_density: float = 7800.0, cube_friction: float = 0.5, ground: bool = True,
                  ground_altitude: float = -0.15, force_threshold: float = 0.05, init_qpos=None,
                  pad_reaction=None, **kwargs):
-        for name, v, lo, hi in (("cube_half_size", cube_half_size, 1e-3, 0.2), ("cube_gap", cube_gap, -0.01, 0.2),
-                                ("cube_density", cube_density, 1.0, 1e5), ("cube_friction", cube_friction, 0.0, 10.0),
-                                ("force_threshold", force_threshold, 0.0, 1e4)):
-            if not (isinstance(v, (int, float)) and lo <= v <= hi):
-                raise ConfigError(f"{name}={v!r} must be a number in [{lo:g}, {hi:g}]")
+        task = self._env_id()
+        for name, v, lo, hi, unit in (("cube_half_size", cube_half_size, 1e-3, 0.2, "m"),
+                                      ("cube_gap", cube_gap, -0.01, 0.2, "m"),
+                                      ("cube_density", cube_density, 1.0, 1e5, "kg/m^3"),
+                                      ("cube_friction", cube_friction, 0.0, 10.0, ""),
+                                      ("force_threshold", force_threshold, 0.0, 1e4, "N"),
+                                      ("ground_altitude", ground_altitude, -1.0, 0.0, "m")):
+            self.check_range(name, v, lo, hi, unit)
+        for name, v in (("free_cube", free_cube), ("two_way", two_way), ("ground", ground)):
+            check_flag(task, name, v)
+        if touch_pad is not None and not isinstance(touch_pad, str):
+            raise ConfigError(f"{task}: touch_pad={touch_pad!r} must be a pad name (str) or None")
+        if init_qpos is not None:
+            try:
+                q = np.asarray(init_qpos, np.float32)
+            except (TypeError, ValueError):
+                q = np.zeros((0, 0), np.float32)
+            if q.ndim != 1 or not np.all(np.isfinite(q)):
+                raise ConfigError(f"{task}: init_qpos={init_qpos!r} must be one finite joint angle [rad] per joint "
+                                  "(articulation qpos order)")
         self.touch_pad_arg = touch_pad
         self.cube_half = float(cube_half_size)
         self.cube_gap = float(cube_gap)
