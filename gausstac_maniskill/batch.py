@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from .config import PadSpec, SolverSettings
-from .cosim import GaussTacSim, default_hand_settings
+from .cosim import GaussTacSim
 from .errors import ConfigError
 from .mpm import MPMWorld
 from .geometry.colliders import Collider
@@ -69,7 +69,7 @@ class BatchedCosim:
         if P.ndim != 4 or P.shape[1] != len(self.link_names):
             raise ConfigError(f"BatchedCosim link_poses must have shape [B, {len(self.link_names)}, 4, 4] "
                               f"(one pose per link of link_names), got {list(P.shape)}")
-        self.world = MPMWorld(settings or default_hand_settings())
+        self.world = MPMWorld(settings or SolverSettings())
         self.scenes = [GaussTacSim(pads, self._env_poses(P, b), urdf=urdf, world=self.world, env=b,
                                    sleep_margin=sleep_margin, pad_surface=pad_surface, pad_solver=pad_solver,
                                    fem_model=fem_model, fem_precompute=fem_precompute)

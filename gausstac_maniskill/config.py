@@ -30,7 +30,14 @@ def _finite(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class Material:
-    """An isotropic solid for MPM particles.
+    """An isotropic solid: a pad's silicone, or a soft object's MPM particles.
+
+    The defaults are the product's pad silicone, Smooth-On Dragon Skin 10 (platinum-cure
+    silicone rubber, Shore 10A). Its data sheet gives a 100 % modulus of 151 kPa (22 psi) and a
+    specific gravity of 1.07; a neo-Hookean fit of that point, σ_eng = μ(λ − λ⁻²) = 1.75 μ at
+    λ = 2, gives μ = 86.7 kPa and E = 3μ ≈ 0.26 MPa. Cured silicone is nearly incompressible
+    (bulk modulus about 1 GPa, ν ≈ 0.4999); ν = 0.48 is the modelling choice, free of locking in
+    both pad solvers.
 
     Attributes:
         E: Young's modulus [Pa], > 0. Silicone pads: 0.1–2 MPa; sponge: 5–50 kPa.
@@ -55,9 +62,9 @@ class Material:
     and Lamé parameters scaled by k(Jp), Jp = det Fp.
     """
 
-    E: float = 3.0e5
-    nu: float = 0.45
-    density: float = 1100.0
+    E: float = 2.6e5
+    nu: float = 0.48
+    density: float = 1070.0
     model: str = "neo_hookean"
     yield_compression: float = 0.10
     yield_stretch: float = 0.05
@@ -111,6 +118,11 @@ class Material:
 @dataclass(frozen=True)
 class SolverSettings:
     """Numerical settings of the MPM co-simulator.
+
+    The defaults are the product's, for fingertip pads at robot control rates (20–100 Hz):
+    dx = 1 mm (pad particles every 0.5 mm), the MPM pads' pseudo-mass ×1000 (the wave speed of a
+    0.3 MPa silicone drops from 32 to 1 m/s; free soft objects keep their physical mass), no
+    absolute damping (pads relax relative to their link), gravity along −z.
 
     Attributes:
         dx: grid spacing [m]. Particles are seeded ``particles_per_axis`` per cell
@@ -173,8 +185,8 @@ class SolverSettings:
     dx: float = 1.0e-3
     particles_per_axis: int = 2
     cfl: float = 0.4
-    max_substeps: int = 2000
-    mass_scaling: float = 1.0
+    max_substeps: int = 5000
+    mass_scaling: float = 1000.0
     hold_scaling: float = 16.0
     hold_speed: float = 1.0e-4
     damping: float = 0.0
@@ -264,18 +276,6 @@ class SensorLayout:
         return (self.size[0] / self.cols, self.size[1] / self.rows)
 
 
-def dragon_skin_10() -> "Material":
-    """The default pad silicone: Smooth-On Dragon Skin 10 (platinum-cure silicone rubber, Shore 10A).
-
-    Smooth-On's data sheet gives a 100 % modulus of 151 kPa (22 psi) and a specific gravity
-    of 1.07. A neo-Hookean fit of that point, σ_eng = μ(λ − λ⁻²) = 1.75 μ at λ = 2, gives
-    μ = 86.7 kPa and E = 3μ ≈ 0.26 MPa. Cured silicone is nearly incompressible (bulk modulus
-    about 1 GPa, ν ≈ 0.4999); ν = 0.48 is the modelling choice: F-bar keeps it free of
-    locking, and its explicit substep count is 1.5× that of ν = 0.45 (4.3× at ν = 0.499,
-    which the solver also runs)."""
-    return Material(E=2.6e5, nu=0.48, density=1070.0)
-
-
 @dataclass(frozen=True)
 class PadSpec:
     """A soft tactile pad on a hand link.
@@ -294,7 +294,7 @@ class PadSpec:
         thickness: soft layer thickness [m]. Default 4 mm: a fingertip skin of the
             GelSight/DIGIT class is 2–5 mm thick, and 4 mm spans the 4 grid cells that
             converge at the default dx = 1 mm (``tactile.pad.MIN_LAYER_CELLS``).
-        material: the silicone (default :func:`dragon_skin_10`: E = 0.26 MPa, ν = 0.48).
+        material: the silicone (default :class:`Material`: Dragon Skin 10, E = 0.26 MPa, ν = 0.48).
         layout: taxel grid of the tactile maps.
         mesh: optional mesh file (link frame) overriding the URDF collision mesh.
         along: the sensor's x axis ("along the finger") in the link frame, made orthogonal
@@ -306,7 +306,7 @@ class PadSpec:
     axis: tuple = (1.0, 0.0, 0.0)
     cone_deg: float = 60.0
     thickness: float = 4.0e-3
-    material: Material = field(default_factory=dragon_skin_10)
+    material: Material = field(default_factory=Material)
     layout: SensorLayout = field(default_factory=SensorLayout)
     mesh: str | None = None
     along: tuple | None = None

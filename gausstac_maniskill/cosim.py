@@ -37,21 +37,11 @@ from .tactile.readout import TactileReadout
 from .transforms import as_pose_matrix, turn_angle
 from .urdf import default_hand_urdf
 
-__all__ = ["GaussTacSim", "default_hand_settings"]
+__all__ = ["GaussTacSim"]
 
 
 #: A pad sleeps only once every particle is within this distance [m] of its rest place.
 REST_TOLERANCE = 5.0e-6
-
-
-def default_hand_settings(**changes) -> SolverSettings:
-    """Solver settings for fingertip pads at control rates: dx = 1 mm; MPM pads' pseudo-mass
-    ×1000 (wave speed of a 0.3 MPa silicone drops from 32 to 1 m/s; free soft objects keep
-    their physical mass), no absolute damping (pads relax relative to their link)."""
-    base = dict(dx=1.0e-3, mass_scaling=1000.0, damping=0.0, gravity=(0.0, 0.0, -9.81),
-                max_substeps=5000)
-    base.update(changes)
-    return SolverSettings(**base)
 
 
 class GaussTacSim:
@@ -62,7 +52,7 @@ class GaussTacSim:
         pads: pad descriptions (see :func:`gausstac_maniskill.tactile.allegro_pad_specs`).
         link_poses: initial world pose (4x4) of every pad link, by link name.
         urdf: URDF the pad links' collision meshes come from (default: ManiSkill's Allegro).
-        settings: solver settings (default :func:`default_hand_settings`).
+        settings: solver settings (default :class:`~gausstac_maniskill.config.SolverSettings`).
         sleep_margin: distance [m] between a pad and the nearest object below which it wakes.
         pad_surface: where colliders touch a pad: ``"mesh"`` (default) on the link mesh
             itself, each surface particle's contact radius its distance below the mesh
@@ -116,7 +106,7 @@ class GaussTacSim:
                  fem_precompute: bool | None = None):
         self.urdf = urdf or default_hand_urdf()
         if world is None:
-            self.settings = settings or default_hand_settings()
+            self.settings = settings or SolverSettings()
             self.world = MPMWorld(self.settings)
         else:
             self.settings = world.settings

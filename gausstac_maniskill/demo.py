@@ -65,7 +65,8 @@ def load_hand_gaussians(asset_dir: Path = ASSET_DIR):
 def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int = 240) -> dict:
     """Run the demo; returns timing statistics (seconds)."""
     from .config import Material
-    from .cosim import GaussTacSim, default_hand_settings
+    from .config import SolverSettings
+    from .cosim import GaussTacSim
     from .geometry import Box, box_particles
     from .pose import MujocoPoseSource
     from .render import box_gaussians
@@ -95,7 +96,7 @@ def run(out: str = "out/demo", fast: bool = False, width: int = 320, height: int
 
     names_all = list(src.link_names)
     pad_pose = lambda P: {n: P[names_all.index(n)] for n in pad_links}  # noqa: E731
-    settings = default_hand_settings(dx=dx)
+    settings = SolverSettings(dx=dx)
     from .tactile import build_pad
     from .urdf import default_hand_urdf, link_mesh
 

@@ -68,7 +68,8 @@ from .. import backend, environment
 from ..agents.base import GaussTacAgent, load_hand_closed_links, load_hand_gaussians, load_hand_lod
 from ..config import Material
 from ..batch import BatchedCosim
-from ..cosim import GaussTacSim, default_hand_settings
+from ..config import SolverSettings
+from ..cosim import GaussTacSim
 from ..errors import AssetWarning, ConfigError
 from ..geometry.colliders import Collider
 from ..pose.sapien_source import SapienPoseSource
@@ -236,7 +237,7 @@ class GaussTacEnv(BaseEnv):
                            ("splat_cull", splat_cull)):
             check_flag(task, name, flag)
         _check_splat_look(task, splat_background, splat_lighting)
-        self.mpm_settings = default_hand_settings(dx=float(mpm_dx))
+        self.mpm_settings = SolverSettings(dx=float(mpm_dx))
         if pad_solver not in ("auto", "mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
             raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'auto', 'mpm' "
                               "or 'fem' and fem_model 'linear' or 'neo_hookean'")

@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from gausstac_maniskill.batch import BatchedCosim
-from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+from gausstac_maniskill.config import SolverSettings
+from gausstac_maniskill.cosim import GaussTacSim
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.mpm import Sphere
 from gausstac_maniskill.pose import MujocoPoseSource
@@ -42,7 +43,7 @@ def setup():
     moves = [np.eye(4), make_pose([0.001, 0.0, 0.0], _rot_z(0.2)), make_pose([0.0, 0.0005, 0.0])]
     poses = np.stack([M @ base for M in moves])  # [B, L, 4, 4]
     i = names.index(INDEX)
-    settings = default_hand_settings(dx=1.5e-3)
+    settings = SolverSettings(dx=1.5e-3)
     S = GaussTacSim(allegro_pad_specs(), dict(zip(names, base)), settings=settings).pads[INDEX].sensor_frame
     envs = []  # per env: the ball's centre at step k (k = -1: 0.5 mm clear of the pad), friction
     for b, (depth, mu) in enumerate([(0.6e-3, 0.0), (0.9e-3, 0.5), (None, 0.0)]):
@@ -229,7 +230,7 @@ def test_batched_pads_at_equilibrium_read_what_each_scene_alone_reads(setup):
     envs), its maps are those of the same scene alone, an env with nothing near reads zeros,
     and an env's flat state moves into the scene alone."""
     names, poses, settings, _ = setup
-    settings = default_hand_settings(dx=2e-3)
+    settings = SolverSettings(dx=2e-3)
     specs = [s for s in allegro_pad_specs() if s.link == INDEX]
     with pytest.warns(Warning):  # 2 mm: a coarse pad, for speed
         batch = BatchedCosim(specs, names, poses[:2], settings=settings, pad_solver="fem")
@@ -265,7 +266,7 @@ def test_batched_pads_at_equilibrium_meet_their_own_envs_soft_object(setup):
     from gausstac_maniskill.mpm import box_particles
 
     names, poses, _, _ = setup
-    settings = default_hand_settings(dx=2e-3)
+    settings = SolverSettings(dx=2e-3)
     specs = [s for s in allegro_pad_specs() if s.link == INDEX]
     i = names.index(INDEX)
     with pytest.warns(Warning):  # 2 mm: a coarse pad, for speed

@@ -3,7 +3,8 @@ default pads at equilibrium are tested in tests/fem/): tactile maps of a press, 
 import numpy as np
 import pytest
 
-from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+from gausstac_maniskill.config import SolverSettings
+from gausstac_maniskill.cosim import GaussTacSim
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.mpm import Sphere
 from gausstac_maniskill.pose import MujocoPoseSource
@@ -21,7 +22,7 @@ def hand_poses():
 
 
 def make_sim(hand_poses):
-    return GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=1.5e-3), pad_solver="mpm")
+    return GaussTacSim(allegro_pad_specs(), hand_poses, settings=SolverSettings(dx=1.5e-3), pad_solver="mpm")
 
 
 def apex_frame(sim, poses):
@@ -81,7 +82,7 @@ def test_stress_reading_matches_the_contact_force(hand_poses):
     estimate is 10-15 % low on this curved pad, so it would fail here. The hand pose turns
     the link, so the binding and sensor frames are exercised too."""
     spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
-    sim = GaussTacSim([spec], {INDEX: hand_poses[INDEX]}, settings=default_hand_settings(dx=1e-3), pad_solver="mpm")
+    sim = GaussTacSim([spec], {INDEX: hand_poses[INDEX]}, settings=SolverSettings(dx=1e-3), pad_solver="mpm")
     centre = add_ball(sim, hand_poses, friction=0.0)
     for k in range(6):
         sim.step({INDEX: hand_poses[INDEX]}, 0.05, {"ball": centre(0.8e-3 * min(1.0, (k + 1) / 3))})
@@ -142,7 +143,7 @@ def test_scene_renders_hand_pads_and_object():
 
     src = MujocoPoseSource()
     all_poses = dict(zip(src.link_names, src.link_poses()[0].numpy()))
-    sim = GaussTacSim(allegro_pad_specs(), all_poses, settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
+    sim = GaussTacSim(allegro_pad_specs(), all_poses, settings=SolverSettings(dx=2e-3), pad_solver="mpm")
     cube_pose = make_pose([0.08, -0.06, 0.05])  # between the camera and the hand, in view
     sim.add_rigid_object("cube", Sphere(radius=0.01, pose=cube_pose))
     hand = load_ply(ASSET_DIR / "gaussians.ply")
@@ -269,7 +270,7 @@ def test_maps_return_to_rest_while_the_object_stays_near(hand_poses):
     Measured: 23 / 7.7 / 4.6 µm depth and 13.5 / 5.7 / 4.7 µm shear after 1 / 2 / 3 steps. (Single
     particles plateau at 12-19 µm: tests/mpm/test_integration.py's strict xfail; a taxel
     averages the sub-cell noise of the particles under it.)"""
-    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(), pad_solver="mpm")
+    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=SolverSettings(), pad_solver="mpm")
     R = 6e-3
     W = apex_frame(sim, hand_poses)
 
@@ -297,16 +298,16 @@ def test_pad_that_crosses_an_object_within_a_step_wakes(hand_poses):
         return {n: make_pose([dx, 0.0, 0.0]) @ T for n, T in hand_poses.items()}
 
     for end, awake in ((0.04, True), (-0.08, False)):
-        sim = GaussTacSim(allegro_pad_specs(), shifted(-0.04), settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
+        sim = GaussTacSim(allegro_pad_specs(), shifted(-0.04), settings=SolverSettings(dx=2e-3), pad_solver="mpm")
         add_ball(sim, hand_poses, friction=0.0)  # on the pad of the unshifted hand
         assert not sim.is_awake(INDEX), "4 cm from the ball: asleep"
         sim.begin_step(shifted(end))
         assert sim.is_awake(INDEX) == awake, end
         if awake:  # the end pose alone is clear of the ball, like the start
-            far = GaussTacSim(allegro_pad_specs(), shifted(end), settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
+            far = GaussTacSim(allegro_pad_specs(), shifted(end), settings=SolverSettings(dx=2e-3), pad_solver="mpm")
             add_ball(far, hand_poses, friction=0.0)
             assert not far.is_awake(INDEX)
-    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=default_hand_settings(dx=2e-3), pad_solver="mpm")
+    sim = GaussTacSim(allegro_pad_specs(), hand_poses, settings=SolverSettings(dx=2e-3), pad_solver="mpm")
     W, R = apex_frame(sim, hand_poses), 6e-3
     away = lambda dx: make_pose(W[:3, 3] + W[:3, 2] * R + [dx, 0.0, 0.0])  # noqa: E731 (dx = 0: touching)
     sim.add_rigid_object("ball", Sphere(radius=R, pose=away(-0.04)))

@@ -99,7 +99,8 @@ def _pressed_scene(pad_solver: str = "mpm"):
     the fingertip as a layer; returns (sim, viewmats [1, 4, 4], Ks [1, 3, 3])."""
     import json
 
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
     from gausstac_maniskill.demo import ASSET_DIR
     from gausstac_maniskill.mpm import Sphere
     from gausstac_maniskill.pose import MujocoPoseSource
@@ -109,7 +110,7 @@ def _pressed_scene(pad_solver: str = "mpm"):
 
     src = MujocoPoseSource()
     poses = dict(zip(src.link_names, src.link_poses()[0].numpy()))
-    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=2e-3), pad_solver=pad_solver)
+    sim = GaussTacSim(allegro_pad_specs(), poses, settings=SolverSettings(dx=2e-3), pad_solver=pad_solver)
     index = "link_3.0_tip"
     apex = poses[index] @ sim.pads[index].sensor_frame
     R = 6e-3

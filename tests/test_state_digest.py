@@ -66,14 +66,15 @@ def _hand_poses():
 
 def pad_scene(pad_solver: str) -> dict:
     """A 6 mm sphere pressed 0.8 mm into the Allegro index pad over 10 steps of 20 ms."""
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
     from gausstac_maniskill.mpm import Sphere
     from gausstac_maniskill.tactile import allegro_pad_specs
     from gausstac_maniskill.transforms import make_pose
 
     poses = _hand_poses()
     dx = 1.0e-3 if pad_solver == "auto" else 1.5e-3
-    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=dx), pad_solver=pad_solver)
+    sim = GaussTacSim(allegro_pad_specs(), poses, settings=SolverSettings(dx=dx), pad_solver=pad_solver)
     W = poses[INDEX] @ sim.pads[INDEX].sensor_frame
     R = 6e-3
     centre = lambda d: make_pose(W[:3, 3] + W[:3, 2] * (R - d))  # noqa: E731

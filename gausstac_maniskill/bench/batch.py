@@ -80,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from .. import backend
     from ..batch import BatchedCosim
-    from ..cosim import GaussTacSim, default_hand_settings
+    from ..config import SolverSettings
+    from ..cosim import GaussTacSim
     from ..geometry import Sphere
     from ..pose import MujocoPoseSource
     from ..tactile import allegro_pad_specs
@@ -89,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     pads = allegro_pad_specs()
     names = [p.link for p in pads]
     base = MujocoPoseSource().link_poses(names)[0].double().numpy()
-    settings = default_hand_settings(dx=args.dx)
+    settings = SolverSettings(dx=args.dx)
     sensor = GaussTacSim(pads, dict(zip(names, base)), settings=settings).pads["link_3.0_tip"].sensor_frame
     print(f"\nBatched co-simulator, Allegro index pad pressed by a 6 mm ball in every env, dx = {args.dx * 1e3:g} mm, "
           f"Taichi {arch}, {args.steps - 1} timed steps of {DT * 1e3:g} ms")

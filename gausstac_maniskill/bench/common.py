@@ -65,10 +65,10 @@ def warmup(contact: str = "particle") -> None:
     from ..mpm import MPMWorld
     from ..transforms import make_pose
 
-    world = MPMWorld(SolverSettings(dx=2e-3, gravity=(0, 0, 0)), contact=contact)
+    world = MPMWorld(SolverSettings(dx=2e-3, gravity=(0, 0, 0), mass_scaling=1.0, max_substeps=2000), contact=contact)
     world.add_link("ground", np.eye(4))
     pts = box_particles([0, 0, -4e-3], [4e-3, 4e-3, 0], 1e-3)
-    world.add_group("pad", pts, Material(), link="ground", kinematic=pts[:, 2] < -3e-3)
+    world.add_group("pad", pts, Material(E=3.0e5, nu=0.45, density=1100.0), link="ground", kinematic=pts[:, 2] < -3e-3)
     world.add_slip_wall(0, 0.0)
     world.add_collider(Sphere(radius=2e-3, pose=make_pose([0, 0, 1.9e-3])))
     world.step(1e-5)

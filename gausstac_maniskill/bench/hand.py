@@ -37,14 +37,15 @@ def _plate_pose(sim, poses, pad, gap):
 
 def pads_in_contact(dx: float = 1.5e-3, repeats: int = 4) -> list[dict]:
     """Wall time per 50 ms step with k = 0..4 pads pressed by a plate each."""
-    from ..cosim import GaussTacSim, default_hand_settings
+    from ..config import SolverSettings
+    from ..cosim import GaussTacSim
     from ..geometry import Box
     from ..tactile import allegro_pad_specs
 
     poses = _hand_poses()
     rows = []
     for k in range(5):
-        sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=dx), pad_solver="mpm")
+        sim = GaussTacSim(allegro_pad_specs(), poses, settings=SolverSettings(dx=dx), pad_solver="mpm")
         touched = list(sim.pads)[:k]
         for i, name in enumerate(sim.pads):
             # every pad gets a plate; untouched ones keep it 5 cm away (they sleep)
@@ -78,12 +79,13 @@ def tip_radius(pad_link: str = INDEX) -> float:
 def press_vs_hertz(dx: float, thickness: float, depths=(0.25e-3, 0.5e-3, 0.75e-3), steps: int = 8) -> dict:
     """Press a flat plate into the index pad; returns force vs depth and timing."""
     from ..config import PadSpec
-    from ..cosim import GaussTacSim, default_hand_settings
+    from ..config import SolverSettings
+    from ..cosim import GaussTacSim
     from ..geometry import Box
 
     poses = _hand_poses()
     spec = PadSpec(link=INDEX, thickness=thickness, cone_deg=70.0)
-    sim = GaussTacSim([spec], {INDEX: poses[INDEX]}, settings=default_hand_settings(dx=dx), pad_solver="mpm")
+    sim = GaussTacSim([spec], {INDEX: poses[INDEX]}, settings=SolverSettings(dx=dx), pad_solver="mpm")
     plate = Box(half_extents=(0.015, 0.015, 0.004), pose=_plate_pose(sim, poses, INDEX, 0.5e-3), friction=0.0)
     sim.add_rigid_object("plate", plate)
     sim.step(poses, 0.05)  # JIT + settle

@@ -54,7 +54,7 @@ def run_case(dx: float, depths=DEPTHS, contact: str = "particle", ramp_transits:
     # grid damping about twice the lowest compressive frequency (π/2)·c/H: near-critical
     damping = 2.0 * (math.pi / 2) * c / (thick + base)
     settings = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), max_substeps=1_000_000, cfl=0.4,
-                              damping=damping)
+                              damping=damping, mass_scaling=1.0)
     h = settings.particle_spacing
     world = MPMWorld(settings, contact=contact)
     world.add_link("ground", np.eye(4))

@@ -253,10 +253,10 @@ def speed_curve(points, indenter: str = "sphere", depth: float = 1e-3, progress:
                              held_substeps=c["phases"][0]["substeps_end"],
                              Fn=c["phases"][0]["Fn_end"], F_spread=c["phases"][0]["F_spread"],
                              F_stress=c["phases"][0]["F_stress_end"], F_pressure=c["phases"][0]["F_pressure_end"]))
-    from ..cosim import default_hand_settings
+    from ..config import SolverSettings
 
-    default_ms = default_hand_settings().mass_scaling
-    default_cfl = default_hand_settings().cfl
+    default_ms = SolverSettings().mass_scaling
+    default_cfl = SolverSettings().cfl
     base = sorted((r for r in runs if r["mass_scaling"] == default_ms and r["patch_radius"] is None
                    and r["cfl"] in (None, default_cfl)), key=lambda r: r["dx"])
     ref, src = base[0]["Fn"], f"finest run (dx = {base[0]['dx'] * 1e3:g} mm)"
@@ -313,9 +313,9 @@ def _solver(args) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..cosim import default_hand_settings
+    from ..config import SolverSettings
 
-    default_dx, default_ms = default_hand_settings().dx, default_hand_settings().mass_scaling
+    default_dx, default_ms = SolverSettings().dx, SolverSettings().mass_scaling
     ap = cli("pad", __doc__)
     ap.add_argument("--quick", action="store_true", help="dx 2, 1.5, 1 mm and fewer control steps")
     ap.add_argument("--dx", type=float, nargs="+", help="grid spacings [m] (default: %g, 7.5e-4, 5e-4)" % default_dx)

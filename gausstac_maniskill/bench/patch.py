@@ -26,13 +26,13 @@ DEPTH = 1e-3  # m
 def run(width: float, radius: float, dx: float, patch: float | None = None) -> dict:
     """Press a sphere of ``radius`` [m] 1 mm into a ``width`` [m] square pad, with the active
     patch ``patch`` [m] (None: the whole pad); see the module."""
-    from ..cosim import default_hand_settings
+    from ..config import SolverSettings
     from ..geometry import Sphere, box_particles
     from ..mpm import MPMWorld
     from ..tactile import allegro_pad_specs
     from ..transforms import make_pose
 
-    s = default_hand_settings(dx=dx, patch_radius=patch)
+    s = SolverSettings(dx=dx, patch_radius=patch)
     world = MPMWorld(s)
     world.add_link("base", np.eye(4))
     pts = box_particles([-width / 2, -width / 2, -THICKNESS - dx], [width / 2, width / 2, 0.0], s.particle_spacing)
@@ -53,12 +53,12 @@ def fem_pad(width: float, dx: float, full: bool) -> dict:
     """A ``width`` [m] square block pad solved at equilibrium (elements of the particle spacing
     at grid ``dx`` [m]), its compliance among all surface points computed now (``full``; not
     cached on disk, so that its cost is measured) or left to be solved point by point."""
-    from ..cosim import default_hand_settings
+    from ..config import SolverSettings
     from ..fem import layer_body
     from ..fem.compliance import estimated_bytes
     from ..tactile import allegro_pad_specs
 
-    size = default_hand_settings(dx=dx).particle_spacing
+    size = SolverSettings(dx=dx).particle_spacing
     material = allegro_pad_specs()[0].material
     t0 = time.perf_counter()
     body = layer_body(THICKNESS, width / 2, size, material.E, material.nu, quarter=False)
@@ -150,10 +150,10 @@ def main(argv: list[str] | None = None) -> int:
     arch = backend.init(args.arch)
     t0 = time.perf_counter()
     if args.pad_solver == "fem":
-        from ..cosim import default_hand_settings
+        from ..config import SolverSettings
         from ..fem.compliance import estimated_bytes
 
-        size = default_hand_settings(dx=args.dx).particle_spacing
+        size = SolverSettings(dx=args.dx).particle_spacing
         limit = args.fem_w_max * 2 ** 20
         jobs = [(w, r, full) for w, r in CASES for full in (False, True)
                 if not full or estimated_bytes(round(w / size) ** 2) <= limit]

@@ -84,21 +84,22 @@ def make_sim(dx: float, indenter: str, thickness: float | None = None, friction:
              cfl: float | None = None, pad_solver: str = "mpm", fem_model: str = "linear",
              fem_precompute: bool | None = None):
     """The index-pad scene: the index pad at :data:`LINK_POSE` in a :class:`GaussTacSim` with
-    :func:`default_hand_settings` (grid spacing ``dx`` [m], optionally another pseudo-mass
+    :class:`~gausstac_maniskill.config.SolverSettings` (grid spacing ``dx`` [m], optionally another pseudo-mass
     factor ``mass_scaling``, ``patch_radius`` [m] or None (False: the default's) and Courant
     number ``cfl``;
     ``pad_surface``, ``pad_solver``, ``fem_model`` and ``fem_precompute`` as in :class:`GaussTacSim`) and
     ``indenter``
     ("plate" | "sphere") 0.2 mm clear of its apex. Returns (sim, W): W the sensor frame's
     world pose (4x4)."""
-    from ..cosim import GaussTacSim, default_hand_settings
+    from ..config import SolverSettings
+    from ..cosim import GaussTacSim
 
     extra = {} if mass_scaling is None else {"mass_scaling": float(mass_scaling)}
     if patch_radius is not False:
         extra["patch_radius"] = patch_radius
     if cfl is not None:
         extra["cfl"] = float(cfl)
-    sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=default_hand_settings(dx=dx, **extra),
+    sim = GaussTacSim([index_spec(thickness)], {INDEX: LINK_POSE}, settings=SolverSettings(dx=dx, **extra),
                       pad_surface=pad_surface, pad_solver=pad_solver, fem_model=fem_model,
                       fem_precompute=fem_precompute)
     W = LINK_POSE @ sim.pads[INDEX].sensor_frame
@@ -113,7 +114,7 @@ def press_pad(dx: float, indenter: str, depths, thickness: float | None = None, 
               fem_model: str = "linear", fem_precompute: bool | None = None) -> dict:
     """Press then slide ``indenter`` ("plate" | "sphere") on the index pad at grid spacing ``dx`` [m]
     (``protocol.slide == 0``: press only); ``mass_scaling``: the pads' pseudo-mass factor
-    (default: :func:`default_hand_settings`'); ``patch_radius`` [m] the active patch (None: off,
+    (default: :class:`~gausstac_maniskill.config.SolverSettings`); ``patch_radius`` [m] the active patch (None: off,
     False: the default's); ``cfl`` the Courant number (default: the settings'); ``pad_solver``
     ``"fem"`` solves the pad at equilibrium instead (with ``fem_model``, ``fem_precompute``): its ``step_ms`` is
     the equilibrium solve's wall time plus the MPM world's (which then holds no particles).
@@ -258,7 +259,7 @@ def layer_world(h: float, dx: float, nu: float, half_width: float, offset: float
     from ..mpm import MPMWorld
 
     settings = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), max_substeps=1_000_000, fbar=fbar, bond=bond,
-                              pressure=pressure)
+                              pressure=pressure, mass_scaling=1.0)
     hp = settings.particle_spacing
     if abs(h / hp - round(h / hp)) > 1e-6:
         raise ValueError(f"layer thickness h={h} m must be a multiple of the particle spacing {hp} m")

@@ -36,7 +36,8 @@ def sponge_scene(field: int = 1, dx: float = 1e-3, pad_solver: str = "mpm", **si
     ``reading()`` returns ``(map_force, pad_stress_force, sponge_stress_force)`` [N], the
     normal force in three readings (pressing positive)."""
     from ..config import Material
-    from ..cosim import GaussTacSim, default_hand_settings
+    from ..config import SolverSettings
+    from ..cosim import GaussTacSim
     from ..geometry import box_particles
     from ..tactile import allegro_pad_specs
     from ..transforms import make_pose
@@ -44,7 +45,7 @@ def sponge_scene(field: int = 1, dx: float = 1e-3, pad_solver: str = "mpm", **si
     pose = np.eye(4)
     pose[2, 3] = 0.1
     spec = next(s for s in allegro_pad_specs() if s.link == INDEX)
-    sim = GaussTacSim([spec], {INDEX: pose}, settings=default_hand_settings(dx=dx), pad_solver=pad_solver,
+    sim = GaussTacSim([spec], {INDEX: pose}, settings=SolverSettings(dx=dx), pad_solver=pad_solver,
                       **sim_kwargs)
     W = pose @ sim.pads[INDEX].sensor_frame  # sensor z: out of the pad, towards the sponge
     R = W[:3, :3]
@@ -145,7 +146,7 @@ def collide(field_b: int, speed: float = 0.1, steps: int = 12, dx: float = 1e-3)
     from ..geometry import box_particles
     from ..mpm import MPMWorld
 
-    s = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0))
+    s = SolverSettings(dx=dx, gravity=(0.0, 0.0, 0.0), mass_scaling=1.0, max_substeps=2000)
     w = MPMWorld(s)
     m = Material(**BLOCK)
     a = box_particles([-0.0105, -0.004, -0.004], [-0.0005, 0.004, 0.004], s.particle_spacing)

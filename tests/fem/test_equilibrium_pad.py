@@ -13,13 +13,14 @@ def _scene(friction=0.5, nu=None, dx=DX, indenter="sphere"):
     import dataclasses
 
     from gausstac_maniskill.bench import scenes as bp
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
 
     spec = bp.index_spec()
     if nu is not None:
         spec = dataclasses.replace(spec, material=dataclasses.replace(spec.material, nu=nu))
     with pytest.warns(Warning) if dx > 1e-3 else contextlib.nullcontext():
-        sim = GaussTacSim([spec], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=dx), pad_solver="fem")
+        sim = GaussTacSim([spec], {bp.INDEX: bp.LINK_POSE}, settings=SolverSettings(dx=dx), pad_solver="fem")
     W = bp.LINK_POSE @ sim.pads[bp.INDEX].sensor_frame
     sim.add_rigid_object("indenter", bp.indenter_collider(indenter, bp.indenter_pose(indenter, W, bp.GAP), friction))
 
@@ -118,12 +119,13 @@ def _box_scene(halves: bool, friction: float):
     """The index pad pressed by a 24 × 24 mm box face, whole or as two boxes side by side
     split off the particle lattice (their union is the whole box's volume)."""
     from gausstac_maniskill.bench import scenes as bp
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
     from gausstac_maniskill.geometry.colliders import Box
     from gausstac_maniskill.transforms import make_pose
 
     with pytest.warns(Warning, match="spans only"):
-        sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
+        sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=SolverSettings(dx=DX),
                           pad_solver="fem")
     W = bp.LINK_POSE @ sim.pads[bp.INDEX].sensor_frame
     a, h, split = 12e-3, 3e-3, 0.37e-3
@@ -201,7 +203,8 @@ def test_fem_precompute_reaches_the_pads(monkeypatch):
     import warnings
 
     from gausstac_maniskill.bench import scenes as bp
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
     from gausstac_maniskill.errors import CostWarning
     from gausstac_maniskill.fem import sensor
     from gausstac_maniskill.fem.sensor import forget_bodies
@@ -211,7 +214,7 @@ def test_fem_precompute_reaches_the_pads(monkeypatch):
         if limit is not None:
             monkeypatch.setattr(sensor, "PRECOMPUTE_BYTES", limit)
         with pytest.warns(Warning, match="spans only"):
-            sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
+            sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=SolverSettings(dx=DX),
                               pad_solver="fem", fem_precompute=choice)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -274,15 +277,16 @@ def test_fem_pad_near_incompressible_is_stable_and_stiffer():
 
 def test_fem_pad_bad_input():
     from gausstac_maniskill.bench import scenes as bp
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
 
     args = ([bp.index_spec()], {bp.INDEX: bp.LINK_POSE})
     with pytest.raises(ConfigError, match="pad_solver"):
         GaussTacSim(*args, pad_solver="implicit")
     with pytest.raises(ConfigError, match="pad_surface='mesh'"):
-        GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem", pad_surface="particles")
+        GaussTacSim(*args, settings=SolverSettings(dx=DX), pad_solver="fem", pad_surface="particles")
     with pytest.warns(Warning):
-        sim = GaussTacSim(*args, settings=default_hand_settings(dx=DX), pad_solver="fem", fem_model="neo_hookean")
+        sim = GaussTacSim(*args, settings=SolverSettings(dx=DX), pad_solver="fem", fem_model="neo_hookean")
     with pytest.raises(ConfigError, match="fem_model='linear' only.*'neo_hookean'"):
         sim.add_soft_object("sponge", np.zeros((8, 3)) + [0, 0, 0.2], bp.index_spec().material)
     assert not sim._surface_colliders and not sim.world.colliders  # nothing added by the refusal
@@ -302,10 +306,11 @@ def test_default_pads_stay_at_equilibrium_with_soft_objects():
     added after is refused with what to do. pad_surface="particles" (the equilibrium pads'
     contact is on the mesh) resolves to the MPM pads."""
     from gausstac_maniskill.bench import scenes as bp
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
 
     args = ([bp.index_spec()], {bp.INDEX: bp.LINK_POSE})
-    settings = default_hand_settings(dx=DX)
+    settings = SolverSettings(dx=DX)
     mat = bp.index_spec().material
     # a 6 × 6 × 3 mm block of the pad's material touching the pad face (particles 0.5 mm apart)
     g = np.stack(np.meshgrid(np.arange(-3e-3, 3e-3, 5e-4), np.arange(-3e-3, 3e-3, 5e-4), np.arange(2.5e-4, 3e-3, 5e-4),

@@ -9,11 +9,12 @@ DX = 2e-3  # 1 mm elements: the coarsest lattice, for speed
 
 def _pad_and_body():
     from gausstac_maniskill.bench import scenes as bp
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
     from gausstac_maniskill.tactile.extract import TaxelBinning
 
     with pytest.warns(Warning, match="spans only"):
-        sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
+        sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=SolverSettings(dx=DX),
                           pad_solver="fem")
     pad = sim.pads[bp.INDEX]
     return sim, pad, sim._fem[bp.INDEX].body, TaxelBinning.for_pad(pad)
@@ -61,7 +62,8 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
     solve of the whole body), pressed and slid; once both matrices are on disk a fresh body
     reads its maps without factoring its stiffness."""
     from gausstac_maniskill.bench import scenes as bp
-    from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+    from gausstac_maniskill.config import SolverSettings
+    from gausstac_maniskill.cosim import GaussTacSim
     from gausstac_maniskill.fem.sensor import forget_bodies
     from gausstac_maniskill.tactile.extract import tactile_maps
 
@@ -82,7 +84,7 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
 
     forget_bodies()
     with pytest.warns(Warning, match="spans only"):
-        again = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=default_hand_settings(dx=DX),
+        again = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=SolverSettings(dx=DX),
                             pad_solver="fem")
     again.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, -1e-3, 1e-3), 0.5))
     again.load_state_dict(sim.state_dict())

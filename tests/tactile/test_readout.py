@@ -8,7 +8,8 @@ to the host, and that it sees state restored on the host.
 import numpy as np
 import pytest
 
-from gausstac_maniskill.cosim import GaussTacSim, default_hand_settings
+from gausstac_maniskill.config import SolverSettings
+from gausstac_maniskill.cosim import GaussTacSim
 from gausstac_maniskill.mpm import Sphere
 from gausstac_maniskill.pose import MujocoPoseSource
 from gausstac_maniskill.tactile import TaxelBinning, allegro_pad_specs, tactile_maps
@@ -25,7 +26,7 @@ def pressed():
     pads asleep."""
     names = [s.link for s in allegro_pad_specs()]
     poses = dict(zip(names, MujocoPoseSource().link_poses(names)[0].double().numpy()))
-    sim = GaussTacSim(allegro_pad_specs(), poses, settings=default_hand_settings(dx=1.5e-3), pad_solver="mpm")
+    sim = GaussTacSim(allegro_pad_specs(), poses, settings=SolverSettings(dx=1.5e-3), pad_solver="mpm")
     W = poses[INDEX] @ sim.pads[INDEX].sensor_frame
     centre = lambda d, s: make_pose(W[:3, 3] + W[:3, 2] * (R - d) + W[:3, 0] * s)  # noqa: E731
     sim.add_rigid_object("ball", Sphere(radius=R, pose=centre(-0.5e-3, 0.0), friction=0.8))
