@@ -10,16 +10,14 @@ The architecture can also be chosen with the environment variable
 :mod:`~gausstac_maniskill.environment`).
 
 Compile time. Taichi compiles each variant of a kernel on its first launch and keeps it in
-its offline cache (``~/.cache/taichi``), so only a machine's first run pays. Two of
-Taichi's whole-kernel passes cost most of that on our substep kernel: its CFG optimisation
-(store forwarding and dead stores across the kernel) and its whole-kernel common
-subexpression elimination (``opt_level >= 1``). ``bench compile`` (index pad, 5 mm sphere,
-2-core CPU; ``BENCHMARKS.md``): the first step takes 158 s with Taichi's defaults, 109 s
-with the CFG pass off and 14 s with ``opt_level=0`` as well; the compiled steps take 1.03,
-1 and 1.20 times as long. The CFG pass is off here. ``GAUSSTAC_COMPILE`` chooses another
-build: ``fast`` also sets ``opt_level=0`` (``make test`` and ``make demo`` use it) and ``taichi`` keeps
-Taichi's own defaults. Builds differ by float rounding only (at most 0.35 µm in the pad's
-positions after 7 steps pressing it 1 mm).
+its offline cache (``~/.cache/taichi``), so only a machine's first run pays. Two of Taichi's
+whole-kernel passes cost most of that on our substep kernel: its CFG optimisation (store
+forwarding and dead stores across the kernel) and its whole-kernel common subexpression
+elimination (``opt_level >= 1``). The CFG pass is off here, which costs the compiled steps
+nothing measurable. ``GAUSSTAC_COMPILE`` chooses another build: ``fast`` also sets
+``opt_level=0`` (``make test`` and ``make demo`` use it: a far shorter first step, slightly
+slower steps after it) and ``taichi`` keeps Taichi's own defaults. Builds differ by float
+rounding only. ``bench compile`` measures each build's first step and step time.
 """
 from __future__ import annotations
 

@@ -25,7 +25,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import torch
 
-from .config import PadSpec, SolverSettings
+from .config import PadSolverSettings, PadSpec, SolverSettings
 from .cosim import GaussTacSim
 from .errors import ConfigError
 from .mpm import MPMWorld
@@ -54,31 +54,30 @@ class BatchedCosim:
         pads: pad descriptions, the same in every env.
         link_names: the L links whose poses :meth:`step` receives (every pad link among them).
         link_poses: [B, L, 4, 4] initial world poses [m] of those links; B is the env count.
-        urdf, settings, sleep_margin, pad_surface, pad_solver, fem_model, fem_precompute: as
-            :class:`~gausstac_maniskill.cosim.GaussTacSim`. With ``pad_solver="fem"`` every env
-            solves its pads at equilibrium after the world's step, one env after another on the
-            host, with one body (factor and compliance) per pad shared by all envs.
+        urdf, settings: as :class:`~gausstac_maniskill.cosim.GaussTacSim`.
+        pad_settings: how the pads are solved (:class:`~gausstac_maniskill.config.PadSolverSettings`,
+            default: its defaults), the same in every env. With equilibrium pads every env solves
+            its pads after the world's step, one env after another on the host, with one body
+            (factor and compliance) per pad shared by all envs.
     """
 
     def __init__(self, pads: Sequence[PadSpec], link_names: Sequence[str], link_poses, *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
-                 sleep_margin: float = 5e-3, pad_surface: str = "mesh", pad_solver: str = "auto",
-                 fem_model: str = "linear", fem_precompute: bool | None = None):
+                 pad_settings: PadSolverSettings | None = None):
         self.link_names = list(link_names)
         P = _as_batch(link_poses, "BatchedCosim link_poses")
         if P.ndim != 4 or P.shape[1] != len(self.link_names):
             raise ConfigError(f"BatchedCosim link_poses must have shape [B, {len(self.link_names)}, 4, 4] "
                               f"(one pose per link of link_names), got {list(P.shape)}")
         self.world = MPMWorld(settings or SolverSettings())
+        self.pad_settings = pad_settings or PadSolverSettings()
         self.scenes = [GaussTacSim(pads, self._env_poses(P, b), urdf=urdf, world=self.world, env=b,
-                                   sleep_margin=sleep_margin, pad_surface=pad_surface, pad_solver=pad_solver,
-                                   fem_model=fem_model, fem_precompute=fem_precompute)
+                                   pad_settings=self.pad_settings)
                        for b in range(P.shape[0])]
         for scene in self.scenes[1:]:  # one body per pad (its factor and compliance) for every env
-            for name, fp in scene._fem.items():
-                fp.share_body(self.scenes[0]._fem[name])
+            scene.solvers["fem"].share_bodies(self.scenes[0].solvers["fem"])
         self.pad_names = [p.name for p in pads]
-        self._readout: TactileReadout | None = None
+        self._readout: tuple | None = None  # (the MPM pads it reads, their TactileReadout)
         self._splat = BatchScene()
         self._soft_key: list | None = None  # the envs' splat scenes that _soft_rows was built for
         self._soft_rows = None
@@ -139,16 +138,23 @@ class BatchedCosim:
         "pressure": [B, H, W] Pa}}`` of the last step (float32, on ``device``; the Taichi
         arch's by default). One launch reads every env's pads on the device: only the maps
         are copied (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`)."""
-        if self._readout is None:
-            self._readout = TactileReadout(self.world, list(self.scenes[0].pads.values()),
-                                           [s.pad_slots() for s in self.scenes])
-        maps = self._readout.maps(device)
-        for b, scene in enumerate(self.scenes):  # pads solved at equilibrium: the world holds them at rest
-            for name, fp in scene._fem.items():
-                if fp.result is not None:  # (the scene's maps: computed once per step, whoever reads them)
-                    for k, v in scene.tactile()[name].items():
-                        maps[name][k][b] = v.to(maps[name][k].device)
-        return maps
+        maps = {}
+        mpm = self.scenes[0].solvers["mpm"]
+        if len(mpm):  # every env's MPM pads in one launch
+            if self._readout is None or self._readout[0] != mpm.names:
+                pads = [self.scenes[0].pads[n] for n in mpm.names]
+                self._readout = (list(mpm.names), TactileReadout(self.world, pads,
+                                                                 [s.solvers["mpm"].slots() for s in self.scenes]))
+            maps = self._readout[1].maps(device)
+        for kind, solver in self.scenes[0].solvers.items():  # the others env by env, stacked
+            if kind == "mpm" or not len(solver):
+                continue
+            envs = [s.solvers[kind].tactile() for s in self.scenes]  # (computed once per step, whoever reads them)
+            for name in solver.names:
+                maps[name] = {k: torch.stack([m[name][k] for m in envs]) for k in envs[0][name]}
+                if device is not None:
+                    maps[name] = {k: v.to(device) for k, v in maps[name].items()}
+        return {name: maps[name] for name in self.pad_names}
 
     def render(self, viewmats, Ks, width: int, height: int, camera_env=None, **kwargs):
         """Render every env's splat scene (:meth:`GaussTacSim.attach_gaussians`) in one

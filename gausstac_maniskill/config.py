@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from .errors import ConfigError
 
-__all__ = ["Material", "SolverSettings", "SensorLayout", "PadSpec", "MODELS"]
+__all__ = ["Material", "SolverSettings", "PadSolverSettings", "SensorLayout", "PadSpec", "MODELS"]
 
 #: Constitutive models understood by the MPM solver.
 MODELS = ("neo_hookean", "fixed_corotated", "foam")
@@ -244,6 +244,61 @@ class SolverSettings:
     def particle_spacing(self) -> float:
         """Distance between seeded particles [m]."""
         return self.dx / self.particles_per_axis
+
+
+@dataclass(frozen=True)
+class PadSolverSettings:
+    """How a scene's pads are solved: which solver, its material model and surface, and when a
+    pad sleeps. One object travels from the task to the pad solvers unchanged.
+
+    Attributes:
+        solver: ``"auto"`` (default): ``"fem"``, except ``"mpm"`` with ``surface="particles"``,
+            and with ``fem_model="neo_hookean"`` ``"mpm"`` once a soft object is added before the
+            pads touched anything; ``"fem"``: each awake pad solved at equilibrium after every
+            step (:class:`~gausstac_maniskill.fem.sensor.EquilibriumPad`, no pseudo-mass);
+            ``"mpm"``: MLS-MPM particles relaxed with a pseudo-mass.
+        fem_model: the equilibrium pads' material model, ``"linear"`` (small strain, fast) or
+            ``"neo_hookean"`` (finite strain, much slower per step).
+        fem_precompute: the equilibrium pads' compliance among all their surface points computed
+            when a pad's body is built (True), or each point's when it first touches (False);
+            None (default): in full when it takes at most
+            :data:`~gausstac_maniskill.fem.sensor.PRECOMPUTE_BYTES`.
+        surface: where colliders touch a pad: ``"mesh"`` (default) on the link mesh itself,
+            ``"particles"`` half a particle spacing beyond its outermost particles (MPM pads only).
+        sleep_margin: distance [m] between a pad and the nearest object below which it wakes,
+            >= 0.
+    """
+
+    solver: str = "auto"
+    fem_model: str = "linear"
+    fem_precompute: bool | None = None
+    surface: str = "mesh"
+    sleep_margin: float = 5.0e-3
+
+    def __post_init__(self) -> None:
+        if self.surface not in ("particles", "mesh"):
+            raise ConfigError(f"GaussTacSim(pad_surface={self.surface!r}) must be 'particles' or 'mesh'")
+        if self.solver not in ("auto", "mpm", "fem"):
+            raise ConfigError(f"GaussTacSim(pad_solver={self.solver!r}) must be 'auto', 'mpm' or 'fem'")
+        if self.fem_model not in ("linear", "neo_hookean"):
+            raise ConfigError(f"pad_solver={self.solver!r}, fem_model={self.fem_model!r}: use pad_solver 'auto', "
+                              "'mpm' or 'fem' and fem_model 'linear' or 'neo_hookean'")
+        if self.fem_precompute not in (None, True, False):
+            raise ConfigError(f"fem_precompute={self.fem_precompute!r} must be None, True or False")
+        if self.solver == "fem" and self.surface != "mesh":
+            raise ConfigError("GaussTacSim(pad_solver='fem') needs pad_surface='mesh' "
+                              "(the equilibrium pads are touched on the link mesh)")
+        margin = _finite("PadSolverSettings.sleep_margin", self.sleep_margin)
+        if margin < 0.0:
+            raise ConfigError(f"PadSolverSettings.sleep_margin={self.sleep_margin!r} m must be >= 0")
+        object.__setattr__(self, "sleep_margin", margin)
+
+    @property
+    def initial_solver(self) -> str:
+        """The pads' solver when the scene is built, ``"fem"`` or ``"mpm"`` (``"auto"`` resolved)."""
+        if self.solver == "auto":
+            return "fem" if self.surface == "mesh" else "mpm"
+        return self.solver
 
 
 @dataclass(frozen=True)

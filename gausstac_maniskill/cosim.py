@@ -5,43 +5,43 @@ Data flows one way: link poses (from SAPIEN or MuJoCo) → :meth:`GaussTacSim.st
 Splatting camera).
 
 Pads: by default (``pad_solver="auto"``) solved at equilibrium each step with linear
-cut-cell FEM (:mod:`gausstac_maniskill.fem`, no pseudo-mass); optionally MLS-MPM
-particles relaxed quasi-statically with a pseudo-mass (``pad_solver="mpm"``,
-:mod:`gausstac_maniskill.mpm.solver`). Soft objects are MPM particles with their physical
-mass; rigid objects are SDF colliders.
+cut-cell FEM (:mod:`gausstac_maniskill.pads.fem`, no pseudo-mass; their particles are also
+groups of the world, held asleep at rest); optionally MLS-MPM particles relaxed
+quasi-statically with a pseudo-mass (``pad_solver="mpm"``, :mod:`gausstac_maniskill.pads.mpm`).
+The scene holds one pad solver per kind (:class:`~gausstac_maniskill.pads.interface.PadSolver`)
+and only orchestrates: it moves the links and objects, tells each solver which of its pads an
+object nears, steps the world and has the solvers solve and read out their pads. Soft objects
+are MPM particles with their physical mass; rigid objects are SDF colliders.
 
-Pads whose bounding sphere is farther than ``sleep_margin`` from every object,
-and that have relaxed (no particle more than ``REST_TOLERANCE`` from its rest place
-on the link, or no longer moving), are put exactly on their rest shape and sleep: they are not simulated, cost nothing, and report
-zero maps; they are carried rigidly by their link and wake up as soon as an object
-comes near. A pad never falls asleep deformed.
+Pads whose bounding sphere is farther than ``sleep_margin`` from every object sleep: an
+equilibrium pad is then at rest; an MPM pad once it has relaxed (no particle more than
+``REST_TOLERANCE`` from its rest place on the link, or no longer moving) is put exactly on its
+rest shape, is not simulated, costs nothing and reports zero maps, carried rigidly by its link,
+and wakes up as soon as an object comes near. A pad never falls asleep deformed.
 
 Default numerics are chosen for robot control steps (20–100 Hz): grid spacing 1 mm
 (pad particles every 0.5 mm). Units: SI.
 """
 from __future__ import annotations
 
-import time
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import torch
 
-from .config import Material, PadSpec, SolverSettings
+from .config import Material, PadSolverSettings, PadSpec, SolverSettings
 from .errors import ConfigError
 from .mpm import MPMWorld
 from .geometry.colliders import Collider
-from .tactile import Pad, build_pad, pad_mesh
-from .tactile.extract import TaxelBinning, tactile_maps
+from .pads import EquilibriumPads, MPMPads, PadSolver
+from .pads.fem import add_contact
+from .pads.mpm import REST_TOLERANCE
+from .tactile import Pad, pad_geometry
 from .tactile.readout import TactileReadout
 from .transforms import as_pose_matrix, turn_angle
 from .urdf import default_hand_urdf
 
-__all__ = ["GaussTacSim"]
-
-
-#: A pad sleeps only once every particle is within this distance [m] of its rest place.
-REST_TOLERANCE = 5.0e-6
+__all__ = ["GaussTacSim", "REST_TOLERANCE"]
 
 
 class GaussTacSim:
@@ -53,6 +53,15 @@ class GaussTacSim:
         link_poses: initial world pose (4x4) of every pad link, by link name.
         urdf: URDF the pad links' collision meshes come from (default: ManiSkill's Allegro).
         settings: solver settings (default :class:`~gausstac_maniskill.config.SolverSettings`).
+        pad_settings: how the pads are solved (:class:`~gausstac_maniskill.config.PadSolverSettings`:
+            solver, FEM model and precompute, contact surface, sleep margin); default: its defaults.
+        world, env: build the scene as env ``env`` of a shared (batched) :class:`MPMWorld`
+            instead of a world of its own (:class:`~gausstac_maniskill.batch.BatchedCosim`
+            does this); its links and groups are named ``env{env}/<name>`` there. A scene in
+            a shared world does not step it (the batch does): use the batch's ``step``.
+        pad_solver, fem_model, fem_precompute, pad_surface, sleep_margin: shorthand for
+            ``pad_settings=PadSolverSettings(solver=pad_solver, fem_model=..., fem_precompute=...,
+            surface=pad_surface, sleep_margin=...)`` (not together with ``pad_settings``):
         sleep_margin: distance [m] between a pad and the nearest object below which it wakes.
         pad_surface: where colliders touch a pad: ``"mesh"`` (default) on the link mesh
             itself, each surface particle's contact radius its distance below the mesh
@@ -63,10 +72,6 @@ class GaussTacSim:
             dx = 0.5 mm of the same mode (``bench pad --curve``): mesh +5.5 %
             (5 mm sphere) / −3.6 % (plate); particles +10.9 % / +6.3 %, and at dx = 0.5 mm the
             particle staircase still reads 12 % (sphere) / 4 % (plate) above the mesh surface.
-        world, env: build the scene as env ``env`` of a shared (batched) :class:`MPMWorld`
-            instead of a world of its own (:class:`~gausstac_maniskill.batch.BatchedCosim`
-            does this); its links and groups are named ``env{env}/<name>`` there. A scene in
-            a shared world does not step it (the batch does): use the batch's ``step``.
         pad_solver: ``"auto"`` (default): ``"fem"`` (with ``fem_model="neo_hookean"``: ``"mpm"``
             once a soft object is added before the pads touched anything; ``pad_surface=
             "particles"``: ``"mpm"``); :attr:`pad_solver` says which.
@@ -101,9 +106,12 @@ class GaussTacSim:
 
     def __init__(self, pads: Sequence[PadSpec], link_poses: Mapping[str, np.ndarray], *,
                  urdf: str | None = None, settings: SolverSettings | None = None,
-                 sleep_margin: float = 5e-3, pad_surface: str = "mesh", world: MPMWorld | None = None,
-                 env: int = 0, pad_solver: str = "auto", fem_model: str = "linear",
-                 fem_precompute: bool | None = None):
+                 pad_settings: PadSolverSettings | None = None, world: MPMWorld | None = None, env: int = 0,
+                 pad_solver: str | None = None, fem_model: str | None = None, fem_precompute: bool | None = None,
+                 pad_surface: str | None = None, sleep_margin: float | None = None):
+        self.pad_settings = _pad_settings(pad_settings, pad_solver=pad_solver, fem_model=fem_model,
+                                          fem_precompute=fem_precompute, pad_surface=pad_surface,
+                                          sleep_margin=sleep_margin)
         self.urdf = urdf or default_hand_urdf()
         if world is None:
             self.settings = settings or SolverSettings()
@@ -114,30 +122,17 @@ class GaussTacSim:
         self.env = int(env)
         self.shared = world is not None
         self._prefix = f"env{self.env}/" if self.shared else ""
-        self.sleep_margin = float(sleep_margin)
-        if pad_surface not in ("particles", "mesh"):
-            raise ConfigError(f"GaussTacSim(pad_surface={pad_surface!r}) must be 'particles' or 'mesh'")
-        if pad_solver not in ("auto", "mpm", "fem"):
-            raise ConfigError(f"GaussTacSim(pad_solver={pad_solver!r}) must be 'auto', 'mpm' or 'fem'")
-        if pad_solver == "fem" and pad_surface != "mesh":
-            raise ConfigError("GaussTacSim(pad_solver='fem') needs pad_surface='mesh' "
-                              "(the equilibrium pads are touched on the link mesh)")
+        self.sleep_margin = self.pad_settings.sleep_margin
         #: "auto": finite-strain pads (fem_model="neo_hookean") turn to the MPM's if a soft object
         #: is added before they touch anything
-        self._auto = pad_solver == "auto"
-        if self._auto:
-            pad_solver = "fem" if pad_surface == "mesh" else "mpm"
+        self._auto = self.pad_settings.solver == "auto"
         #: the pads' solver now, ``"fem"`` or ``"mpm"`` (``pad_solver="auto"`` resolved)
-        self.pad_solver = pad_solver
-        self._fem: dict = {}  # pad name -> EquilibriumPad (pad_solver="fem")
-        # pad name -> index of the collider its link mesh is for soft objects (pad_solver="fem"),
-        # and that collider's SDF at rest
-        self._surface_colliders: dict[str, int] = {}
-        self._surface_rest: dict[str, np.ndarray] = {}
-        self._binning: dict[str, TaxelBinning] = {}
-        self._zero_maps: dict[str, dict] = {}  # equilibrium pad -> its maps at rest (zeros), by shape
-        self.pad_solve_time = 0.0  # wall time [s] of the last step's equilibrium solves (pad_solver="fem")
+        self.pad_solver = self.pad_settings.initial_solver
+        #: one pad solver per kind (:class:`~gausstac_maniskill.pads.interface.PadSolver`), by kind
+        self.solvers: dict[str, PadSolver] = {"fem": EquilibriumPads(self, self.pad_settings),
+                                              "mpm": MPMPads(self, self.pad_settings)}
         self.pads: dict[str, Pad] = {}
+        self._link_pose: dict[str, np.ndarray] = {}
         self._objects: dict[str, int] = {}
         self._soft: dict[str, str] = {}
         names = [p.name for p in pads]
@@ -148,30 +143,51 @@ class GaussTacSim:
             if spec.link not in link_poses:
                 raise ConfigError(f"link_poses has no pose for pad link {spec.link!r} "
                                   f"(given: {sorted(link_poses)})")
-            pad = build_pad(spec, pad_mesh(spec, self.urdf), h, self.settings.dx)
+            pad = pad_geometry(spec, self.urdf, h, self.settings.dx)
             T = as_pose_matrix(link_poses[spec.link], f"link_poses[{spec.link!r}]")
             if not self.world.has_link(self._w(spec.link)):
                 self.world.add_link(self._w(spec.link), T, env=self.env)
-            world_pts = pad.rest @ T[:3, :3].T + T[:3, 3]
-            # the bond surface lies ``thickness`` below the link surface, parallel to it
-            self.world.add_group(self._w(spec.name), world_pts, spec.material, link=self._w(spec.link),
-                                 kinematic=pad.kinematic, spacing=h,
-                                 contact_radius=pad.contact_radius if pad_surface == "mesh" else None,
-                                 bond_distance=spec.thickness - pad.depth, bond_normal=pad.normal @ T[:3, :3].T)
             self.pads[spec.name] = pad
-            if pad_solver == "fem":
-                from .fem.sensor import EquilibriumPad
-
-                self._fem[spec.name] = EquilibriumPad(pad, model=fem_model, precompute=fem_precompute)
-                self.world.set_awake(self._w(spec.name), False)  # the MPM never steps it
+            self._link_pose[spec.link] = T
+            self.solvers[self.pad_solver].add(spec.name)
         self._link_pose = {k: as_pose_matrix(v, f"link_poses[{k!r}]") for k, v in link_poses.items()}
         self._maps: dict[str, dict[str, torch.Tensor]] = {}
-        self._awake = {name: True for name in self.pads}
         self._update_sleep()
 
     def _w(self, name: str) -> str:
         """The world's name of this scene's link or group ``name``."""
         return self._prefix + name
+
+    def world_name(self, name: str) -> str:
+        """The world's name of this scene's link or group ``name`` (``env{env}/name`` in a shared world)."""
+        return self._prefix + name
+
+    def link_pose(self, link: str) -> np.ndarray:
+        """[4, 4] world pose [m] of link ``link`` at the end of the current step."""
+        return self._link_pose[link]
+
+    @property
+    def rigid_objects(self) -> Mapping[str, int]:
+        """Rigid object name -> the index of its collider in the world."""
+        return self._objects
+
+    @property
+    def soft_objects(self) -> Mapping[str, str]:
+        """The soft objects, by name (each its world group's, :meth:`world_name`)."""
+        return self._soft
+
+    def pad_solver_of(self, pad: str) -> PadSolver:
+        """The solver (:class:`~gausstac_maniskill.pads.interface.PadSolver`) of pad ``pad``."""
+        name = self._pad(pad).name
+        for solver in self.solvers.values():
+            if name in solver:
+                return solver
+        raise ConfigError(f"pad {name!r} has no solver")  # (never: every pad has one)
+
+    @property
+    def pad_solve_time(self) -> float:
+        """Wall time [s] of the last step's equilibrium solves (0 without equilibrium pads)."""
+        return self.solvers["fem"].solve_time
 
     def group(self, name: str):
         """The world's :class:`~gausstac_maniskill.mpm.solver.Group` of pad or soft object
@@ -223,16 +239,9 @@ class GaussTacSim:
         object added before they touched anything turns them into MPM pads)."""
         if name in self._objects or name in self._soft or name in self.pads:
             raise ConfigError(f"object {name!r} already exists")
-        models = sorted({fp.model for fp in self._fem.values()} - {"linear"})
-        if models and self._auto and not any(fp.result is not None for fp in self._fem.values()):
+        fem = self.solvers["fem"]
+        if len(fem) and not fem.meet_soft_object(name, self._auto):
             self._to_mpm_pads()
-        elif models:
-            raise ConfigError(f"add_soft_object({name!r}): pads solved at equilibrium meet soft objects with "
-                              f"fem_model='linear' only (these are {models[0]!r}"
-                              f"{' and have touched something already' if self._auto else ''}); "
-                              f"use fem_model='linear' or pad_solver='mpm'")
-        if self._fem:
-            self._add_surface_colliders()
         kwargs.setdefault("field", 1)
         if isinstance(kwargs.get("link"), str):
             kwargs["link"] = self._w(kwargs["link"])
@@ -240,61 +249,13 @@ class GaussTacSim:
         self._soft[name] = name
         self._update_sleep()
 
-    def _add_surface_colliders(self) -> None:
-        """Each equilibrium pad's link mesh as a rigid collider of the MPM world, moving with
-        its link, for the soft objects to meet (friction ``settings.soft_friction``): their push
-        on it, read from the particles' contact impulses, loads the pad (:meth:`_soft_load`), and
-        the collider takes the pad's shape before each step (:meth:`_shape_surface_colliders`)."""
-        from .geometry.colliders import MeshCollider
-
-        for name, pad in self.pads.items():
-            if name in self._fem and name not in self._surface_colliders:
-                T = self._link_pose[pad.spec.link]
-                mesh = pad_mesh(pad.spec, self.urdf)
-                col = MeshCollider(pose=T, friction=self.settings.soft_friction, name=f"surface of pad {name!r}",
-                                   mesh=mesh, sdf_dx=min(pad.spacing, float(np.max(mesh.extents)) / 48.0))
-                self._surface_colliders[name] = self.world.add_collider(col, env=self.env)
-                self._surface_rest[name] = col.sdf  # (read-only, shared)
-
-    def _shape_surface_colliders(self) -> None:
-        """Each equilibrium pad's surface collider takes the pad's shape for the next step: its
-        SDF lowered by the surface's outward normal offset at the nearest surface point, φ − s
-        (the soft objects meet the pad where it was pushed in; s follows the last solved shape,
-        relaxed: :meth:`~gausstac_maniskill.fem.sensor.EquilibriumPad.relax_surface`)."""
-        for name, c in self._surface_colliders.items():
-            fp, rest = self._fem[name], self._surface_rest[name]
-            col = self.world.colliders[c]
-            offset = fp.relax_surface()
-            if fp.result is None:
-                if col.sdf is not rest:
-                    self.world.set_collider_sdf(c, rest)
-                continue
-            nearest = fp.grid_nearest_points(col.sdf_origin, col.sdf_dx, rest.shape)
-            self.world.set_collider_sdf(c, rest - offset[nearest].reshape(rest.shape))
-
-    def _soft_load(self, name: str, T: np.ndarray) -> np.ndarray | None:
-        """[S, 3] link-frame load [N] the soft objects put on equilibrium pad ``name`` in the last
-        step (the reaction to their particles' contact with its surface collider), or None."""
-        c = self._surface_colliders.get(name)
-        if c is None:
-            return None
-        xs, fs = [], []
-        for g in self._soft:
-            touch = self.world.contact_collider(self._w(g)) == c
-            if touch.any():
-                xs.append(self.world.positions(self._w(g))[touch])
-                fs.append(-self.world.contact_forces(self._w(g))[touch])  # on the pad: the opposite
-        if not xs:
-            return None
-        return self._fem[name].soft_load(np.concatenate(xs), np.concatenate(fs), T)
-
     def _to_mpm_pads(self) -> None:
         """``pad_solver="auto"`` with ``fem_model="neo_hookean"`` meets a soft object: the pads,
         untouched so far, become MPM particles (the world held them asleep at rest; they wake
         when an object nears)."""
-        for name in self._fem:
-            self._awake[name] = False  # as the world holds its group
-        self._fem.clear()
+        mpm = self.solvers["mpm"]
+        for name in self.solvers["fem"].clear():
+            mpm.adopt(name)
         self.pad_solver = "mpm"
         self._maps = {}
 
@@ -311,10 +272,8 @@ class GaussTacSim:
             raise ConfigError(f"unknown rigid object {name!r}; objects: {sorted(self._objects)}")
         f, tau = self.world.collider_wrench(self._objects[name])
         origin = self.world.colliders[self._objects[name]].pose[:3, 3]
-        for pad, fp in self._fem.items():
-            if name in fp.holders:
-                x, fc = fp.contact_points(self._link_pose[fp.pad.spec.link], name)
-                f, tau = f - fc.sum(0), tau - np.cross(x - origin, fc).sum(0)
+        for solver in self.solvers.values():  # what the world does not hold
+            f, tau = solver.object_wrench(name, origin, f, tau)
         return f, tau
 
     def link_wrench(self, link: str) -> tuple[np.ndarray, np.ndarray]:
@@ -323,26 +282,9 @@ class GaussTacSim:
         pushed on them, through a massless layer (for two-way coupling of the hand; equal
         and opposite to the rigid objects' share of :meth:`object_wrench`)."""
         f, tau = self.world.link_wrench(self._w(link))
-        for row in self._fem_contacts(link).values():
-            f, tau = f + row[:3], tau + row[3:6]
+        for solver in self.solvers.values():  # what the world does not hold
+            f, tau = solver.link_wrench(link, f, tau)
         return f, tau
-
-    def _fem_contacts(self, link: str) -> dict[str, np.ndarray]:
-        """:meth:`link_contacts`' rows of the equilibrium pads on ``link``, by object."""
-        out: dict[str, np.ndarray] = {}
-        for fp in self._fem.values():
-            if fp.pad.spec.link != link or not fp.touching:
-                continue
-            T = self._link_pose[link]
-            for obj in fp.holders:
-                x, fc = fp.contact_points(T, obj)
-                _add_contact(out, obj, np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0),
-                                                       [fp.indentation(obj)]]))
-            x, fc = fp.load_points(T)  # soft objects' push (key None, as the MPM pads' other field)
-            if len(x):
-                _add_contact(out, None, np.concatenate([fc.sum(0), np.cross(x - T[:3, 3], fc).sum(0),
-                                                        [fp.load_indentation()]]))
-        return out
 
     def link_contacts(self, link: str) -> dict[str | None, np.ndarray]:
         """Per object that hand link ``link``'s pads touched in the last step, ``[7]``: the
@@ -354,8 +296,9 @@ class GaussTacSim:
         rows = self.world.link_contacts(self._w(link))
         names = {i: n for n, i in self._objects.items()}
         out = {names.get(i): r for i, r in enumerate(rows) if (i in names or i == len(rows) - 1) and np.any(r[:6])}
-        for name, row in self._fem_contacts(link).items():
-            _add_contact(out, name, row)
+        for solver in self.solvers.values():  # what the world does not hold
+            for name, row in solver.link_contacts(link).items():
+                add_contact(out, name, row)
         return out
 
     # ------------------------------------------------------------------ stepping
@@ -388,9 +331,8 @@ class GaussTacSim:
         at once): keep every link's pose ``link_poses`` (name → checked 4x4 [m]; the renderer
         poses the whole hand), move the objects, wake or put pads to sleep."""
         self._link_pose.update(link_poses)
-        for name, c in self._surface_colliders.items():
-            self.world.set_collider_pose(c, self._link_pose[self.pads[name].spec.link])
-        self._shape_surface_colliders()
+        for solver in self.solvers.values():
+            solver.after_link_poses()
         for name, T in (object_poses or {}).items():
             self.set_object_pose(name, T)
         self._update_sleep()
@@ -398,8 +340,8 @@ class GaussTacSim:
     def end_step(self) -> None:
         """Second half of :meth:`step`, after the world stepped: solve the equilibrium pads
         (``pad_solver="fem"``) at the step's end poses, forget the last maps."""
-        if self._fem:
-            self._solve_pads()
+        for solver in self.solvers.values():
+            solver.end_step()
         self._maps = {}
         self._posed = None
 
@@ -411,32 +353,8 @@ class GaussTacSim:
         compliance and its maps' response (the default binning's, in the same sweep) are
         computed the first time on a machine, then read from the disk cache. Does nothing
         for MPM pads."""
-        for fp in self._fem.values():
-            fp.body  # noqa: B018 (built on first access)
-
-    def _solve_pads(self) -> None:
-        """Each awake equilibrium pad against the rigid objects within reach of its surface
-        points (one element): each point meets the nearest of them
-        (:class:`~gausstac_maniskill.fem.indenters.Indenters`). A pad with none within reach is
-        at rest."""
-        from .geometry.colliders import signed_distance
-
-        t0 = time.perf_counter()
-        for name, fp in self._fem.items():
-            if not self._awake[name]:
-                continue
-            T = self._link_pose[fp.pad.spec.link]
-            body = fp.body
-            local = body.points if fp.result is None else body.points + fp.result.displacement
-            pts = local @ T[:3, :3].T + T[:3, 3]
-            near = {obj: self.world.colliders[i] for obj, i in sorted(self._objects.items())
-                    if float(signed_distance(self.world.colliders[i], pts)[0].min()) < body.body.size}
-            load = self._soft_load(name, T)
-            if near or load is not None:
-                fp.solve(near, T, load)
-            else:
-                fp.release()
-        self.pad_solve_time = time.perf_counter() - t0
+        for solver in self.solvers.values():
+            solver.prepare()
 
     def _update_sleep(self) -> None:
         """Wake pads near an object (collider or soft group), put the others to sleep.
@@ -476,41 +394,7 @@ class GaussTacSim:
                 for lo, hi in soft_boxes:
                     d = float(np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1).min())
                     near |= d - reach < self.sleep_margin
-            if name in self._fem:  # solved at equilibrium: away from every object it is at rest
-                if not near:
-                    self._fem[name].release()
-                self._awake[name] = near
-                continue
-            if not near and self._awake[name]:
-                x = self.world.positions(self._w(name)).astype(np.float64)
-                settled = self._relative_speed(name, x) * self.world.last_dt_ctrl < 0.2 * REST_TOLERANCE
-                if np.abs(self._displacement(name, x)).max() >= REST_TOLERANCE and not settled:
-                    near = True  # still moving back: stay awake until the pad has relaxed
-                else:
-                    # away from every object, the unloaded elastic solution is the rest shape:
-                    # sleep exactly there (what remains is MPM's numerical plasticity)
-                    self.world.rest_group(self._w(name))
-            if near != self._awake[name]:
-                self.world.set_awake(self._w(name), near)
-                self._awake[name] = near
-
-    def _relative_speed(self, name: str, x: np.ndarray) -> float:
-        """Largest speed [m/s] of pad ``name``'s soft particles (at world positions x [N, 3])
-        relative to its link's rigid motion (bound particles move with the link by definition;
-        their finite-difference velocity carries float32 rounding of ~3e-5 m/s)."""
-        pad = self.pads[name]
-        link = self._w(pad.spec.link)
-        T, (v_o, w) = self.world.link_pose(link), self.world.link_twist(link)
-        soft = ~pad.kinematic
-        rigid = v_o + np.cross(w, x[soft] - T[:3, 3])
-        return float(np.linalg.norm(self.world.velocities(self._w(name))[soft] - rigid, axis=1).max())
-
-    def _displacement(self, name: str, x: np.ndarray) -> np.ndarray:
-        """[N, 3] displacement [m] of pad ``name``'s particles (at world positions x [N, 3])
-        from rest, in the link frame."""
-        pad = self.pads[name]
-        T = self.world.link_pose(self._w(pad.spec.link))  # where the particles were last stepped to
-        return (x - T[:3, 3]) @ T[:3, :3] - pad.rest
+            self.pad_solver_of(name).set_near(name, near)
 
     # ------------------------------------------------------------------ rendering
     def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None, hand_lod=None,
@@ -579,7 +463,8 @@ class GaussTacSim:
     # ------------------------------------------------------------------ readout
     def is_awake(self, pad: str) -> bool:
         """Whether pad ``pad`` is being simulated this step."""
-        return self._awake[self._pad(pad).name]
+        name = self._pad(pad).name
+        return self.pad_solver_of(name).awake[name]
 
     def _pad(self, name: str) -> Pad:
         if name not in self.pads:
@@ -592,50 +477,21 @@ class GaussTacSim:
         sleeping pad reads all zeros. One launch reads every pad on the device
         (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`)."""
         if not self._maps:
-            if len(self._fem) < len(self.pads):
-                self._maps = {name: {k: v[0] for k, v in m.items()} for name, m in self.readout().maps().items()}
-            for name in self._fem:
-                self._maps[name] = self._fem_maps(name)
+            maps = {}
+            for solver in self.solvers.values():
+                maps.update(solver.tactile())
+            self._maps = {name: maps[name] for name in self.pads}
         return self._maps
-
-    def _fem_maps(self, name: str) -> dict[str, torch.Tensor]:
-        """The maps of equilibrium pad ``name``, on the Taichi arch's device: for a linear pad
-        with its full compliance, one matrix times its contact forces
-        (:meth:`EquilibriumPad.tactile_maps`); else :func:`~.tactile.extract.tactile_maps` of
-        its particles' state (:meth:`EquilibriumPad.particle_state`: one solve of the body).
-        Exact zeros while nothing touches it (its equilibrium is then its rest shape)."""
-        from . import backend
-
-        fp, pad = self._fem[name], self.pads[name]
-        if name not in self._binning:
-            self._binning[name] = TaxelBinning.for_pad(pad)
-        T = self._link_pose[pad.spec.link]
-        if fp.result is None and name in self._zero_maps:
-            return {k: v.clone() for k, v in self._zero_maps[name].items()}
-        maps = fp.tactile_maps(self._binning[name])
-        if maps is None:
-            x, _, sigma, f = fp.particle_state(T)
-            maps = tactile_maps(pad, self._binning[name], x, T, f, sigma)
-        device = backend.torch_device()
-        maps = {k: v.to(device) for k, v in maps.items()}
-        if fp.result is None:  # at rest: zeros (their shapes and dtypes kept for the next time)
-            self._zero_maps[name] = {k: torch.zeros_like(v) for k, v in maps.items()}
-            maps = {k: v.clone() for k, v in self._zero_maps[name].items()}
-        return maps
 
     def pad_contact_forces(self, pad: str) -> np.ndarray:
         """[N, 3] world contact force [N] on each of ``pad``'s particles in the last step (from
         rigid objects, and for a pad at equilibrium soft objects too; zero where none)."""
         name = self._pad(pad).name
-        if name in self._fem:
-            return self._fem[name].particle_state(self._link_pose[self.pads[name].spec.link])[3]
-        return self.world.contact_forces(self._w(name))
+        return self.pad_solver_of(name).contact_forces(name)
 
     def readout(self) -> TactileReadout:
-        """The :class:`~gausstac_maniskill.tactile.readout.TactileReadout` of this scene's pads."""
-        if getattr(self, "_readout", None) is None:
-            self._readout = TactileReadout(self.world, list(self.pads.values()), [self.pad_slots()])
-        return self._readout
+        """The :class:`~gausstac_maniskill.tactile.readout.TactileReadout` of this scene's MPM pads."""
+        return self.solvers["mpm"].readout()
 
     def pad_slots(self) -> list[tuple[str, str]]:
         """Per pad, the world's names of its particle group and its link."""
@@ -665,15 +521,9 @@ class GaussTacSim:
         forces off the bond instead: equal to the contact force at equilibrium by construction.
         """
         p = self._pad(pad)
-        if not self._awake[p.name]:
+        if not self.is_awake(p.name):
             return np.zeros(3)
-        if p.name in self._fem:  # the elements' internal forces off the bond (EquilibriumPad.stress_force)
-            return p.sensor_frame[:3, :3].T @ self._fem[p.name].stress_force()
-        grad_phi = (p.normal @ self.world.binding_rotation(self._w(p.name)).T) / p.spec.thickness  # world at binding
-        grad_phi[p.kinematic] = 0.0
-        f = self.world.virtual_work_force(self._w(p.name), grad_phi)
-        R = self._link_pose[p.spec.link][:3, :3] @ p.sensor_frame[:3, :3]
-        return R.T @ f
+        return self.pad_solver_of(p.name).stress_force(p.name)
 
     def pad_normal_force(self, pad: str) -> float:
         """Total normal contact force [N] on ``pad`` in the last step (sum of its force map)."""
@@ -684,11 +534,7 @@ class GaussTacSim:
 
         A sleeping pad is not simulated; it is reported carried rigidly by its link."""
         name = self._pad(pad).name
-        if name in self._fem:
-            x, F, _, _ = self._fem[name].particle_state(self._link_pose[self.pads[name].spec.link])
-            return x.astype(np.float32), F.astype(np.float32)
-        g = self._w(name)
-        return self._carried(name, self.world.positions(g), self.world.deformation_gradients(g))
+        return self.pad_solver_of(name).particles(name)
 
     def particles(self, index: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """World positions [P, 3] and F [P, 3, 3] of every particle of the world (pads, soft
@@ -700,15 +546,8 @@ class GaussTacSim:
         rows = np.arange(len(x)) if index is None else np.asarray(index)
         if index is not None:
             x, F = x[rows], F[rows]
-        for name in self.pads:
-            if name in self._fem:  # from their solution, below
-                continue
-            g = self.group(name)
-            lo, hi = np.searchsorted(rows, (g.start, g.stop))  # the group's rows among ``rows`` (ascending)
-            if hi > lo:
-                x[lo:hi], F[lo:hi] = self._carried(name, x[lo:hi], F[lo:hi])
-        where, frames = self.equilibrium_frames(rows)
-        x[where], F[where] = frames[:, :, 3], frames[:, :, :3]
+        for solver in self.solvers.values():  # sleeping MPM pads carried, equilibrium pads from their solution
+            solver.fill_particles(rows, x, F)
         return x, F
 
     def equilibrium_frames(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -716,31 +555,12 @@ class GaussTacSim:
         pads solved at equilibrium (``pad_solver="fem"``), which the MPM world holds at rest:
         (their positions in ``rows`` [k], their frames (F | x) [k, 3, 4] float32, world frame,
         from :meth:`pad_particles`). The splat camera draws these pads with them."""
-        where, frames = [np.zeros(0, np.int64)], [np.zeros((0, 3, 4), np.float32)]
-        rows = np.asarray(rows)
-        for name in self._fem:
-            g = self.group(name)
-            lo, hi = np.searchsorted(rows, (g.start, g.stop))
-            if hi > lo:
-                x, F = self.pad_particles(name)
-                local = rows[lo:hi] - g.start
-                where.append(np.arange(lo, hi))
-                frames.append(np.concatenate([F[local], x[local, :, None]], axis=2))
-        return np.concatenate(where), np.concatenate(frames)
-
-    def _carried(self, name: str, x: np.ndarray, F: np.ndarray):
-        D = self._carry(name)
-        if D is None:
-            return x, F
-        return (x @ D[:3, :3].T + D[:3, 3]).astype(np.float32), (D[:3, :3] @ F).astype(np.float32)
+        return self.solvers["fem"].frames(rows)
 
     def _carry(self, name: str) -> np.ndarray | None:
         """The rigid motion [4, 4] of pad ``name``'s link since the pad fell asleep (its particles
         stay where they were), or None while it is awake."""
-        g = self.group(name)
-        if g.awake or g.sleep_pose is None:
-            return None
-        return self._link_pose[self.pads[name].spec.link] @ np.linalg.inv(g.sleep_pose)
+        return self.pad_solver_of(name).carry(name)
 
     def carry_rows(self, index: np.ndarray) -> np.ndarray:
         """[P'] int32: for each world particle of ``index`` ([P'] ascending), the row of
@@ -775,9 +595,11 @@ class GaussTacSim:
         In a shared world, this env's part only: it loads into the same scene alone and back."""
         state = {"world": self.world.state_dict(env=self._state_env),
                  "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
-                 "awake": dict(self._awake)}
-        if self._fem:  # the equilibrium pads' last solutions (their warm start and friction holds)
-            state["fem"] = {name: fp.state() for name, fp in self._fem.items()}
+                 "awake": {name: self.is_awake(name) for name in self.pads}}
+        for solver in self.solvers.values():  # what the world does not hold (the equilibrium pads' solutions)
+            own = solver.state()
+            if own:
+                state[solver.kind] = own
         return state
 
     def flat_state(self) -> dict[str, np.ndarray]:
@@ -805,11 +627,10 @@ class GaussTacSim:
             group_awake=np.asarray(w["awake"], bool), group_sleep_pose=sleep, group_has_sleep_pose=has_sleep,
             scalars=np.array([w["time"], w["step_count"], w["vmax"], w["last_dt_ctrl"]], np.float64),
             link_pose=np.stack([self._link_pose[k] for k in sorted(self._link_pose)]),
-            pad_awake=np.array([self._awake[k] for k in self.pads], bool),
+            pad_awake=np.array([self.is_awake(k) for k in self.pads], bool),
         )
-        for i, name in enumerate(self.pads):
-            if name in self._fem:
-                out.update({f"fem{i}_{k}": v for k, v in self._fem[name].flat_state(sorted(self._objects)).items()})
+        for solver in self.solvers.values():
+            out.update(solver.flat_state())
         return out
 
     def load_flat_state(self, state: Mapping[str, np.ndarray]) -> None:
@@ -836,34 +657,33 @@ class GaussTacSim:
         self.load_state_dict({"world": world,
                               "link_pose": {k: np.asarray(T, np.float64) for k, T in zip(names, state["link_pose"])},
                               "awake": {k: bool(a) for k, a in zip(self.pads, state["pad_awake"])}})
-        for i, name in enumerate(self.pads):
-            if name in self._fem:
-                prefix = f"fem{i}_"
-                if prefix + "force" not in state:
-                    raise ConfigError(f"load_flat_state: the state has no {prefix}* entries for pad {name!r}, "
-                                      "which this scene solves at equilibrium (pad_solver='fem'); a state saved with "
-                                      "the MPM pads loads into a scene made "
-                                      "with pad_solver='mpm'")
-                self._fem[name].load_flat_state({k[len(prefix):]: v for k, v in state.items()
-                                                 if k.startswith(prefix)}, sorted(self._objects))
+        for solver in self.solvers.values():
+            solver.load_flat_state(state)
 
     def load_state_dict(self, state: dict) -> None:
         """Restore a :meth:`state_dict` of a scene built the same way (bit-exact)."""
         self.world.load_state_dict(state["world"], env=self._state_env)
         self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
-        self._awake = dict(state["awake"])
-        for name, pad_state in state.get("fem", {}).items():
-            self._fem[name].load_state(pad_state)
+        for solver in self.solvers.values():
+            solver.awake.update({name: state["awake"][name] for name in solver.names})
+            solver.load_state(state.get(solver.kind, {}))
         self._maps = {}
         self._posed = None
 
 
-def _add_contact(rows: dict, name, row: np.ndarray) -> None:
-    """Add a :meth:`GaussTacSim.link_contacts` row [7] (force, torque, indentation) to ``rows``
-    under ``name``: forces and torques add, the deeper indentation stands."""
-    if name in rows:
-        row = np.concatenate([rows[name][:6] + row[:6], [max(rows[name][6], row[6])]])
-    rows[name] = row
+def _pad_settings(settings: PadSolverSettings | None, **loose) -> PadSolverSettings:
+    """``settings``, or the :class:`PadSolverSettings` of the loose options given (GaussTacSim's
+    keyword names; None: the default); giving both is a :class:`ConfigError`."""
+    given = {k: v for k, v in loose.items() if v is not None}
+    if settings is None:
+        fields = {"pad_solver": "solver", "pad_surface": "surface"}
+        return PadSolverSettings(**{fields.get(k, k): v for k, v in given.items()})
+    if not isinstance(settings, PadSolverSettings):
+        raise ConfigError(f"GaussTacSim(pad_settings={settings!r}) must be a PadSolverSettings")
+    if given:
+        raise ConfigError(f"GaussTacSim: give pad_settings or the loose pad options ({sorted(given)}), not both")
+    return settings
+
 
 
 def _sweep(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, float]:

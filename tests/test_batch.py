@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from gausstac_maniskill.batch import BatchedCosim
-from gausstac_maniskill.config import SolverSettings
+from gausstac_maniskill.config import PadSolverSettings, SolverSettings
 from gausstac_maniskill.cosim import GaussTacSim
 from gausstac_maniskill.errors import ConfigError
 from gausstac_maniskill.mpm import Sphere
@@ -63,7 +63,8 @@ def _balls(envs):
 
 def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
     names, poses, settings, envs = setup
-    batch = BatchedCosim(allegro_pad_specs(), names, torch.as_tensor(poses), settings=settings, pad_solver="mpm")
+    batch = BatchedCosim(allegro_pad_specs(), names, torch.as_tensor(poses), settings=settings,
+                         pad_settings=PadSolverSettings(solver="mpm"))
     batch.add_rigid_object("ball", _balls(envs))
     substeps = []
     for k in range(STEPS):
@@ -72,7 +73,8 @@ def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
         substeps.append(batch.world.last_step.substeps)
     assert maps[INDEX]["force"].shape[0] == 3 and maps[INDEX]["shear"].shape[-1] == 2
     for b, (centre, mu) in enumerate(envs):
-        alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[b])), settings=settings, pad_solver="mpm")
+        alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[b])), settings=settings,
+                            pad_settings=PadSolverSettings(solver="mpm"))
         alone.add_rigid_object("ball", Sphere(radius=R, pose=centre(-1), friction=mu))
         for k in range(STEPS):
             alone.begin_step(dict(zip(names, poses[b])), {"ball": centre(k)})
@@ -118,8 +120,10 @@ def test_batched_envs_match_each_scene_alone(setup, monkeypatch):
 def test_bad_batch_input_is_named(setup):
     names, poses, settings, _ = setup
     with pytest.raises(ConfigError, match=r"link_poses must have shape \[B, 4, 4, 4\]"):
-        BatchedCosim(allegro_pad_specs(), names, poses[:, :2], settings=settings, pad_solver="mpm")
-    batch = BatchedCosim(allegro_pad_specs(), names, poses[:1], settings=settings, pad_solver="mpm")
+        BatchedCosim(allegro_pad_specs(), names, poses[:, :2], settings=settings,
+                     pad_settings=PadSolverSettings(solver="mpm"))
+    batch = BatchedCosim(allegro_pad_specs(), names, poses[:1], settings=settings,
+                         pad_settings=PadSolverSettings(solver="mpm"))
     bad = poses[:1].copy()
     bad[0, 0, 0, 3] = np.nan
     with pytest.raises(ConfigError, match="link_poses contains NaN"):
@@ -133,7 +137,8 @@ def test_env_state_moves_between_the_batch_and_the_scene_alone(setup):
     the whole batch restored from its envs' states replays bit for bit (on the CPU; on CUDA
     the scatter's atomic adds land in no fixed order, so to float32 rounding)."""
     names, poses, settings, envs = setup
-    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings, pad_solver="mpm")
+    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings,
+                         pad_settings=PadSolverSettings(solver="mpm"))
     batch.add_rigid_object("ball", _balls(envs))
 
     def step(k):
@@ -158,7 +163,8 @@ def test_env_state_moves_between_the_batch_and_the_scene_alone(setup):
                 assert torch.equal(after[pad][key], again[pad][key]), (pad, key)
     # env 1's state in the scene alone: it steps on like env 1 of the batch
     centre, mu = envs[1]
-    alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[1])), settings=settings, pad_solver="mpm")
+    alone = GaussTacSim(allegro_pad_specs(), dict(zip(names, poses[1])), settings=settings,
+                        pad_settings=PadSolverSettings(solver="mpm"))
     alone.add_rigid_object("ball", Sphere(radius=R, pose=centre(-1), friction=mu))
     alone.load_flat_state(saved[1])
     alone.begin_step(dict(zip(names, poses[1])), {"ball": centre(3)})
@@ -186,7 +192,8 @@ def test_batch_renders_every_env_in_one_call(setup, monkeypatch):
     from gausstac_maniskill.splat import rasterizer
 
     names, poses, settings, envs = setup
-    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings, pad_solver="mpm")
+    batch = BatchedCosim(allegro_pad_specs(), names, poses, settings=settings,
+                         pad_settings=PadSolverSettings(solver="mpm"))
     batch.add_rigid_object("ball", _balls(envs))
     hand = load_ply(ASSET_DIR / "gaussians.ply")
     links = json.loads((ASSET_DIR / "links.json").read_text())["link_names"]
@@ -233,8 +240,9 @@ def test_batched_pads_at_equilibrium_read_what_each_scene_alone_reads(setup):
     settings = SolverSettings(dx=2e-3)
     specs = [s for s in allegro_pad_specs() if s.link == INDEX]
     with pytest.warns(Warning):  # 2 mm: a coarse pad, for speed
-        batch = BatchedCosim(specs, names, poses[:2], settings=settings, pad_solver="fem")
-        alone = GaussTacSim(specs, dict(zip(names, poses[0])), settings=settings, pad_solver="fem")
+        batch = BatchedCosim(specs, names, poses[:2], settings=settings, pad_settings=PadSolverSettings(solver="fem"))
+        alone = GaussTacSim(specs, dict(zip(names, poses[0])), settings=settings,
+                            pad_settings=PadSolverSettings(solver="fem"))
     apex = poses[0][names.index(INDEX)] @ alone.pads[INDEX].sensor_frame
     ball = lambda d: make_pose(apex[:3, 3] + apex[:3, 2] * (R - d))  # noqa: E731
     far = make_pose(apex[:3, 3] + [0.0, 0.0, 0.3])
@@ -245,7 +253,7 @@ def test_batched_pads_at_equilibrium_read_what_each_scene_alone_reads(setup):
         d = 0.8e-3 * (k + 1) / 3
         maps = batch.step(poses[:2], DT, {"ball": np.stack([ball(d), far])})[INDEX]
         ref = alone.step(dict(zip(names, poses[0])), DT, {"ball": ball(d)})[INDEX]
-    assert batch.scenes[1]._fem[INDEX].body is batch.scenes[0]._fem[INDEX].body
+    assert batch.scenes[1].solvers["fem"].pads[INDEX].body is batch.scenes[0].solvers["fem"].pads[INDEX].body
     assert float(ref["force"].sum()) > 0.05
     for key in ("depth", "shear", "force", "pressure"):
         np.testing.assert_array_equal(maps[key][0].cpu().numpy(), ref[key].cpu().numpy())

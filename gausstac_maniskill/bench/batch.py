@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from .. import backend
     from ..batch import BatchedCosim
-    from ..config import SolverSettings
+    from ..config import PadSolverSettings, SolverSettings
     from ..cosim import GaussTacSim
     from ..geometry import Sphere
     from ..pose import MujocoPoseSource
@@ -102,11 +102,12 @@ def main(argv: list[str] | None = None) -> int:
     for B in tqdm(args.envs, desc="env counts", unit="B"):  # each row as it is measured: a cut run keeps them
         scenes = _scenes(B, names, base, sensor)
         poses = np.stack([P for P, _ in scenes])
-        batch = BatchedCosim(pads, names, poses, settings=settings, pad_solver="mpm")
+        batch = BatchedCosim(pads, names, poses, settings=settings, pad_settings=PadSolverSettings(solver="mpm"))
         batch.add_rigid_object("ball", [Sphere(radius=R, pose=c(-1), friction=0.5) for _, c in scenes])
         loop = []
         for P, c in (scenes if B <= args.loop_max else scenes[:1]):
-            sim = GaussTacSim(pads, dict(zip(names, P)), settings=settings, pad_solver="mpm")
+            sim = GaussTacSim(pads, dict(zip(names, P)), settings=settings,
+                              pad_settings=PadSolverSettings(solver="mpm"))
             sim.add_rigid_object("ball", Sphere(radius=R, pose=c(-1), friction=0.5))
             loop.append(sim)
         t_batch = t_loop = h_batch = h_loop = 0.0

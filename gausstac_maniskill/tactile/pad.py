@@ -248,6 +248,22 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
 
 
 _CACHE: dict = {}
+_PADS: dict = {}  # (spec, urdf, spacing, dx) -> Pad, see pad_geometry
+
+
+def pad_geometry(spec: PadSpec, urdf: str, spacing: float, dx: float) -> Pad:
+    """The pad of ``spec`` cut from its mesh (``spec.mesh`` or the link's collision mesh in
+    ``urdf``) at particle ``spacing`` [m] on a grid of spacing ``dx`` [m]: :func:`build_pad`,
+    built once per process for each (spec, urdf, spacing, dx) and then shared, read-only, by
+    every scene and task that asks (the co-simulator's pads and a task's ``pad_geometry``).
+    Warns about an under-resolved layer on every call, as :func:`build_pad` does."""
+    key = (spec, str(urdf), float(spacing), float(dx))
+    pad = _PADS.get(key)
+    if pad is None:
+        pad = _PADS[key] = build_pad(spec, pad_mesh(spec, urdf), spacing, dx)
+    else:
+        check_layer_resolution(spec, dx)
+    return pad
 
 #: Grid cells the soft layer must span for its contact force to converge (with 1–2 cells the
 #: force is off by 2.7–11× against Hertz theory: ``bench hand``'s fingertip press).

@@ -96,23 +96,25 @@ def test_fem_pad_friction_resists_a_slide_and_state_round_trips():
     other, _, press_other = _scene(friction=0.5)
     other.load_flat_state(flat)
     np.testing.assert_array_equal(press_other(-1e-3, 1e-3)[0], F_slid)
-    assert other._fem[bp.INDEX].body is sim._fem[bp.INDEX].body  # kept in the process, not rebuilt
+    # kept in the process, not rebuilt
+    assert other.solvers["fem"].pads[bp.INDEX].body is sim.solvers["fem"].pads[bp.INDEX].body
     from gausstac_maniskill.fem.sensor import forget_bodies
 
     forget_bodies()
-    assert _scene(friction=0.5)[0]._fem[bp.INDEX].body is not sim._fem[bp.INDEX].body
+    assert _scene(friction=0.5)[0].solvers["fem"].pads[bp.INDEX].body is not sim.solvers["fem"].pads[bp.INDEX].body
     flat_again = other.flat_state()  # (after a step: another state, the same shapes)
     assert {k: np.shape(v) for k, v in flat_again.items()} == {k: np.shape(v) for k, v in flat.items()}
     with pytest.raises(ConfigError, match="fem0_.*pad_solver='mpm'"):  # e.g. a state recorded with the MPM pads
         other.load_flat_state({k: v for k, v in flat.items() if not k.startswith("fem0_")})
     with pytest.raises(ConfigError, match="lacks.*owner"):  # a state without the points' owners
         other.load_flat_state({k: v for k, v in flat.items() if k != "fem0_owner"})
-    sim._fem[bp.INDEX].result.cut_cells_linear = True  # (the flag of a finite-strain step solved by the fallback)
+    # (the flag of a finite-strain step solved by the fallback)
+    sim.solvers["fem"].pads[bp.INDEX].result.cut_cells_linear = True
     flagged = sim.flat_state()
     other.load_flat_state(flagged)
-    assert other._fem[bp.INDEX].result.cut_cells_linear
+    assert other.solvers["fem"].pads[bp.INDEX].result.cut_cells_linear
     other.load_flat_state({k: v for k, v in flagged.items() if k != "fem0_cut_cells_linear"})  # a state without the flag
-    assert not other._fem[bp.INDEX].result.cut_cells_linear
+    assert not other.solvers["fem"].pads[bp.INDEX].result.cut_cells_linear
 
 
 def _box_scene(halves: bool, friction: float):
@@ -223,7 +225,7 @@ def test_fem_precompute_reaches_the_pads(monkeypatch):
         assert len(costly) == (limit is not None), costly
         if costly:
             assert "point by point" in costly[0] and "fem_precompute=True" in costly[0]
-        body = sim._fem[bp.INDEX].body
+        body = sim.solvers["fem"].pads[bp.INDEX].body
         assert (body.columns_solved == body.num_points) is full
     forget_bodies()
 
@@ -236,7 +238,7 @@ def test_fem_pad_held_step_keeps_the_equilibrium():
     sim, W, press = _scene(friction=0.5)
     press(bp.GAP)
     press(-1e-3)
-    fp = sim._fem[bp.INDEX]
+    fp = sim.solvers["fem"].pads[bp.INDEX]
     res = fp.result
     press(-1e-3)
     assert fp.result is res
@@ -254,7 +256,7 @@ def test_fem_pad_released_within_reach_reads_zero():
     press(bp.GAP)
     press(-0.5e-3)
     F, maps = press(0.3 * DX / 2)  # 0.3 mm clear: within the 1 mm element, touching nothing
-    assert sim._fem[bp.INDEX].result is not None  # it was solved, not released
+    assert sim.solvers["fem"].pads[bp.INDEX].result is not None  # it was solved, not released
     assert not np.any(F) and float(maps["force"].abs().max()) == 0.0
     F, maps = press(-0.5e-3)  # and presses again from there
     assert F[2] > 0
@@ -289,9 +291,9 @@ def test_fem_pad_bad_input():
         sim = GaussTacSim(*args, settings=SolverSettings(dx=DX), pad_solver="fem", fem_model="neo_hookean")
     with pytest.raises(ConfigError, match="fem_model='linear' only.*'neo_hookean'"):
         sim.add_soft_object("sponge", np.zeros((8, 3)) + [0, 0, 0.2], bp.index_spec().material)
-    assert not sim._surface_colliders and not sim.world.colliders  # nothing added by the refusal
+    assert not sim.solvers["fem"].surface_colliders and not sim.world.colliders  # nothing added by the refusal
     rest = sim.flat_state()  # at rest, before any solve: no body assembled for it
-    assert not rest["fem0_solved"][0] and sim._fem[bp.INDEX]._body is None
+    assert not rest["fem0_solved"][0] and sim.solvers["fem"].pads[bp.INDEX]._body is None
     from gausstac_maniskill.fem.sensor import EquilibriumPad
 
     with pytest.raises(ConfigError, match="model"):
@@ -324,14 +326,15 @@ def test_default_pads_stay_at_equilibrium_with_soft_objects():
         if touched:
             sim.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, -0.5e-3), 0.5))
             sim.step({bp.INDEX: bp.LINK_POSE}, 0.05)
-            assert sim._fem[bp.INDEX].touching
+            assert sim.solvers["fem"].pads[bp.INDEX].touching
         sim.add_soft_object("block", far if touched else block, mat)
-        assert sim.pad_solver == "fem" and bp.INDEX in sim._fem and bp.INDEX in sim._surface_colliders
+        fem = sim.solvers["fem"]
+        assert sim.pad_solver == "fem" and bp.INDEX in fem.pads and bp.INDEX in fem.surface_colliders
 
     with pytest.warns(Warning):
         nh = GaussTacSim(*args, settings=settings, fem_model="neo_hookean")
     nh.add_soft_object("block", block, mat)
-    assert nh.pad_solver == "mpm" and not nh._fem
+    assert nh.pad_solver == "mpm" and not nh.solvers["fem"].pads
     nh.step({bp.INDEX: bp.LINK_POSE}, 0.01)
     assert nh.is_awake(bp.INDEX)  # an MPM pad, woken by the block beside it
     with pytest.warns(Warning):
@@ -349,7 +352,7 @@ def _sponge_distance_to_pad(sim, pad_name: str, sponge: np.ndarray) -> float:
     surface, along the nearest surface point's outward normal (negative: inside the pad)."""
     from scipy.spatial import cKDTree
 
-    fp = sim._fem[pad_name]
+    fp = sim.solvers["fem"].pads[pad_name]
     T = sim._link_pose[fp.pad.spec.link]
     body = fp.body
     surface = body.points + (0.0 if fp.result is None else fp.result.displacement)
@@ -384,11 +387,11 @@ def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
     np.testing.assert_allclose(-(R.T @ sim.link_wrench(soft.INDEX)[0])[2], in_map, rtol=1e-5)  # pushed in: -z
 
     saved = sim.state_dict()
-    c = sim._surface_colliders[soft.INDEX]
-    rest = sim._surface_rest[soft.INDEX]
-    pushed_in = -float(sim._fem[soft.INDEX].normal_displacement().min())
+    c = sim.solvers["fem"].surface_colliders[soft.INDEX]
+    rest = sim.solvers["fem"].surface_rest[soft.INDEX]
+    pushed_in = -float(sim.solvers["fem"].pads[soft.INDEX].normal_displacement().min())
     held = press(soft.PRESS)[soft.INDEX]
-    met = -float(sim._fem[soft.INDEX]._surface[0].min())  # the shape the sponge met in that step (relaxed)
+    met = -float(sim.solvers["fem"].pads[soft.INDEX]._surface[0].min())  # the shape the sponge met then (relaxed)
     assert float((sim.world.colliders[c].sdf - rest).max()) == pytest.approx(met, rel=1e-4)
     assert met == pytest.approx(pushed_in, rel=0.02)  # held: the shape solved the step before
     sim.load_state_dict(saved)
@@ -399,7 +402,7 @@ def test_fem_pad_meets_a_soft_sponge_and_reads_its_push():
 
     for _ in range(3):  # the holder pulled 3 mm back: the sponge leaves the pad
         maps = press(-3e-3)[soft.INDEX]
-    assert sim._fem[soft.INDEX].result is None
+    assert sim.solvers["fem"].pads[soft.INDEX].result is None
     for k in ("depth", "shear", "force", "pressure"):
         assert float(maps[k].abs().max()) == 0.0
     press(-3e-3)  # (the collider takes the rest shape before the step after the release)
@@ -424,7 +427,7 @@ def test_fem_pad_held_against_an_object_as_stiff_as_itself_settles(monkeypatch):
     last = [f[0] for f in forces[-3:]]
     assert max(last) - min(last) < 0.005 * last[-1], last
     assert forces[-1][0] == pytest.approx(forces[-1][2], rel=0.06)
-    assert sim._fem[soft.INDEX]._surface[3] > 0.3  # κ read from the hold: the object is stiff
+    assert sim.solvers["fem"].pads[soft.INDEX]._surface[3] > 0.3  # κ read from the hold: the object is stiff
 
 
 def test_centre_state_neo_hookean_linearises_to_the_linear_stress():

@@ -17,7 +17,7 @@ def _pad_and_body():
         sim = GaussTacSim([bp.index_spec()], {bp.INDEX: bp.LINK_POSE}, settings=SolverSettings(dx=DX),
                           pad_solver="fem")
     pad = sim.pads[bp.INDEX]
-    return sim, pad, sim._fem[bp.INDEX].body, TaxelBinning.for_pad(pad)
+    return sim, pad, sim.solvers["fem"].pads[bp.INDEX].body, TaxelBinning.for_pad(pad)
 
 
 def test_map_readout_reads_a_homogeneous_strain_exactly():
@@ -71,12 +71,12 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
     sim, pad, body, binning = _pad_and_body()
     W = bp.LINK_POSE @ pad.sensor_frame
     sim.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, bp.GAP), 0.5))
-    fp = sim._fem[bp.INDEX]
+    fp = sim.solvers["fem"].pads[bp.INDEX]
     for z, x in ((-0.5e-3, 0.0), (-1e-3, 0.0), (-1e-3, 1e-3)):
         maps = sim.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"ball": bp.indenter_pose("sphere", W, z, x)})[bp.INDEX]
         assert fp.body.has_compliance and fp.result is not None
         pos, _, sigma, f = fp.particle_state(bp.LINK_POSE)
-        ref = tactile_maps(pad, sim._binning[bp.INDEX], pos, bp.LINK_POSE, f, sigma)
+        ref = tactile_maps(pad, sim.solvers["fem"].binning[bp.INDEX], pos, bp.LINK_POSE, f, sigma)
         for k in ref:
             scale = float(ref[k].abs().max())
             assert scale > 0
@@ -89,7 +89,8 @@ def test_pad_maps_equal_the_particles_maps_and_need_no_factor():
     again.add_rigid_object("ball", bp.indenter_collider("sphere", bp.indenter_pose("sphere", W, -1e-3, 1e-3), 0.5))
     again.load_state_dict(sim.state_dict())
     m2 = again.step({bp.INDEX: bp.LINK_POSE}, 0.05, {"ball": bp.indenter_pose("sphere", W, -1e-3, 1e-3)})[bp.INDEX]
-    assert again._fem[bp.INDEX].body is not body and not again._fem[bp.INDEX].body.factored
+    fp = again.solvers["fem"].pads[bp.INDEX]
+    assert fp.body is not body and not fp.body.factored
     for k in maps:
         np.testing.assert_allclose(m2[k].cpu().numpy(), maps[k].cpu().numpy(), atol=1e-6 * float(maps[k].abs().max()))
     forget_bodies()
