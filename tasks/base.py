@@ -38,22 +38,22 @@ share is folded into the hand's joint drives, which PhysX integrates implicitly
 massless on the SAPIEN side: what its particles take from an object in a step, its link
 takes back, so the impulses on the two bodies cancel.
 
+The class holds the ManiSkill hooks; the mechanism they call lives in the package:
+:mod:`~gausstac_maniskill.tactile_env` (splat source, pad contacts and reaction, state dict parts),
+:mod:`~gausstac_maniskill.task_checks` (argument and action checks),
+:mod:`~gausstac_maniskill.scene_objects` (what tasks register) and
+:mod:`~gausstac_maniskill.physx` (wrenches, poses, the PhysX GPU library).
+
 Units: SI. ``physx_cpu`` runs one env per process (use ``gym.vector.AsyncVectorEnv``);
 the code keeps a batch axis everywhere.
 """
 from __future__ import annotations
 
-import contextlib
 import copy
 import dataclasses
-import numbers
 import os
-import sys
 import time
-import warnings
-from dataclasses import dataclass
 from functools import partial
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -62,21 +62,26 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import common
-from mani_skill.utils.structs.pose import Pose
 
-from .. import backend, environment
+from .. import backend
 from ..agents.base import GaussTacAgent, load_hand_closed_links, load_hand_gaussians, load_hand_lod
 from ..config import Material
 from ..batch import BatchedCosim
 from ..config import SolverSettings
 from ..cosim import GaussTacSim
-from ..errors import AssetWarning, ConfigError
+from ..errors import ConfigError
 from ..geometry.colliders import Collider
+from ..physx import apply_wrench, batched_pose
 from ..pose.sapien_source import SapienPoseSource
 from ..transforms import vec7_to_matrix
 from ..render import RigidLayer
-from ..sensors import (GaussianSplatCamera, GaussianSplatCameraConfig, SplatSource, TactileSensor,
-                       TactileSensorConfig)
+from ..scene_objects import CapturedObject, RigidObject, SoftObject, captured_object, load_scene_capture
+from ..sensors import GaussianSplatCameraConfig, TactileSensor, TactileSensorConfig
+from ..tactile_env import (EnvSplatSource, attach_splat_cameras, batch_state, copied, fold_pad_reaction,
+                           invalidate_splat_backgrounds, load_flat_states, pad_contacts, split_task_state,
+                           stacked_flat_states, task_state_leaves)
+from ..task_checks import (check_action, check_choice, check_flag, check_pad_coupling, check_pair, check_range,
+                           check_render_mode, check_sim_backend, check_size, check_splat_look)
 from .contact_spring import ObjectSpring
 from .joint_contact import JointContact
 
@@ -89,37 +94,6 @@ PAD_REACTION_MIN_FREQ = 2000
 
 #: splat camera background [RGB in 0..1] behind a captured scene (``splat_background=None``)
 SCENE_BACKGROUND = (0.0, 0.0, 0.0)
-
-
-@dataclass
-class RigidObject:
-    """A SAPIEN actor the pads feel through an SDF collider (collider in the actor frame)."""
-
-    name: str
-    actor: object
-    collider: Collider
-    gaussians: object = None
-    two_way: bool = False
-
-
-@dataclass
-class CapturedObject:
-    """A SAPIEN actor drawn by captured Gaussians (in the actor frame) that follow its pose."""
-
-    name: str
-    actor: object
-    gaussians: object
-
-
-@dataclass
-class SoftObject:
-    """An MPM-only deformable object: ``particles(env_idx)`` -> (world positions [N, 3] m,
-    kinematic mask [N] or None, anchor 4x4 world pose or None); kinematic particles are
-    glued to the fixed anchor frame."""
-
-    name: str
-    particles: Callable[[int], tuple]
-    material: Material
 
 
 class GaussTacEnv(BaseEnv):
@@ -225,9 +199,9 @@ class GaussTacEnv(BaseEnv):
                  pad_solver: str = "auto", fem_model: str = "linear", fem_precompute: bool | None = None,
                  **kwargs):
         backend.ensure_init()
-        _check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
+        check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         task = self._env_id()
-        _check_render_mode(task, kwargs.get("render_mode"))
+        check_render_mode(task, kwargs.get("render_mode"))
         if not (isinstance(mpm_dx, (int, float)) and 2e-4 <= mpm_dx <= 1e-2):
             raise ConfigError(f"mpm_dx={mpm_dx!r} m must be a number in [2e-4, 1e-2]")
         check_range(task, "mpm_sleep_margin", mpm_sleep_margin, 0.0, 1.0, "m")
@@ -236,15 +210,13 @@ class GaussTacEnv(BaseEnv):
         for name, flag in (("record_mpm_state", record_mpm_state), ("splat_lod", splat_lod),
                            ("splat_cull", splat_cull)):
             check_flag(task, name, flag)
-        _check_splat_look(task, splat_background, splat_lighting)
+        check_splat_look(task, splat_background, splat_lighting)
         self.mpm_settings = SolverSettings(dx=float(mpm_dx))
-        if pad_solver not in ("auto", "mpm", "fem") or fem_model not in ("linear", "neo_hookean"):
-            raise ConfigError(f"pad_solver={pad_solver!r}, fem_model={fem_model!r}: use pad_solver 'auto', 'mpm' "
-                              "or 'fem' and fem_model 'linear' or 'neo_hookean'")
-        if fem_precompute not in (None, True, False):
-            raise ConfigError(f"fem_precompute={fem_precompute!r} must be None, True or False")
-        self.pad_solver, self.fem_model, self.fem_precompute = pad_solver, fem_model, fem_precompute
-        self.mpm_sleep_margin = float(mpm_sleep_margin)
+        from ..config import PadSolverSettings
+
+        #: the pads' solver settings, from the kwargs pad_solver, fem_model, fem_precompute, mpm_sleep_margin
+        self.pad_settings = PadSolverSettings(solver=pad_solver, fem_model=fem_model, fem_precompute=fem_precompute,
+                                              sleep_margin=mpm_sleep_margin)
         self.splat_size = tuple(int(v) for v in splat_size)
         self.render_size = tuple(int(v) for v in render_size)
         self.record_mpm_state = bool(record_mpm_state)
@@ -258,7 +230,7 @@ class GaussTacEnv(BaseEnv):
             raise ConfigError(f"camera={camera!r}: use 'splat' (Gaussian Splatting) or 'sapien'")
         self.camera_kind = camera
         #: the placed captured scene (world frame) or None; see ``scene_ply``
-        self.scene_gaussians = _load_scene_capture(scene_ply, scene_pose, camera)
+        self.scene_gaussians = load_scene_capture(scene_ply, scene_pose, camera)
         self._scene_layer = None if self.scene_gaussians is None else RigidLayer(self.scene_gaussians)
         if splat_background is None:
             splat_background = "sapien" if self.scene_gaussians is None else SCENE_BACKGROUND
@@ -277,25 +249,15 @@ class GaussTacEnv(BaseEnv):
         self._cosim_stale = True
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
         self.step_timing: dict[str, float] = {}
-        self._splat_source = _EnvSplatSource(self)
+        self._splat_source = EnvSplatSource(self)
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
-        if self.pad_reaction and self.gpu_sim_enabled:
-            raise ConfigError("pad_reaction=True needs sim_backend='physx_cpu': the reaction is applied per "
-                              "rigid body, which the GPU simulation does not offer yet")
-        if self.pad_coupling == "implicit" and self.sim_config.scene_config.enable_tgs:
-            raise ConfigError("pad_reaction=True needs PhysX's PGS solver (sim_config=dict(scene_config=dict("
-                              "enable_tgs=False)), the default with pad_reaction): TGS does not hold the contact "
-                              "springs on two-way objects (see tasks/contact_spring.py)")
-        if self.pad_coupling == "explicit" and self.sim_freq < PAD_REACTION_MIN_FREQ:
-            warnings.warn(f"pad_reaction='explicit' at sim_freq={self.sim_freq} Hz: the explicit pad-link coupling was "
-                          f"measured stable from {PAD_REACTION_MIN_FREQ} Hz on a hand closed hard on an object; "
-                          "below, a hard press can fling a finger (pass sim_config=dict(sim_freq=...))",
-                          UserWarning, stacklevel=2)
+        check_pad_coupling(self.pad_coupling, self.gpu_sim_enabled, self.sim_config.scene_config.enable_tgs,
+                           self.sim_freq, PAD_REACTION_MIN_FREQ)
 
     @classmethod
     def check_range(cls, name: str, value, low: float, high: float, unit: str = "") -> None:
         """``ConfigError`` naming the task and argument ``name`` unless ``value`` is a number
-        in [low, high] (:func:`check_range`)."""
+        in [low, high] (:func:`~gausstac_maniskill.task_checks.check_range`)."""
         check_range(cls._env_id(), name, value, low, high, unit)
 
     @classmethod
@@ -382,31 +344,14 @@ class GaussTacEnv(BaseEnv):
         For the pads to feel the object too, register it with :meth:`add_mpm_rigid`
         instead, with ``gaussians=load_capture(ply, placement)``.
         """
-        from ..splat import GaussianSet
-        from ..splat.capture import Similarity, capture_extent, load_capture, transform_gaussians
-
         if name in self._rigid or name in self._soft or name in self._captured:
             raise ConfigError(f"object {name!r} already registered")
-        placement = Similarity.coerce(placement, f"add_captured_object({name!r}).placement")
-        if isinstance(capture, GaussianSet):
-            g, label = transform_gaussians(capture, placement), f"captured object {name!r}"
-        else:
-            g, label = load_capture(capture, placement), f"{Path(capture).name} (captured object {name!r})"
-        mesh = actor.get_first_collision_mesh(to_world_frame=False)
-        if mesh is None:
-            raise ConfigError(f"add_captured_object({name!r}): actor {actor.name!r} has no collision shape; "
-                              "a captured object rides on an actor that SAPIEN simulates (add_*_collision)")
-        size, mesh_size = capture_extent(g.means), float(np.max(mesh.extents))
-        if size > 0 and not 0.5 <= size / mesh_size <= 2.0:
-            hint = placement.scale * mesh_size / size
-            warnings.warn(f"{label}: the placed Gaussians span {size:.3g} m but actor {actor.name!r}'s "
-                          f"collision mesh spans {mesh_size:.3g} m; placement scale={hint:.4g} would match them",
-                          AssetWarning, stacklevel=2)
-        self._captured[name] = CapturedObject(name, actor, g)
+        self._captured[name] = captured_object(name, actor, capture, placement)
 
     def add_mpm_soft(self, name: str, particles: Callable[[int], tuple], material: Material) -> None:
         """A deformable MPM object (not in SAPIEN; the splat camera draws it): see
-        :class:`SoftObject`. ``particles`` is called when each episode's co-simulator is built."""
+        :class:`~gausstac_maniskill.scene_objects.SoftObject`. ``particles`` is called when
+        each episode's co-simulator is built."""
         if name in self._rigid or name in self._soft or name in self._captured:
             raise ConfigError(f"MPM object {name!r} already registered")
         self._soft[name] = SoftObject(name, particles, material)
@@ -462,15 +407,13 @@ class GaussTacEnv(BaseEnv):
     def pad_geometry(self, pad: str):
         """The :class:`~gausstac_maniskill.tactile.Pad` (link-frame particles and sensor frame)
         of pad ``pad`` at this env's resolution (cached)."""
-        from ..tactile import build_pad, pad_mesh
+        from ..tactile import pad_geometry
 
-        if pad not in self._pad_geometry:
-            spec = next((p for p in self.agent.gausstac_pads if p.name == pad), None)
-            if spec is None:
-                raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
-            self._pad_geometry[pad] = build_pad(spec, pad_mesh(spec, type(self.agent).pad_urdf()),
-                                                self.mpm_settings.particle_spacing, self.mpm_settings.dx)
-        return self._pad_geometry[pad]
+        spec = next((p for p in self.agent.gausstac_pads if p.name == pad), None)
+        if spec is None:
+            raise ConfigError(f"unknown pad {pad!r}; pads: {self.pad_names}")
+        return pad_geometry(spec, type(self.agent).pad_urdf(), self.mpm_settings.particle_spacing,
+                            self.mpm_settings.dx)
 
     def pad_frame(self, pad: str) -> torch.Tensor:
         """[B, 4, 4] world pose of ``pad``'s sensor frame now (z out of the pad, origin at
@@ -506,11 +449,7 @@ class GaussTacEnv(BaseEnv):
     def _setup_sensors(self, options: dict):
         super()._setup_sensors(options)
         for cams in (self._sensors, self._human_render_cameras):
-            for uid, cam in list(cams.items()):
-                if isinstance(cam.config, GaussianSplatCameraConfig) and not isinstance(cam, GaussianSplatCamera):
-                    cams[uid] = GaussianSplatCamera.adopt(cam)
-                if isinstance(cams[uid], GaussianSplatCamera):
-                    cams[uid].attach(self._splat_source)
+            attach_splat_cameras(cams, self._splat_source)
         self.scene.sensors = self._sensors
         self.scene.human_render_cameras = self._human_render_cameras
 
@@ -543,9 +482,7 @@ class GaussTacEnv(BaseEnv):
             # was built and measured with (a held pad's larger one jolted a pinched cube)
             settings = dataclasses.replace(settings, hold_scaling=1.0)
         self._batch = BatchedCosim(agent.gausstac_pads, self._pose_source.link_names, self._link_poses(),
-                                   urdf=agent.pad_urdf(), settings=settings,
-                                   sleep_margin=self.mpm_sleep_margin, pad_solver=self.pad_solver,
-                                   fem_model=self.fem_model, fem_precompute=self.fem_precompute)
+                                   urdf=agent.pad_urdf(), settings=settings, pad_settings=self.pad_settings)
         self.cosims = self._batch.scenes
         for name, obj in self._rigid.items():
             cols = [copy.deepcopy(obj.collider) for _ in range(self.num_envs)]
@@ -604,9 +541,7 @@ class GaussTacEnv(BaseEnv):
         self._cosim_stale = True
         for cams in (getattr(self, "_sensors", {}), getattr(self, "_human_render_cameras", {})):
             # a new episode may look different in ways no pose shows (randomised materials)
-            for cam in cams.values():
-                if isinstance(cam, GaussianSplatCamera):
-                    cam.invalidate_background()
+            invalidate_splat_backgrounds(cams)
         t0 = time.perf_counter()
         out = super().reset(seed=seed, options=options)
         self.step_timing["reset"] = time.perf_counter() - t0
@@ -616,7 +551,7 @@ class GaussTacEnv(BaseEnv):
         """ManiSkill's info (``evaluate()`` and ``elapsed_steps``), every tensor a copy: a
         kept info never changes with later steps."""
         self._ensure_cosims()  # after _initialize_episode placed the hand and objects
-        return _copied(super().get_info())
+        return copied(super().get_info())
 
     @property
     def mpm_every_sim_step(self) -> bool:
@@ -637,7 +572,7 @@ class GaussTacEnv(BaseEnv):
             for name in self._wrench:
                 self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
             if self._contacts.shape[1]:
-                self._contacts[b] = self._pad_contacts(sim)
+                self._contacts[b] = pad_contacts(sim, self._pad_links, list(self._rigid))
         self.step_timing["mpm"] = self.step_timing.get("mpm", 0.0) + time.perf_counter() - t0
 
     def _after_simulation_step(self):
@@ -657,25 +592,18 @@ class GaussTacEnv(BaseEnv):
         """Two-way coupling: the pads' reactions of the last MPM step act during this SAPIEN
         step, on the two-way objects and, equal and opposite, on the pad links."""
         super()._before_simulation_step()
-        if not self._contacts.shape[1]:
-            for name, w in self._wrench.items():
-                _apply_wrench(self._rigid[name].actor, w)
-            return
-        obj_w = {n: w.copy() for n, w in self._wrench.items()}
-        if self.pad_coupling == "explicit":
-            link_w = self._contacts[..., :6].sum(2)
-            for i, name in enumerate(self._pad_links):
-                _apply_wrench(self.agent.robot.links_map[name], link_w[:, i])
-        else:  # the links' share goes through their drives, the two-way objects' through springs
-            names = list(self._rigid)
-            for b, (hand, springs) in enumerate(zip(self._joint_contacts, self._object_springs)):
-                hand.fold(self._contacts[b], self._contact_friction)
-                for j, spring in enumerate(springs):
-                    if spring is not None:
-                        rows = list(zip(self._contacts[b][:, j], hand.links))
-                        obj_w[names[j]][b] -= spring.take(rows, self._contact_friction[j])
+        obj_w = self._wrench
+        if self._contacts.shape[1]:
+            obj_w = {n: w.copy() for n, w in self._wrench.items()}
+            if self.pad_coupling == "explicit":
+                link_w = self._contacts[..., :6].sum(2)
+                for i, name in enumerate(self._pad_links):
+                    apply_wrench(self.agent.robot.links_map[name], link_w[:, i])
+            else:  # the links' share goes through their drives, the two-way objects' through springs
+                fold_pad_reaction(self._contacts, self._contact_friction, self._joint_contacts, self._object_springs,
+                                  list(self._rigid), obj_w)
         for name, w in obj_w.items():
-            _apply_wrench(self._rigid[name].actor, w)
+            apply_wrench(self._rigid[name].actor, w)
 
     @property
     def pad_links(self) -> list[str]:
@@ -693,17 +621,6 @@ class GaussTacEnv(BaseEnv):
     def _pad_link_wrenches(self, sim: GaussTacSim) -> np.ndarray:
         """[len(pad_links), 6] of one co-simulator (see :meth:`pad_link_wrench`)."""
         return np.array([np.concatenate(sim.link_wrench(link)) for link in self._pad_links])
-
-    def _pad_contacts(self, sim: GaussTacSim) -> np.ndarray:
-        """[len(pad_links), rigid objects + 1, 7] of one co-simulator: per pad link and
-        object touched (rigid objects in registration order, then soft objects) the force,
-        torque about the link origin and indentation of :meth:`GaussTacSim.link_contacts`."""
-        order = {name: j for j, name in enumerate(self._rigid)}
-        out = np.zeros((len(self._pad_links), len(self._rigid) + 1, 7))
-        for i, link in enumerate(self._pad_links):
-            for name, row in sim.link_contacts(link).items():
-                out[i, order.get(name, len(self._rigid))] += row
-        return out
 
     def object_wrench(self, name: str) -> torch.Tensor:
         """[B, 6] force [N] and torque [N·m] (about the object origin) the pads exerted on
@@ -730,35 +647,14 @@ class GaussTacEnv(BaseEnv):
 
     def _checked_action(self, action):
         """``action`` as a float32 tensor on the env's device, or a ``ConfigError`` naming
-        what is wrong (ManiSkill's own answers are a bare ``AssertionError`` for a wrong
-        shape and a NaN complaint for an integer array). Accepted: real numbers (int and
-        float dtypes; integers cast to float32) of shape ``[A]`` or ``[B, A]``, A the control
-        mode's action size, all finite. ``None`` and dict actions pass unchanged."""
+        what is wrong (:func:`~gausstac_maniskill.task_checks.check_action`). Accepted: real
+        numbers (int and float dtypes; integers cast to float32) of shape ``[A]`` or ``[B, A]``,
+        A the control mode's action size, all finite. ``None`` and dict actions pass unchanged."""
         if action is None or isinstance(action, dict):
             return action
         task = self.spec.id if self.spec else self._env_id()
-        try:
-            a = action if isinstance(action, torch.Tensor) else torch.as_tensor(np.asarray(action))
-        except (TypeError, ValueError, RuntimeError) as err:
-            raise ConfigError(f"{task}: action of type {type(action).__name__} is not an array of numbers "
-                              f"({err}); nothing was stepped") from err
-        if a.dtype == torch.bool or a.is_complex() or not (a.is_floating_point() or _is_integer(a.dtype)):
-            raise ConfigError(f"{task}: action of dtype {a.dtype} (shape {tuple(a.shape)}) is not an array of real "
-                              "numbers; use float32 (integer arrays are cast to float32); nothing was stepped")
-        single = getattr(self._orig_single_action_space, "shape", None)
-        if single is not None:
-            single = tuple(single)
-            batched = (self.num_envs, *single)
-            if tuple(a.shape) not in (single, batched):
-                raise ConfigError(f"{task}: action of shape {tuple(a.shape)}; control_mode {self.control_mode!r} "
-                                  f"expects shape {single} or {batched} (num_envs={self.num_envs}); "
-                                  "nothing was stepped")
-        a = a.to(device=self.device, dtype=torch.float32)
-        if not torch.isfinite(a).all():
-            bad = torch.nonzero(~torch.isfinite(a)).tolist()
-            raise ConfigError(f"{task}: action contains NaN or inf at {bad[:8]} (shape {list(a.shape)}); "
-                              "nothing was stepped")
-        return a
+        return check_action(task, action, getattr(self._orig_single_action_space, "shape", None), self.num_envs,
+                            self.control_mode, self.device)
 
     def get_obs(self, info=None, unflattened: bool = False):
         """ManiSkill's observation plus ``obs["tactile"]``. Every leaf is a copy: no tensor of
@@ -775,7 +671,7 @@ class GaussTacEnv(BaseEnv):
                 tactile = {p: {k: v.reshape(v.shape[0], -1) for k, v in m.items()} for p, m in tactile.items()}
             obs["tactile"] = tactile
             self.step_timing["tactile"] = self.step_timing.get("tactile", 0.0) + time.perf_counter() - t0
-        obs = _copied(obs)
+        obs = copied(obs)
         return obs if unflattened else self._flatten_raw_obs(obs)
 
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
@@ -809,320 +705,36 @@ class GaussTacEnv(BaseEnv):
         """Restore :meth:`_get_task_state` (rows ``env_idx``)."""
 
     def get_state_dict(self):
+        """ManiSkill's state plus ``state["task"]`` (the task's variables, the two-way wrenches and
+        pad contacts acting next: :func:`~gausstac_maniskill.tactile_env.task_state_leaves`) and,
+        with ``record_mpm_state``, ``state["gausstac"]`` (every co-simulator's flat state)."""
         state = super().get_state_dict()
-        task = self._get_task_state()
-        if self._wrench:  # the two-way wrench acting during the next SAPIEN step
-            task = {**task, **{f"wrench_{n}": torch.as_tensor(w, dtype=torch.float64) for n, w in self._wrench.items()}}
-        if self._contacts.size:  # the pads' contacts acting on their links, [B, L * (O + 1) * 7]
-            task["pad_contacts"] = torch.as_tensor(self._contacts.reshape(self.num_envs, -1), dtype=torch.float64)
-        if task:  # [B] leaves as [B, 1]: ManiSkill's replay indexes every state leaf as [..., D]
-            state["task"] = {k: (v[:, None] if v.ndim == 1 else v).clone() for k, v in task.items()}
+        task = task_state_leaves(self._get_task_state(), self._wrench, self._contacts, self.num_envs)
+        if task:
+            state["task"] = task
         if self.record_mpm_state and self.cosims and not self._cosim_stale:
-            flats = [sim.flat_state() for sim in self.cosims]
-            state["gausstac"] = {k: torch.from_numpy(np.stack([f[k] for f in flats])) for k in flats[0]}
+            state["gausstac"] = stacked_flat_states(self.cosims)
         return state
 
     def set_state_dict(self, state: dict, env_idx: torch.Tensor = None):
         """SAPIEN state, then the task's variables, then the co-simulators: restored from
         ``state["gausstac"]`` when present (exact), otherwise rebuilt at rest."""
-        state = _batch_state(state)
+        state = batch_state(state)
         mpm = state.get("gausstac")
         sim_state = {k: v for k, v in state.items() if k not in ("gausstac", "task")}
         super().set_state_dict(sim_state, env_idx)
         rows = torch.arange(self.num_envs) if env_idx is None else torch.as_tensor(common.to_numpy(env_idx))
-        task = {}
-        for k, v in state.get("task", {}).items():
-            v = common.to_tensor(v).cpu()
-            task[k] = v[rows] if v.shape[0] == self.num_envs else v  # rows of the envs being set
-        wrench = {k[len("wrench_"):]: task.pop(k) for k in list(task) if k.startswith("wrench_")}
-        contacts = task.pop("pad_contacts", None)
-        if task:  # back to the task's own shapes ([B, 1] -> [B])
-            now = self._get_task_state()
-            task = {k: v[..., 0] if k in now and now[k].ndim == 1 and v.ndim == 2 else v for k, v in task.items()}
+        task, wrench, contacts = split_task_state(state.get("task", {}), rows, self.num_envs, self._get_task_state)
         if task:
             self._set_task_state(task, rows)  # first: soft objects are built from task variables
         if mpm is None:
             self._build_cosims()  # at rest, from the poses just set
         else:
             self._ensure_cosims()
-            for row, b in enumerate(rows.tolist()):
-                flat = {k: np.asarray(common.to_numpy(v))[b if np.shape(v)[0] == self.num_envs else row]
-                        for k, v in mpm.items()}
-                self.cosims[b].load_flat_state(flat)
+            load_flat_states(self.cosims, mpm, rows, self.num_envs)
             self._tactile_maps = None
         for name, w in wrench.items():
             if name in self._wrench:
                 self._wrench[name][rows.numpy()] = w.double().numpy()
         if contacts is not None and self._contacts.size:
             self._contacts[rows.numpy()] = contacts.double().numpy().reshape((len(rows),) + self._contacts.shape[1:])
-
-
-def _load_scene_capture(scene_ply, scene_pose, camera: str):
-    """The placed captured scene of ``GaussTacEnv(scene_ply=..., scene_pose=...)``, or None."""
-    if scene_ply is None:
-        if scene_pose is not None:
-            raise ConfigError("scene_pose was given without scene_ply (the captured scene it places)")
-        return None
-    if camera != "splat":
-        raise ConfigError(f"scene_ply needs camera='splat' (SAPIEN's camera cannot draw Gaussians), got "
-                          f"camera={camera!r}")
-    from ..splat.capture import Similarity, load_capture
-
-    if isinstance(scene_ply, str) and scene_ply == "example":
-        from ..splat.example_scene import EXAMPLE_PLACEMENT, EXAMPLE_SCENE
-
-        scene_ply, scene_pose = EXAMPLE_SCENE, EXAMPLE_PLACEMENT if scene_pose is None else scene_pose
-    return load_capture(scene_ply, Similarity.coerce(scene_pose, "scene_pose"))
-
-
-def check_range(task: str, name: str, value, low: float, high: float, unit: str = "") -> None:
-    """``ConfigError`` ``"<task>: <name>=<value> must be a number in [low, high] unit"`` unless
-    ``value`` is a real number (not a bool) with ``low <= value <= high`` (NaN is refused)."""
-    if not _is_real(value) or not low <= value <= high:
-        raise ConfigError(f"{task}: {name}={value!r} must be a number in [{low:g}, {high:g}] {unit}".rstrip())
-
-
-def check_pair(task: str, name: str, value, low: float, high: float, unit: str = "") -> tuple[float, float]:
-    """``value`` as ``(lo, hi)`` floats, or a ``ConfigError`` naming ``name`` unless it is two real
-    numbers with ``low <= lo <= hi <= high``."""
-    try:
-        pair = tuple(value)
-    except TypeError:
-        pair = ()
-    if len(pair) != 2 or not all(_is_real(v) for v in pair) or not low <= pair[0] <= pair[1] <= high:
-        raise ConfigError(f"{task}: {name}={value!r} must be two numbers (lo, hi) with {low:g} <= lo <= hi <= "
-                          f"{high:g} {unit}".rstrip())
-    return float(pair[0]), float(pair[1])
-
-
-def check_flag(task: str, name: str, value) -> None:
-    """``ConfigError`` naming ``name`` unless ``value`` is a bool (``bool("no")`` would be True)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ConfigError(f"{task}: {name}={value!r} must be True or False")
-
-
-def check_choice(task: str, name: str, value, choices) -> None:
-    """``ConfigError`` naming ``name`` and the choices unless ``value`` is one of them."""
-    if not isinstance(value, str) or value not in choices:
-        raise ConfigError(f"{task}: {name}={value!r} must be one of {', '.join(repr(c) for c in choices)}")
-
-
-def check_size(task: str, name: str, value) -> None:
-    """``ConfigError`` naming ``name`` unless ``value`` is (width, height), two integers in [1, 8192] pixels."""
-    try:
-        wh = tuple(value)
-    except TypeError:
-        wh = ()
-    if len(wh) != 2 or not all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
-                               and 1 <= v <= 8192 for v in wh):
-        raise ConfigError(f"{task}: {name}={value!r} must be (width, height), two integers in [1, 8192] pixels")
-
-
-def _is_real(value) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-
-
-def _is_integer(dtype: torch.dtype) -> bool:
-    return not dtype.is_floating_point and not dtype.is_complex and dtype != torch.bool
-
-
-def _copied(tree):
-    """``tree`` (nested dicts of tensors and arrays, as ManiSkill's obs and info) with every
-    tensor cloned and every array copied; other leaves as they are."""
-    if isinstance(tree, dict):
-        return {k: _copied(v) for k, v in tree.items()}
-    if isinstance(tree, torch.Tensor):
-        return tree.clone()
-    if isinstance(tree, np.ndarray):
-        return tree.copy()
-    return tree
-
-
-def _check_render_mode(task: str, render_mode) -> None:
-    """``ConfigError`` for a render mode ManiSkill does not know, and for ``"human"`` (SAPIEN's
-    viewer window) on a Linux machine without a display (neither ``DISPLAY`` nor
-    ``WAYLAND_DISPLAY`` set), where SAPIEN fails deep inside ``gym.make``."""
-    if render_mode is None:
-        return
-    modes = BaseEnv.SUPPORTED_RENDER_MODES
-    if render_mode not in modes:
-        raise ConfigError(f"{task}: render_mode={render_mode!r} must be None or one of "
-                          f"{', '.join(repr(m) for m in modes)}")
-    if render_mode == "human" and sys.platform.startswith("linux") and not (
-            environment.read("DISPLAY") or environment.read("WAYLAND_DISPLAY")):
-        raise ConfigError(f"{task}: render_mode='human' opens SAPIEN's viewer window, and this machine has no "
-                          "display (DISPLAY and WAYLAND_DISPLAY are unset); use render_mode='rgb_array', which "
-                          "draws without a window (env.render() returns the frames, [B, H, W, 3] uint8)")
-
-
-def _check_splat_look(task: str, splat_background, splat_lighting) -> None:
-    """``ConfigError`` naming ``splat_background`` or ``splat_lighting`` unless they are what
-    :class:`GaussTacEnv` documents (checked for ``camera="sapien"`` too)."""
-    from ..splat.lighting import Lighting
-
-    if not isinstance(splat_lighting, Lighting) and not (isinstance(splat_lighting, str)
-                                                         and splat_lighting in ("scene", "baked")):
-        raise ConfigError(f"{task}: splat_lighting={splat_lighting!r} must be 'scene', 'baked' or a "
-                          "gausstac_maniskill.splat.lighting.Lighting")
-    if splat_background is None or (isinstance(splat_background, str) and splat_background == "sapien"):
-        return
-    try:
-        rgb = np.asarray(splat_background, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        rgb = np.zeros(0)
-    if isinstance(splat_background, str) or rgb.shape != (3,) or not np.all(np.isfinite(rgb)) \
-            or rgb.min() < 0 or rgb.max() > 1:
-        raise ConfigError(f"{task}: splat_background={splat_background!r} must be None, 'sapien' or an RGB "
-                          "triple in [0, 1]")
-
-
-def _check_sim_backend(num_envs, sim_backend) -> None:
-    """``ConfigError`` for what ManiSkill or SAPIEN would refuse with a bare error: ``num_envs
-    > 1`` where ManiSkill simulates on the CPU (it runs one env per process there, and says
-    only "failed to find device cuda"), a GPU backend without CUDA, and a GPU backend whose
-    PhysX GPU library SAPIEN cannot fetch (a ``requests`` ConnectionError from deep inside)."""
-    if not isinstance(num_envs, int) or isinstance(num_envs, bool) or num_envs < 1:
-        raise ConfigError(f"num_envs={num_envs!r} must be a positive integer")
-    name = str(sim_backend).split(":")[0]  # "physx_cuda:1" names a device
-    cuda = torch.cuda.is_available()
-    on_cpu = name in ("physx_cpu", "cpu") or (name == "auto" and (num_envs == 1 or not cuda))
-    if num_envs > 1 and on_cpu:
-        raise ConfigError(
-            f"num_envs={num_envs} with sim_backend={sim_backend!r}: ManiSkill simulates several envs in one "
-            "process only on an NVIDIA GPU (sim_backend='physx_cuda'); on the CPU it runs one env per process. "
-            "Use gymnasium.vector.AsyncVectorEnv over gym.make(..., num_envs=1), or, to record demonstrations, "
-            "`python -m gausstac_maniskill.collect <env_id> --num-procs N` (add --ray [ADDRESS] to spread the "
-            "workers over a Ray cluster)")
-    if on_cpu or name not in ("physx_cuda", "cuda", "gpu", "auto"):
-        return  # ManiSkill names a backend it does not know itself
-    if not cuda:
-        raise ConfigError(f"sim_backend={sim_backend!r} needs an NVIDIA GPU with CUDA, and torch sees none here "
-                          "(torch.cuda.is_available() is False); use sim_backend='physx_cpu' with num_envs=1")
-    _enable_physx_gpu(sim_backend)
-
-
-def _enable_physx_gpu(sim_backend) -> None:
-    """Load SAPIEN's PhysX GPU library now, so that a failure names the file. SAPIEN fetches
-    it from GitHub into ``~/.sapien/physx/<version>/`` on first use (on a machine without
-    internet, a ConnectionError inside ``gym.make``)."""
-    from pathlib import Path
-
-    import sapien.physx
-
-    if sapien.physx.is_gpu_enabled():
-        return
-    version = sapien.physx.version()
-    folder = Path.home() / ".sapien" / "physx" / version
-    try:
-        sapien.physx.enable_gpu()
-    except Exception as err:  # noqa: BLE001 - any failure here: the library is missing or broken
-        raise ConfigError(
-            f"sim_backend={sim_backend!r}: SAPIEN could not load its PhysX GPU library "
-            f"{folder / 'libPhysXGpu_64.so'} ({type(err).__name__}: {str(err).splitlines()[0][:200]}). SAPIEN "
-            f"downloads it on first use from https://github.com/sapien-sim/physx-precompiled/releases/download/"
-            f"{version}/linux-so.zip; on a machine without internet, download that file elsewhere and unzip it "
-            f"into {folder}") from err
-
-
-def _apply_wrench(entity, w: np.ndarray) -> None:
-    """Add w [B, 6] (force [N], torque [N·m] about the entity's origin, world frame) to the
-    rigid body of each env of a ManiSkill actor or link for the coming SAPIEN step (CPU
-    sim), as a force at its centre of mass and the torque that keeps the moment."""
-    if not np.any(w):
-        return
-    origin = entity.pose.raw_pose[:, :3].detach().cpu().double().numpy()
-    for b, body in enumerate(entity._bodies):
-        if not np.any(w[b]):
-            continue
-        com = np.asarray((body.entity_pose * body.cmass_local_pose).p, np.float64)
-        force, torque = w[b, :3], w[b, 3:]
-        torque_com = torque + np.cross(origin[b] - com, force)  # the moment about the centre of mass
-        body.add_force_torque(force.astype(np.float32), torque_com.astype(np.float32))
-
-
-def batched_pose(p, q) -> Pose:
-    """ManiSkill pose of n envs from positions [n, 3] m and quaternions (w, x, y, z) [n, 4]."""
-    return Pose.create_from_pq(torch.as_tensor(np.asarray(p), dtype=torch.float32),
-                               torch.as_tensor(np.asarray(q), dtype=torch.float32))
-
-
-def _batch_state(state: dict) -> dict:
-    """Give a one-env state dict whose leaves lack the env axis (ManiSkill's CPU replay
-    passes one step of a recorded ``env_states`` that way) its env axis; batched dicts
-    are returned unchanged. The articulations' state tells which: ``[D]`` or ``[B, D]``."""
-    probe = next(iter((state.get("articulations") or state.get("actors") or {}).values()), None)
-    if probe is None or len(probe.shape) != 1:
-        return state
-
-    def add_axis(x):
-        return {k: add_axis(v) for k, v in x.items()} if isinstance(x, dict) else x[None]
-
-    return add_axis(state)
-
-
-class _EnvSplatSource(SplatSource):
-    """The env's co-simulators as the splat camera's scene."""
-
-    def __init__(self, env: GaussTacEnv):
-        self.env = env
-
-    def render(self, viewmats, Ks, width, height, background, background_depth, lighting=None):
-        """Every env's camera in one rasterizer call (:meth:`BatchedCosim.render`); an env
-        without Gaussians shows the background as it is."""
-        env = self.env
-        env._ensure_cosims()
-        out = env._batch.render(viewmats, Ks, width, height, background=background,
-                                background_depth=background_depth, lighting=lighting)
-        # depth: the Gaussians' where they cover the pixel, else the background's
-        d_bg = background_depth.to(out.depth.device) if background_depth is not None else float("inf")
-        depth = torch.where(out.alpha > 0.5, out.depth / out.alpha.clamp_min(1e-6), d_bg)
-        return out.rgb, depth
-
-    def _hidden_entities(self) -> list:
-        """SAPIEN entities the Gaussians replace: the hand's links (when it has Gaussians), the
-        MPM rigid objects that have Gaussians and the captured objects' actors (CPU sim; none on
-        the GPU sim). A moving object drawn by its Gaussians then leaves SAPIEN's background
-        picture unchanged, so it is taken once and reused."""
-        env = self.env
-        entities = []
-        if not env.gpu_sim_enabled:
-            if type(env.agent).gausstac_gaussians:
-                entities += [obj.entity for link in env.agent.robot.links for obj in link._objs]
-            entities += [ent for o in env._rigid.values() if o.gaussians is not None for ent in o.actor._objs]
-            entities += [ent for o in env._captured.values() for ent in o.actor._objs]
-        return entities
-
-    def background_key(self):
-        """Poses (and render visibility) of every SAPIEN entity that the background picture
-        may show, i.e. all but the hidden ones; ``None`` on the GPU sim (not tracked)."""
-        env = self.env
-        if env.gpu_sim_enabled:
-            return None
-        hidden = {e.global_id for e in self._hidden_entities()}
-        key = []
-        for sub in env.scene.sub_scenes:
-            for ent in sub.entities:
-                if ent.global_id in hidden:
-                    continue
-                pose = ent.pose
-                rb = ent.find_component_by_type(sapien.render.RenderBodyComponent)
-                key += [ent.global_id, *pose.p, *pose.q, -1.0 if rb is None else rb.visibility]
-        return np.asarray(key, dtype=np.float64)
-
-    @contextlib.contextmanager
-    def hidden(self):
-        """Hide the hand's SAPIEN visuals (when it has Gaussians to replace them) and the
-        captured objects' actors while the splat camera takes its background (CPU sim)."""
-        entities = self._hidden_entities()
-        bodies = []
-        for ent in entities:
-            rb = ent.find_component_by_type(sapien.render.RenderBodyComponent)
-            if rb is not None and rb.visibility != 0:
-                bodies.append(rb)
-        for rb in bodies:
-            rb.visibility = 0
-        try:
-            yield
-        finally:
-            for rb in bodies:
-                rb.visibility = 1

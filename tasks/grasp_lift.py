@@ -24,7 +24,7 @@ import torch
 from mani_skill.utils.registration import register_env
 
 from ..geometry.colliders import Box
-from .base import batched_pose
+from ..physx import batched_pose
 from .pinch_grasp import OPEN_HAND, PinchGraspEnv
 
 __all__ = ["GraspLiftCubeEnv", "OPEN_HAND"]

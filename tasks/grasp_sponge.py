@@ -25,7 +25,7 @@ from mani_skill.utils.registration import register_env
 from ..config import MODELS, Material
 from ..errors import ConfigError
 from ..geometry import HalfSpace, box_particles
-from .base import check_choice, check_pair
+from ..task_checks import check_choice, check_pair
 from .pinch_grasp import PinchGraspEnv
 
 __all__ = ["GraspSqueezeSpongeEnv"]

@@ -14,7 +14,8 @@ import sapien
 import torch
 from mani_skill.utils import common
 
-from .base import GaussTacEnv, check_range
+from ..task_checks import check_range
+from .base import GaussTacEnv
 
 __all__ = ["PinchGraspEnv", "OPEN_HAND", "check_range"]
 

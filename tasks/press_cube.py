@@ -22,7 +22,9 @@ from mani_skill.utils import common
 from mani_skill.utils.registration import register_env
 
 from ..geometry.colliders import Box
-from .base import GaussTacEnv, batched_pose, check_pair
+from ..physx import batched_pose
+from ..task_checks import check_pair
+from .base import GaussTacEnv
 
 __all__ = ["PressCubeEnv", "IndexCubeTask", "INDEX_READY"]
 

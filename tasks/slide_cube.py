@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from mani_skill.utils.registration import register_env
 
-from .base import check_pair
+from ..task_checks import check_pair
 from .press_cube import IndexCubeTask
 
 __all__ = ["SlideCubeEnv"]

@@ -17,7 +17,7 @@ from mani_skill.utils.registration import register_env
 
 from ..config import MODELS, Material
 from ..geometry import box_particles
-from .base import check_choice, check_pair
+from ..task_checks import check_choice, check_pair
 from .press_cube import IndexCubeTask
 
 __all__ = ["SqueezeSpongeEnv"]

@@ -43,8 +43,10 @@ from mani_skill.utils.registration import register_env
 
 from ..errors import ConfigError
 from ..geometry.colliders import Box
+from ..physx import batched_pose
+from ..task_checks import check_flag
 from ..transforms import matrix_to_quat
-from .base import GaussTacEnv, batched_pose, check_flag
+from .base import GaussTacEnv
 
 __all__ = ["TouchEnv"]
 
