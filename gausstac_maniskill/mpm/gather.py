@@ -4,7 +4,7 @@
 A soft Gaussian rides on one particle (:mod:`gausstac_maniskill.splat.deform`): its frame is
 the particle's deformation gradient F_p and position x_p. A sleeping pad's particles stay on
 the device where the pad fell asleep while its link moves on; the renderer carries them with
-the rigid motion D = [R | t] of the link since then: (F, x) -> (R F, R x + t). One launch reads
+the link's rigid motion D = [R | t] from then to now: (F, x) -> (R F, R x + t). One launch reads
 the particles of every env and pad, so that a picture copies only the frames it needs (not the
 whole particle state) and, on CUDA, nothing to the host.
 """

@@ -1,40 +1,32 @@
-"""The active patch: a pad's cost follows its contact, not its size (issue 10, point 7).
+"""The active patch: a pad's cost follows its contact, not its size.
 
-A fingertip pad in contact deforms near the contact; a few layer thicknesses away it
-barely moves, yet every one of its particles costs the same in each substep. With
-``SolverSettings.patch_radius`` set, every control step splits each awake quasi-static
-group that is bound to a link (a pad) into three parts:
+A pad in contact deforms near the contact and barely moves a few layer thicknesses away. With
+``SolverSettings.patch_radius`` set, every control step splits each awake quasi-static group
+bound to a link (a pad) into three parts:
 
-* the **patch**: its dynamic particles whose rest place, carried by the link to its pose
-  at the start or at the end of the step, lies within ``patch_radius`` of a collider's
-  surface. They are simulated as usual;
-* the **shell**: every other particle within ``SHELL_CELLS`` grid cells of the patch
-  (measured in the link's rest frame). For this step it is bound to the link where it
-  is now, deformed (a kinematic particle whose rest coordinate is its current place in
-  the link frame), so it pins the grid nodes around the patch: the displacement at the
-  patch's boundary is held at its current value (a Dirichlet boundary);
-* the **frozen** rest rides rigidly with the link: position, deformation gradient and
-  stress are carried by the link's motion once per control step (:func:`carry_rigidly`),
-  and it costs nothing in the substeps.
+* the **patch**: its dynamic particles whose rest place, carried by the link to its pose at the
+  start or end of the step, lies within ``patch_radius`` of a collider's surface; simulated;
+* the **shell**: every other particle within ``SHELL_CELLS`` grid cells of the patch (link rest
+  frame), bound for this step to the link where it is now, deformed, so it pins the grid nodes
+  around the patch (a Dirichlet boundary at the patch's current displacement);
+* the **frozen** rest: carried rigidly by the link's motion once per control step
+  (:func:`carry_rigidly`), at no cost in the substeps.
 
-The error is that of clamping the layer ``patch_radius`` away from the contact at the
-displacement it had when it left the patch; ``bench patch`` and ``bench pad --curve
---patch-radius`` measure it against the whole pad.
-
-The whole group is simulated instead when no collider is within ``patch_radius`` of it,
-when a group of the other velocity field (a soft object) is awake (soft contact is not
-localised), and once a contact has ended until the group is put back at rest
-(:meth:`~gausstac_maniskill.mpm.solver.MPMWorld.rest_group`): a released pad then relaxes
-everywhere, including the deformation frozen behind a sliding contact.
+The error is that of clamping the layer ``patch_radius`` from the contact at the displacement
+it had when it left the patch; ``bench patch`` and ``bench pad --curve --patch-radius`` measure
+it. The whole group is simulated when no collider is within ``patch_radius``, while a soft
+object (the other velocity field) is awake, and after a contact ends until the group is put
+back at rest (:meth:`~gausstac_maniskill.mpm.solver.MPMWorld.rest_group`), so a released pad
+relaxes everywhere, including the deformation frozen behind a sliding contact.
 """
 
 import numpy as np
 import taichi as ti
 from scipy import ndimage
 
-from .colliders import local_sdf
-from .kernels import N_COL, NDF, NDF2, NDI, NDM, NDV, Particles, Scene
-from .kinematics import pose_at
+from ..geometry.colliders import local_sdf
+from ..geometry.kinematics import pose_at
+from .kernels import N_COL, NDF, NDF2, NDI, NDV, Particles, Scene
 
 __all__ = ["ActivePatch", "SHELL_CELLS"]
 
@@ -71,44 +63,43 @@ def rest_gap(P: Particles, S: Scene, X_rest: NDV, link_poses: NDF2, col_poses: N
 
 
 @ti.kernel
-def bind_in_place(lst: NDI, n: ti.i32, link_poses: NDF2, x: NDV, X0: NDV, link: NDI):
+def bind_in_place(P: Particles, X0: NDV, lst: NDI, n: ti.i32, link_poses: NDF2):
     """Shell particles: their rest coordinate becomes their current place in the link frame
     (at the step's start pose), so the kinematic placement holds them where they are."""
     for ii in range(n):
         p = lst[ii]
-        R0, t0 = pose_at(link_poses, link[p], 0.0)
-        X0[p] = R0.transpose() @ (x[p] - t0)
+        R0, t0 = pose_at(link_poses, P.link[p], 0.0)
+        X0[p] = R0.transpose() @ (P.x[p] - t0)
 
 
 @ti.kernel
-def carry_rigidly(lst: NDI, n: ti.i32, dt: ti.f32, link_poses: NDF2, x: NDV, v: NDV, C: NDM, F: NDM, tau: NDM,
-                  impulse: NDV, contact_id: NDI, link: NDI):
+def carry_rigidly(P: Particles, lst: NDI, n: ti.i32, dt: ti.f32, link_poses: NDF2):
     """Frozen particles ride with their link over the control step of ``dt`` seconds:
     x ← R_rel (x − t0) + t1, F ← R_rel F, τ ← R_rel τ R_relᵀ (R_rel = R1 R0ᵀ), the rigid
     velocity and velocity gradient of that motion, and no contact."""
     for ii in range(n):
         p = lst[ii]
-        R0, t0 = pose_at(link_poses, link[p], 0.0)
-        R1, t1 = pose_at(link_poses, link[p], 1.0)
+        R0, t0 = pose_at(link_poses, P.link[p], 0.0)
+        R1, t1 = pose_at(link_poses, P.link[p], 1.0)
         Rr = R1 @ R0.transpose()
-        xn = Rr @ (x[p] - t0) + t1
-        v[p] = (xn - x[p]) / dt
-        x[p] = xn
-        C[p] = (R1 - R0) @ R0.transpose() / dt
-        F[p] = Rr @ F[p]
-        tau[p] = Rr @ tau[p] @ Rr.transpose()
-        impulse[p] = ti.Vector([0.0, 0.0, 0.0])
-        contact_id[p] = -1
+        xn = Rr @ (P.x[p] - t0) + t1
+        P.v[p] = (xn - P.x[p]) / dt
+        P.x[p] = xn
+        P.C[p] = (R1 - R0) @ R0.transpose() / dt
+        P.F[p] = Rr @ P.F[p]
+        P.tau[p] = Rr @ P.tau[p] @ Rr.transpose()
+        P.impulse[p] = ti.Vector([0.0, 0.0, 0.0])
+        P.contact_id[p] = -1
 
 
 @ti.kernel
-def groups_in_contact(active: NDI, n: ti.i32, contact_id: NDI, group: NDI, colliders_only: ti.template(), out: NDI):
+def groups_in_contact(P: Particles, active: NDI, n: ti.i32, colliders_only: ti.template(), out: NDI):
     """out[g] = 1 where a particle of group g touched a collider (or, unless ``colliders_only``,
     the other field) this step."""
     for ii in range(n):
         p = active[ii]
-        if contact_id[p] >= 0 or (not colliders_only and contact_id[p] != -1):
-            out[group[p]] = 1
+        if P.contact_id[p] >= 0 or (not colliders_only and P.contact_id[p] != -1):
+            out[P.group[p]] = 1
 
 
 class ActivePatch:

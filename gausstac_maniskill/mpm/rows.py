@@ -43,7 +43,7 @@ def move_rigidly(P: Particles, start: ti.i32, stop: ti.i32, R: mat3, t: vec3):
 @ti.kernel
 def put_at_rest(P: Particles, X0: NDV, start: ti.i32, stop: ti.i32, R: mat3, t: vec3, F_rest: mat3):
     """Rows [start, stop) on their rest place X0 (link frame) on the link pose (R, t), still,
-    unstressed, with deformation gradient ``F_rest`` (the link's turn since binding), no contact."""
+    unstressed, with deformation gradient ``F_rest`` (the link's turn from its binding pose), no contact."""
     for p in range(start, stop):
         P.x[p] = R @ X0[p] + t
         P.v[p] = vec3(0.0)

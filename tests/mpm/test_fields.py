@@ -28,10 +28,10 @@ def test_one_field_meets_a_cell_early():
 
 
 def test_field_friction_and_contact_radius_are_checked():
-    w = MPMWorld(SolverSettings())
+    w = MPMWorld(SolverSettings(mass_scaling=1.0, max_substeps=2000))
     with pytest.raises(ConfigError, match="field=2 must be 0 or 1"):
-        w.add_group("x", np.zeros((1, 3)), Material(), field=2)
+        w.add_group("x", np.zeros((1, 3)), Material(E=3.0e5, nu=0.45, density=1100.0), field=2)
     with pytest.raises(ConfigError, match="contact_radius must be > 0"):
-        w.add_group("y", np.zeros((2, 3)), Material(), contact_radius=[1e-3, 0.0])
+        w.add_group("y", np.zeros((2, 3)), Material(E=3.0e5, nu=0.45, density=1100.0), contact_radius=[1e-3, 0.0])
     with pytest.raises(ConfigError, match="soft_friction"):
-        SolverSettings(soft_friction=-0.1)
+        SolverSettings(soft_friction=-0.1, mass_scaling=1.0, max_substeps=2000)

@@ -1,10 +1,8 @@
 """Every loop of a Taichi kernel that should run in parallel does.
 
 Taichi parallelises only the loops at a kernel's outermost scope. A loop that a run-time
-``if`` (or ``while``) encloses runs serially, on one thread: on a GPU that is a disaster that
-no CPU test shows. Measured on an H100 (2026-11-24, ``bench kernels --arch cuda``): the bond's
-ghost-node pass under ``if bond_on:`` took 4.5 ms of each substep twice over, 95 % of the
-index pad's kernel time (1708 ms per 50 ms step; 79 ms once the loop ran in parallel).
+``if`` (or ``while``) encloses runs serially, on one thread: on a GPU that can dominate a
+step's kernel time, which no CPU test shows (``bench kernels --arch cuda`` measures it).
 
 This is a static check of the source (no Taichi run): it walks each kernel, inlines the
 ``ti.func`` it calls, and reports a loop reached through a run-time branch. A loop meant to
@@ -15,14 +13,31 @@ import inspect
 
 import pytest
 
+import gausstac_maniskill.geometry.colliders
+import gausstac_maniskill.geometry.mesh_query
 import gausstac_maniskill.mpm.colliders
-import gausstac_maniskill.mpm.kernels
-import gausstac_maniskill.mpm.mesh_query
+import gausstac_maniskill.mpm.kernels.contact
+import gausstac_maniskill.mpm.kernels.grid
+import gausstac_maniskill.mpm.kernels.launch
+import gausstac_maniskill.mpm.kernels.layout
+import gausstac_maniskill.mpm.kernels.pressure
+import gausstac_maniskill.mpm.kernels.readouts
+import gausstac_maniskill.mpm.kernels.slabs
+import gausstac_maniskill.mpm.kernels.transfer
 import gausstac_maniskill.mpm.patch
-import gausstac_maniskill.splat.rasterizer
+import gausstac_maniskill.splat.kernels.common
+import gausstac_maniskill.splat.kernels.composite
+import gausstac_maniskill.splat.kernels.project
+import gausstac_maniskill.splat.kernels.tiles
 
-MODULES = [gausstac_maniskill.mpm.kernels, gausstac_maniskill.mpm.patch, gausstac_maniskill.mpm.colliders,
-           gausstac_maniskill.mpm.mesh_query, gausstac_maniskill.splat.rasterizer]
+MODULES = [gausstac_maniskill.mpm.kernels.layout, gausstac_maniskill.mpm.kernels.slabs,
+           gausstac_maniskill.mpm.kernels.grid, gausstac_maniskill.mpm.kernels.transfer,
+           gausstac_maniskill.mpm.kernels.contact, gausstac_maniskill.mpm.kernels.pressure,
+           gausstac_maniskill.mpm.kernels.readouts, gausstac_maniskill.mpm.kernels.launch,
+           gausstac_maniskill.mpm.patch, gausstac_maniskill.mpm.colliders,
+           gausstac_maniskill.geometry.colliders, gausstac_maniskill.geometry.mesh_query,
+           gausstac_maniskill.splat.kernels.common, gausstac_maniskill.splat.kernels.project,
+           gausstac_maniskill.splat.kernels.tiles, gausstac_maniskill.splat.kernels.composite]
 
 
 def _decorated(fn: ast.FunctionDef, name: str) -> bool:
@@ -101,7 +116,8 @@ def test_no_kernel_loop_is_serialised_by_a_runtime_branch(module, kernel):
 
 
 def test_the_check_finds_a_loop_under_a_runtime_if():
-    """The walker on the shape of the bug it guards (the bond pass before 2026-11-24)."""
+    """The walker on the shape of the bug it guards (a parallel loop in a ``ti.func`` called
+    under a run-time ``if``)."""
     src = '''
 @ti.func
 def ghosts(n: ti.template(), v: ti.template()):

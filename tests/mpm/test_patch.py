@@ -60,8 +60,8 @@ def test_a_pad_nothing_touches_costs_nothing_and_rides_with_its_link():
     info = world.step(0.05)
     assert info.active_particles == 0
     np.testing.assert_allclose(world.positions("pad"), rest @ T[:3, :3].T + T[:3, 3], atol=2e-7)
-    # float32 rounding of the carried rotation: within 1e-6 on the CPU, 2.2e-6 on CUDA (H100,
-    # 2026-11-26: its fused multiply-adds round otherwise); a pad left unturned is off by up to 0.32
+    # float32 rounding of the carried rotation: within 1e-6 on the CPU, 2.2e-6 on CUDA (its
+    # fused multiply-adds round otherwise); a pad left unturned is off by up to 0.32
     np.testing.assert_allclose(world.deformation_gradients("pad"), np.broadcast_to(T[:3, :3], (len(rest), 3, 3)),
                                atol=4e-6 if backend.current_arch() == "cuda" else 1e-6)
 
@@ -106,6 +106,6 @@ def test_a_patched_state_round_trip_is_bit_exact():
 
 def test_patch_radius_is_checked():
     with pytest.raises(ConfigError, match="patch_radius"):
-        SolverSettings(patch_radius=0.0)
+        SolverSettings(patch_radius=0.0, mass_scaling=1.0, max_substeps=2000)
     with pytest.raises(ConfigError, match="patch_radius"):
-        SolverSettings(patch_radius=float("nan"))
+        SolverSettings(patch_radius=float("nan"), mass_scaling=1.0, max_substeps=2000)

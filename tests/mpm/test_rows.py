@@ -1,21 +1,20 @@
 """Waking, sleeping and resting a group in place on the device (mpm/rows.py).
 
-What this guards: with B envs whose pads wake and sleep at different steps, each event used
-to copy the whole particle state to the host and rebuild every device array (344 ms at
-B = 64, dx = 2 mm, 534k particles; 17 % of a step). Now such events change only the group's
-rows on the device and the active lists. The test drives two envs through press, sleep
-while the link moves, wake, press again and rest, and checks that this is one rebuild
-(the first push) and that every state field matches the old host path (forced by marking
-the world for a rebuild before each event) to float32 rounding.
+What this guards: with B envs whose pads wake and sleep at different steps, each event
+changes only the group's rows on the device and the active lists, instead of copying the
+whole particle state to the host and rebuilding every device array. The test drives two
+envs through press, sleep while the link moves, wake, press again and rest, and checks that
+this is one rebuild (the first push) and that every state field matches the host path
+(forced by marking the world for a rebuild before each event) to float32 rounding.
 """
 import numpy as np
 
 from gausstac_maniskill.config import Material, SolverSettings
 from gausstac_maniskill.mpm import MPMWorld, box_particles
-from gausstac_maniskill.mpm.colliders import Sphere
+from gausstac_maniskill.geometry.colliders import Sphere
 from gausstac_maniskill.transforms import make_pose, rotation_about
 
-MAT = Material(E=2e5, nu=0.4)
+MAT = Material(E=2e5, nu=0.4, density=1100.0)
 DT = 0.02
 
 
@@ -66,7 +65,7 @@ def test_wake_and_sleep_in_place_match_the_host_path():
     light, full = _run(False), _run(True)
     assert light.rebuilds == 1 and full.rebuilds > 5
     assert light.group("pad0").awake and light.group("pad1").awake
-    # measured 2026-11-24: positions 7e-9 m, velocities 5e-7 m/s (of 0.06), F 4.5e-6, stress 0.8 Pa (of 92 kPa)
+    # measured: positions 7e-9 m, velocities 5e-7 m/s (of 0.06), F 4.5e-6, stress 0.8 Pa (of 92 kPa)
     for read, atol in (("positions", 1e-7), ("velocities", 5e-6), ("deformation_gradients", 5e-5)):
         a, b = getattr(light, read)(), getattr(full, read)()
         assert np.isfinite(a).all()

@@ -34,7 +34,7 @@ def test_initial_velocity_gradient_stays_inside_each_body():
     """add_group fits each particle's APIC C to its initial velocity (solver._velocity_gradient).
     Two cubes of one group that move apart at uniform velocities, their facing layers 1.9
     particle spacings apart: C is zero in both, since neither strains (a fit over plain nearest
-    neighbours reached across the gap and gave the facing layers up to 6.3 1/s); and a
+    neighbours would reach across the gap and give the facing layers up to 6.3 1/s); and a
     spin is fitted exactly, [ω]× in every particle."""
     from gausstac_maniskill.mpm.solver import _velocity_gradient
 
@@ -50,7 +50,7 @@ def test_initial_velocity_gradient_stays_inside_each_body():
 
 
 def test_stiff_pad_10_mpa():
-    world = pad_world(material=Material(E=10e6, nu=0.45))
+    world = pad_world(material=Material(E=10e6, nu=0.45, density=1100.0))
     n0 = world.num_particles
     c, _ = press(world, depth=0.5e-3)
     assert_healthy(world, n0)
@@ -61,7 +61,7 @@ def test_stiff_pad_10_mpa():
 
 
 def test_near_incompressible_nu_049():
-    world = pad_world(material=Material(E=3e5, nu=0.49))
+    world = pad_world(material=Material(E=3e5, nu=0.49, density=1100.0))
     n0 = world.num_particles
     c, _ = press(world, depth=1e-3)
     assert_healthy(world, n0)
@@ -153,9 +153,9 @@ def test_long_run_2000_steps_energy_bounded():
     gathered velocities, elastic from F) overshoots in the first oscillation by an O(Δt)
     amount: max E/E0 over 40 steps measured 1.113, 1.018 and 1.0015 at Courant numbers 0.5,
     0.1 and 0.02 (this set-up, same control step). The test runs at the default 0.4, so it
-    allows 15 %; an instability grows without bound in 2000 steps. (Before add_group fitted C
-    to the initial velocity, the first transfer lost 20 % of the energy and hid the overshoot.)"""
-    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0))
+    allows 15 %; an instability grows without bound in 2000 steps. (With C = 0 at the start,
+    the first transfer would lose 20 % of the energy and hide the overshoot.)"""
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0), mass_scaling=1.0, max_substeps=2000)
     world = MPMWorld(s)
     pts = box_particles([0, 0, 0], [0.01, 0.01, 0.01], s.particle_spacing)
     c = pts.mean(0)
@@ -176,7 +176,7 @@ def test_long_run_2000_steps_energy_bounded():
 
 
 def test_gravity_drop_on_floor_stays_bounded():
-    s = SolverSettings(dx=2e-3)
+    s = SolverSettings(dx=2e-3, mass_scaling=1.0, max_substeps=2000)
     world = MPMWorld(s)
     pts = box_particles([0, 0, 0.002], [0.01, 0.01, 0.012], s.particle_spacing)
     world.add_group("cube", pts, Material(E=5e4, nu=0.3, density=1000))
@@ -193,12 +193,12 @@ def test_gravity_drop_on_floor_stays_bounded():
 # ----------------------------------------------------------------------------- kinematics
 
 def test_kinematic_block_follows_link_exactly():
-    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0))
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0), mass_scaling=1.0, max_substeps=2000)
     world = MPMWorld(s)
     T0 = make_pose([0.01, 0.0, 0.02], rotation_about([0, 0, 1], 0.3))
     world.add_link("link", T0)
     pts = box_particles([0.0, 0.0, 0.01], [0.01, 0.008, 0.02], s.particle_spacing)
-    world.add_group("rigid", pts, Material(), link="link", kinematic=True)
+    world.add_group("rigid", pts, Material(E=3.0e5, nu=0.45, density=1100.0), link="link", kinematic=True)
     X0 = world.rest_positions("rigid")
     T = T0
     for k in range(6):
@@ -224,7 +224,7 @@ def test_soft_block_moved_rigidly_by_its_base_stays_undeformed():
     world = MPMWorld(s)
     world.add_link("link", np.eye(4))
     pts = box_particles([0, 0, 0], [0.008, 0.008, 0.012], s.particle_spacing)
-    world.add_group("soft", pts, Material(E=1e5, nu=0.4), link="link", kinematic=pts[:, 2] < 0.004)
+    world.add_group("soft", pts, Material(E=1e5, nu=0.4, density=1100.0), link="link", kinematic=pts[:, 2] < 0.004)
     for k in range(20):
         world.set_link_pose("link", make_pose([0.0005 * k, 0, 0], rotation_about([0, 0, 1], 0.02 * k)))
         world.step(0.02)
@@ -257,11 +257,11 @@ def test_state_dict_round_trip_is_bit_exact_and_deterministic():
 
 
 def test_sleeping_group_is_bit_identical_and_costs_no_grid():
-    s = SolverSettings(dx=1.5e-3, gravity=(0, 0, -9.81))
+    s = SolverSettings(dx=1.5e-3, gravity=(0, 0, -9.81), mass_scaling=1.0, max_substeps=2000)
     world = MPMWorld(s)
     a = box_particles([0, 0, 0], [0.006, 0.006, 0.006], s.particle_spacing)
-    world.add_group("a", a, Material())
-    world.add_group("b", a + [0.1, 0, 0], Material())  # 10 cm away
+    world.add_group("a", a, Material(E=3.0e5, nu=0.45, density=1100.0))
+    world.add_group("b", a + [0.1, 0, 0], Material(E=3.0e5, nu=0.45, density=1100.0))  # 10 cm away
     world.step(1e-3)
     both_cells = world.last_step.grid_cells
     world.set_awake("b", False)
@@ -275,11 +275,11 @@ def test_sleeping_group_is_bit_identical_and_costs_no_grid():
 
 
 def test_waking_group_follows_link_motion_while_asleep():
-    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0))
+    s = SolverSettings(dx=2e-3, gravity=(0, 0, 0), mass_scaling=1.0, max_substeps=2000)
     world = MPMWorld(s)
     world.add_link("tip", np.eye(4))
     pts = box_particles([0, 0, 0], [0.008, 0.008, 0.008], s.particle_spacing)
-    world.add_group("pad", pts, Material(), link="tip", kinematic=pts[:, 2] < 0.003)
+    world.add_group("pad", pts, Material(E=3.0e5, nu=0.45, density=1100.0), link="tip", kinematic=pts[:, 2] < 0.003)
     world.set_awake("pad", False)
     T = make_pose([0.05, 0, 0], rotation_about([0, 0, 1], 0.5))
     world.set_link_pose("tip", T)
@@ -299,12 +299,12 @@ def test_grid_covers_only_active_region():
 # ----------------------------------------------------------------------------- CFL
 
 def test_cfl_substeps_scale_with_wave_speed():
-    soft = pad_world(material=Material(E=1e5, nu=0.3))
-    stiff = pad_world(material=Material(E=4e5, nu=0.3))
+    soft = pad_world(material=Material(E=1e5, nu=0.3, density=1100.0))
+    stiff = pad_world(material=Material(E=4e5, nu=0.3, density=1100.0))
     n_soft, _ = soft.plan_substeps(1e-3)
     n_stiff, _ = stiff.plan_substeps(1e-3)
     assert 1.8 < n_stiff / n_soft < 2.2  # c ∝ √E
-    scaled = pad_world(material=Material(E=4e5, nu=0.3), mass_scaling=4.0)
+    scaled = pad_world(material=Material(E=4e5, nu=0.3, density=1100.0), mass_scaling=4.0)
     assert scaled.plan_substeps(1e-3)[0] <= n_soft + 1  # mass scaling by 4 halves c
 
 
@@ -339,7 +339,7 @@ def test_pad_torn_from_its_core_is_put_back_at_rest_with_a_warning():
 
 
 def test_impossible_step_is_refused_with_advice():
-    world = pad_world(material=Material(E=10e6, nu=0.49), max_substeps=50)
+    world = pad_world(material=Material(E=10e6, nu=0.49, density=1100.0), max_substeps=50)
     with pytest.raises(SimulationError, match=r"max_substeps=50.*mass_scaling"):
         world.step(0.05)
     assert np.all(np.isfinite(world.positions()))  # nothing was lost
@@ -358,12 +358,12 @@ def test_nan_is_detected_and_named():
 
 
 def test_exploding_particles_raise_instead_of_leaving_the_grid():
-    s = SolverSettings(dx=1e-3, gravity=(0, 0, 0), max_grid_cells=20000, max_substeps=10**6)
+    s = SolverSettings(dx=1e-3, gravity=(0, 0, 0), max_grid_cells=20000, max_substeps=10**6, mass_scaling=1.0)
     world = MPMWorld(s)
     pts = box_particles([0, 0, 0], [0.004, 0.004, 0.004], s.particle_spacing)
     # two bodies flying apart at 10 m/s: the active box must grow until the limit
-    world.add_group("left", pts, Material(E=1e4, nu=0.3), velocity=[-10.0, 0, 0])
-    world.add_group("right", pts + [0.006, 0, 0], Material(E=1e4, nu=0.3), velocity=[10.0, 0, 0])
+    world.add_group("left", pts, Material(E=1e4, nu=0.3, density=1100.0), velocity=[-10.0, 0, 0])
+    world.add_group("right", pts + [0.006, 0, 0], Material(E=1e4, nu=0.3, density=1100.0), velocity=[10.0, 0, 0])
     with pytest.raises(SimulationError, match=r"max_grid_cells.*'left'.*'right'"):
         for _ in range(100):
             world.step(1e-3)

@@ -1,0 +1,425 @@
+"""Where an MPM world keeps its state (:class:`WorldState`, part of
+:class:`~gausstac_maniskill.mpm.solver.MPMWorld`): host arrays and their device copies, the
+kernels' argument packs over them, the active lists, the per-step uploads (constants, poses),
+and ``state_dict`` / ``load_state_dict``, whole or per env."""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import taichi as ti
+
+from ..errors import ConfigError
+from ..geometry.colliders import MeshCollider
+from ..geometry.kinematics import FRAME
+from ..transforms import matrix_to_quat
+from . import kernels as K
+from .materials import material_table
+from .model import _collider_bound, _env_index, no_anchor
+
+
+class ParticleField(NamedTuple):
+    """One per-particle array of the world (host ``_host[key]``, device ``_dev[key]``, [N, *row]
+    rows in group order; a row's env is its group's ``env``)."""
+
+    dtype: object  # Taichi scalar type of the device array
+    row: tuple  # shape of one row: () scalar, (k,) vector, (k, k) matrix
+    unit: str
+    doc: str
+
+
+#: every per-particle array, in the order _push uploads them
+PARTICLE_FIELDS = {
+    "x": ParticleField(ti.f32, (3,), "m", "position"),
+    "v": ParticleField(ti.f32, (3,), "m/s", "velocity"),
+    "impulse": ParticleField(ti.f32, (3,), "N s", "contact impulse of the last control step"),
+    "X0": ParticleField(ti.f32, (3,), "m", "rest coordinates in the link frame (0 without a link)"),
+    "bond": ParticleField(ti.f32, (4,), "-, m", "bond surface normal (link frame), signed distance (0: none)"),
+    "anchor": ParticleField(ti.f32, (4,), "m, -", "static friction: stuck point in its collider's frame, collider"),
+    "C": ParticleField(ti.f32, (3, 3), "1/s", "APIC velocity gradient"),
+    "F": ParticleField(ti.f32, (3, 3), "-", "deformation gradient"),
+    "tau": ParticleField(ti.f32, (3, 3), "Pa", "Kirchhoff stress"),
+    "Jp": ParticleField(ti.f32, (), "-", "plastic volume change"),
+    "mass": ParticleField(ti.f32, (), "kg", "mass (a quasi-static group's pseudo-mass)"),
+    "vol": ParticleField(ti.f32, (), "m³", "rest volume"),
+    "radius": ParticleField(ti.f32, (), "m", "contact radius"),
+    "kind": ParticleField(ti.i32, (), "-", "kernels.DYNAMIC or KINEMATIC"),
+    "matid": ParticleField(ti.i32, (), "-", "material row"),
+    "link": ParticleField(ti.i32, (), "-", "link (-1: none)"),
+    "group": ParticleField(ti.i32, (), "-", "group"),
+    "contact_id": ParticleField(ti.i32, (), "-", "collider touched (-1: none, kernels.SOFT_CONTACT the other field)"),
+}
+#: the particle fields a step changes: what state_dict holds and _pull brings back
+_STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor")
+
+
+def _renumber(parts: dict, new_id: np.ndarray) -> None:
+    """Map the collider ids (>= 0) of the particles' contacts and static-friction anchors
+    through ``new_id`` (old id -> new id), in place."""
+    cid = parts["contact_id"]
+    hit = cid >= 0
+    cid[hit] = new_id[cid[hit]]
+    a = parts["anchor"][:, 3]
+    stuck = a >= 0
+    a[stuck] = new_id[a[stuck].astype(int)]
+
+
+class WorldState:
+    """The host and device arrays of an :class:`~gausstac_maniskill.mpm.solver.MPMWorld` (a part of
+    it: the arrays are the world's)."""
+
+    def _upload_counts(self) -> None:
+        self._dev["counts"].from_numpy(np.array([len(self.link_names), len(self.groups), len(self.colliders),
+                                                 len(self._walls), self._n_active, self._n_kin, self.num_envs],
+                                                np.int32))
+
+    def _sdf_values(self) -> np.ndarray:
+        """Every mesh collider's SDF samples, one after another (``sdf_info`` holds the offsets)."""
+        parts = [c.sdf.ravel() for c in self.colliders if isinstance(c, MeshCollider)]
+        return np.concatenate(parts) if parts else np.zeros(1, np.float32)
+
+    def _upload_consts(self) -> None:
+        """Scene constants of the kernels (kernels.DX ...): spacing, gravity, damping rate,
+        reach, margin, friction between the two velocity fields, bond mode; and per env the
+        relaxation rate ζ of its quasi-static nodes (the largest of its awake groups)."""
+        s = self.settings
+        rate = np.zeros(self.num_envs, np.float32)
+        for g in self.groups:
+            if g.awake and g.quasi_static:
+                rate[g.env] = max(rate[g.env], g.relaxation / math.sqrt(self._hold_factor(g)))
+        self._dev["env_relax"].from_numpy(rate)
+        self._dev["consts"].from_numpy(np.array([s.dx, *s.gravity, s.damping, self._reach, s.grid_margin,
+                                                 s.soft_friction, float(s.bond == "surface")], np.float32))
+
+    def _alloc_grid(self, cap: int) -> None:
+        d = self._dev
+        d["grid_pm"] = ti.Vector.ndarray(4, ti.f32, shape=cap)
+        d["grid_v"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
+        d["grid_m"] = ti.ndarray(ti.f32, shape=cap)
+        d["grid_mq"] = ti.ndarray(ti.f32, shape=cap)
+        d["grid_link"] = ti.ndarray(ti.i32, shape=cap)
+        d["grid_dp"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
+        d["grid_vol"] = ti.Vector.ndarray(2, ti.f32, shape=cap)
+        d["grid_vc"] = ti.ndarray(ti.f32, shape=cap)
+        d["grid_ds"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
+        d["grid_kin"] = ti.Vector.ndarray(6, ti.f32, shape=cap)
+        d["cell_slot"] = ti.ndarray(ti.i32, shape=cap)
+        d["grid_t"] = ti.Vector.ndarray(3, ti.f32, shape=cap)
+        self._grid_cap = cap
+        self._alloc_cells()
+
+    def _alloc_cells(self) -> None:
+        """Per-cell arrays of the cell pressure (kernels.pressure_solve): room for one occupied cell
+        per two particles (8 per cell when seeded; kernels.number_cells flags an overflow, which
+        step() reports); and the Grid pack."""
+        d = self._dev
+        cells = max(self._n // 2, 1) + 64 if self._cellp else 1
+        if d.get("slot_cell") is None or d["slot_cell"].shape[0] != cells:
+            d["slot_cell"] = ti.ndarray(ti.i32, shape=cells)
+            d["cell_a"] = ti.Vector.ndarray(4, ti.f32, shape=cells)
+            d["cell_b"] = ti.Vector.ndarray(4, ti.f32, shape=cells)
+            d["cell_G"] = ti.Vector.ndarray(3, ti.f32, shape=cells * 64)
+        if d.get("cell_count") is None:
+            d["cell_count"] = ti.ndarray(ti.i32, shape=2)
+            d["cg_sum"] = ti.ndarray(ti.f32, shape=K.CG_ROWS)
+        self._pack["W"] = None
+        self._pack["G"] = K.Grid(**{k: d[k] for k in ("grid_pm", "grid_v", "grid_m", "grid_mq", "grid_link",
+                                                       "grid_dp", "grid_vol", "grid_vc", "grid_ds", "grid_kin",
+                                                       "cell_slot", "slot_cell", "cell_count",
+                                                       "cell_a", "cell_b", "cell_G", "grid_t", "cg_sum")})
+
+    def _env_major(self, parts) -> tuple[np.ndarray, np.ndarray]:
+        """The active list from ``parts`` [(env, particle rows)] in group order: env by env
+        (each env's rows in their order: a node only ever sums its own env's particles, so
+        this order changes no sum), and where each env's rows start in it ([num_envs + 1])."""
+        parts = sorted(parts, key=lambda p: p[0])  # stable: group order within an env
+        active = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int32)
+        count = np.bincount([p[0] for p in parts], [len(p[1]) for p in parts], minlength=self.num_envs)
+        return active.astype(np.int32), np.concatenate([[0], np.cumsum(count)]).astype(np.int32)
+
+    def _pull(self, keys=_STATE_FIELDS) -> None:
+        """Copy the state fields ``keys`` (all by default) back to the host arrays, those the
+        device holds newer: a read after a step copies only the field it reads, not the
+        whole particle state."""
+        stale = getattr(self, "_stale", None)
+        if stale and self._dev:
+            for key in [k for k in keys if k in stale]:
+                self._host[key] = self._dev[key].to_numpy()[: self._n]
+                stale.discard(key)
+
+    def _push(self) -> None:
+        """(Re)build device arrays from the host after any structural change; after groups
+        only woke or fell asleep, renew just the active lists (:meth:`_refresh_active`)."""
+        if not self._dirty:
+            if self._awake_changed:
+                self._refresh_active()
+            if self._sdf_stale:
+                self._dev["sdf"].from_numpy(self._sdf_values())
+                self._sdf_stale = False
+            return
+        self.rebuilds += 1
+        self._pull()
+        if self._n == 0 and not self.groups:
+            self._n_active = 0
+            self._n_kin = 0
+        h, d = self._host, self._dev
+        n = max(self._n, 1)
+
+        def upload(key, arr, dtype, shape=()):
+            nd = (ti.Vector.ndarray(shape[0], dtype, shape=len(arr)) if len(shape) == 1 else
+                  ti.Matrix.ndarray(shape[0], shape[1], dtype, shape=len(arr)) if len(shape) == 2 else
+                  ti.ndarray(dtype, shape=arr.shape))
+            nd.from_numpy(np.ascontiguousarray(arr))
+            d[key] = nd
+
+        if self._n:
+            for key, f in PARTICLE_FIELDS.items():
+                upload(key, h[key], f.dtype, f.row)
+            upload("group_bind", h["group_bind"].astype(np.float32), ti.f32)
+        self._fbar, self._cellp = self._stress_flags()  # from the materials, which only _push sees change
+        # room for every particle: the lists are rewritten when groups wake or sleep, and with
+        # the active patch every step
+        d["active"], d["active_kin"] = ti.ndarray(ti.i32, shape=n), ti.ndarray(ti.i32, shape=n)
+        d["env_rows"] = ti.ndarray(ti.i32, shape=self.num_envs + 1)
+        if self._patch is not None:
+            self._patch.forget()
+            upload("X_rest", h["X0"] if self._n else np.zeros((1, 3), np.float32), ti.f32, (3,))
+            for key in ("patch_gap", "patch_cand", "patch_frozen", "patch_bind"):
+                d[key] = ti.ndarray(ti.f32 if key == "patch_gap" else ti.i32, shape=n)
+            d["patch_contact"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
+        for key in ("order", "slab_of"):
+            d[key] = ti.ndarray(ti.i32, shape=n)
+        if "slab_start" not in d:
+            d["slab_start"] = ti.ndarray(ti.i32, shape=K.SLAB_CAP)
+            d["cursor"] = ti.ndarray(ti.i32, shape=K.SLAB_CAP)
+        d["bounds"] = ti.ndarray(ti.i32, shape=(K.NCHUNK, 6))
+        d["box"] = ti.ndarray(ti.i32, shape=K.BOX)
+        d["first_bad"] = ti.ndarray(ti.i32, shape=K.NCHUNK)
+        d["vmax_chunk"] = ti.ndarray(ti.f32, shape=K.NCHUNK)
+        upload("mat_table", material_table(self.materials, self.settings.pressure), ti.f32)
+        upload("group_qs", np.array([int(g.quasi_static) for g in self.groups] or [0], np.int32), ti.i32)
+        upload("group_tear", np.array([g.tear for g in self.groups] or [0.0], np.float32), ti.f32)
+        d["torn"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
+        d["group_touched"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
+        d["group_drift"] = ti.ndarray(ti.f32, shape=max(len(self.groups), 1))
+        upload("group_field", np.array([g.field for g in self.groups] or [0], np.int32), ti.i32)
+        upload("group_env", np.array([g.env for g in self.groups] or [0], np.int32), ti.i32)
+        # the grid holds one box per env and awake field: each group's copy (_refresh_active)
+        d["group_copy"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
+        upload("col_env", np.array(self._col_env or [0], np.int32), ti.i32)
+        walls = np.array(self._walls, np.float32).reshape(-1, 3)
+        upload("walls", walls if len(walls) else np.zeros((1, 3), np.float32), ti.f32)
+        # colliders
+        nc = max(len(self.colliders), 1)
+        kinds = np.zeros(nc, np.int32)
+        prm = np.zeros((nc, 4), np.float32)
+        friction = np.zeros((nc, 2), np.float32)  # (μ, 1 if sticky)
+        info = np.zeros((nc, 4), np.int32)
+        offset = 0
+        for i, c in enumerate(self.colliders):
+            kinds[i], prm[i], friction[i] = c.kind, c.params(), (c.friction, float(c.sticky))
+            if isinstance(c, MeshCollider):
+                info[i] = (offset, *c.sdf.shape)
+                offset += c.sdf.size
+        upload("col_kind", kinds, ti.i32)
+        upload("col_prm", prm, ti.f32)
+        upload("col_friction", friction, ti.f32)
+        upload("col_bound", np.array([_collider_bound(c) for c in self.colliders] or [0.0], np.float32), ti.f32)
+        upload("sdf_info", info, ti.i32)
+        upload("sdf", self._sdf_values(), ti.f32)
+        self._sdf_stale = False
+        d["col_pose"] = ti.ndarray(ti.f32, shape=(nc, 14))
+        d["col_impulse"] = ti.ndarray(ti.f32, shape=(nc, 6))
+        d["link_pose"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 14))
+        n_slot, slot = self.pair_slots()
+        d["pair_impulse"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1) * n_slot, 7))
+        upload("col_slot", slot.astype(np.int32) if len(slot) else np.zeros(1, np.int32), ti.i32)
+        d["link_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), FRAME))
+        d["col_frames"] = ti.ndarray(ti.f32, shape=(nc, FRAME))
+        d["group_frames"] = ti.ndarray(ti.f32, shape=(max(len(self.groups), 1), FRAME))
+        upload("group_link", np.array([g.link for g in self.groups] or [-1], np.int32), ti.i32)
+        if "group_bind" not in d:
+            upload("group_bind", np.tile(np.array([1.0, 0, 0, 0], np.float32), (1, 1)), ti.f32)
+        d["twist_change"] = ti.ndarray(ti.f32, shape=(max(len(self.link_names), 1), 9))
+        d["counts"] = ti.ndarray(ti.i32, shape=7)
+        self._refresh_active()
+        d["consts"] = ti.ndarray(ti.f32, shape=9)
+        d["env_relax"] = ti.ndarray(ti.f32, shape=self.num_envs)
+        self._upload_consts()
+        self._build_packs()
+        if self._grid_cap == 0:
+            self._alloc_grid(4096)
+        else:
+            self._alloc_cells()  # the particle count or the materials may have changed
+        self._link_radius = np.zeros(len(self.link_names))
+        if self._n:
+            bound = (h["kind"] == 1) & (h["link"] >= 0)
+            np.maximum.at(self._link_radius, h["link"][bound], np.linalg.norm(h["X0"][bound], axis=1))
+        self._dirty = False
+        self._stale = set()
+
+    def _refresh_active(self) -> None:
+        """The awake groups' particles as the active list (env-major, :meth:`_env_major`),
+        its kinematic ones, each env's rows, the counts, and whether two velocity fields are
+        awake (then the grid holds two box copies per env: see add_group's ``field``)."""
+        d, n = self._dev, max(self._n, 1)
+        kind = self._host["kind"] if self._n else np.zeros(n, np.int32)
+        active, env_rows = self._env_major([(g.env, np.arange(g.start, g.stop, dtype=np.int32))
+                                            for g in self.groups if g.awake])
+        active_kin = active[kind[active] == 1]
+        self._n_active, self._n_kin = len(active), len(active_kin)
+        self._two_fields = len({g.field for g in self.groups if g.awake}) == 2
+        B = self.num_envs  # each group's grid copy: field · num_envs + env, the field only with two
+        d["group_copy"].from_numpy(np.array([(g.field if self._two_fields else 0) * B + g.env for g in self.groups]
+                                            or [0], np.int32))
+        d["env_rows"].from_numpy(env_rows)
+        d["active"].from_numpy(np.resize(active, n))
+        d["active_kin"].from_numpy(np.resize(active_kin, n))
+        self._upload_counts()
+        self._awake_changed = False
+
+    def _build_packs(self) -> None:
+        """Group the device arrays into the kernels' argument packs (kernels.Particles, Scene,
+        Order, Placement, Reduction; the Grid pack is built with the grid in _alloc_grid). Built
+        once per rebuild of the arrays: a kernel_launch.CachedKernel re-checks a new pack."""
+        d, pk = self._dev, self._pack
+        pk["W"] = None  # World is assembled on first use (_world_pack)
+        if self._n:
+            pk["P"] = K.Particles(**{k: d[k] for k in (
+                "x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor", "mass", "vol", "radius",
+                "kind", "link", "matid", "group", "bond")})
+            pk["placement"] = K.Placement(
+                **{k: d[k] for k in ("x", "v", "C", "X0", "link", "counts", "consts", "link_frames", "col_frames",
+                                     "group_bind", "group_link", "group_frames", "active", "bounds", "slab_of",
+                                     "cursor", "order", "slab_start")},
+                link_poses=d["link_pose"], col_poses=d["col_pose"], kin=d["active_kin"], active_box=d["box"])
+        pk["S"] = K.Scene(**{k: d[k] for k in (
+            "counts", "consts", "mat_table", "group_qs", "group_frames", "group_field", "group_env", "group_copy",
+            "env_relax", "link_frames", "walls", "col_kind", "col_prm", "col_frames", "col_friction", "sdf",
+            "sdf_info", "col_impulse", "col_env", "col_bound")})
+        pk["O"] = K.Order(order=d["order"], slab_start=d["slab_start"], active_box=d["box"])
+        pk["R"] = K.Reduction(env_rows=d["env_rows"], col_slot=d["col_slot"], col_ends=d["col_pose"],
+                              link_ends=d["link_pose"], col_sums=d["col_impulse"], pair_sums=d["pair_impulse"])
+
+    def _upload_poses(self) -> None:
+        """The step's pose rows (kinematics.py: start position, quaternion, end position,
+        quaternion on the same hemisphere) of every link and collider."""
+        def pose_rows(prev, nxt):
+            out = np.zeros((max(len(prev), 1), 14), np.float32)
+            if len(prev):
+                qa, qb = matrix_to_quat(prev[:, :3, :3]), matrix_to_quat(nxt[:, :3, :3])
+                qb *= np.where(np.einsum("ij,ij->i", qa, qb) < 0, -1.0, 1.0)[:, None]
+                out[:len(prev)] = np.concatenate([prev[:, :3, 3], qa, nxt[:, :3, 3], qb], 1)
+            return out
+
+        self._dev["link_pose"].from_numpy(pose_rows(self._link_prev, self._link_next))
+        self._dev["col_pose"].from_numpy(pose_rows(self._col_prev, self._collider_poses()))
+
+    def _collider_poses(self) -> np.ndarray:
+        """[C, 4, 4] the colliders' target poses (where they end the next step)."""
+        return np.array([c.pose for c in self.colliders]).reshape(-1, 4, 4)
+
+    def _env_parts(self, env: int | None):
+        """Indices of what env ``env`` owns (all with None): particle rows, groups, links,
+        colliders; a clear error for an env this world does not have."""
+        if env is None:
+            return (np.arange(self._n), np.arange(len(self.groups)), np.arange(len(self.link_names)),
+                    np.arange(len(self.colliders)))
+        env = _env_index(env, "state of env")
+        if env >= self.num_envs:
+            raise ConfigError(f"env={env}: this world has {self.num_envs} env(s)")
+        groups = np.array([i for i, g in enumerate(self.groups) if g.env == env], int)
+        rows = np.concatenate([np.arange(self.groups[i].start, self.groups[i].stop) for i in groups]) \
+            if len(groups) else np.zeros(0, int)
+        return (rows, groups, np.flatnonzero(np.array(self._link_env, int) == env),
+                np.flatnonzero(np.array(self._col_env, int) == env))
+
+    def state_dict(self, env: int | None = None) -> dict:
+        """The mutable state (numpy arrays and scalars); see :meth:`load_state_dict`. With
+        ``env``, only that env's part (its groups' particles, its links and colliders, in
+        world order): the same layout as the state of a world that holds that scene alone,
+        so a batched env's state loads into a single scene and back. The scalars (time, step
+        count, largest speed) are the world's."""
+        self._pull()
+        rows, groups, links, cols = self._env_parts(env)
+        G = [self.groups[i] for i in groups]
+        parts = {k: self._host[k][rows].copy() for k in _STATE_FIELDS} if len(rows) else {}
+        if parts and env is not None:  # collider ids of contacts and anchors: the env's own numbering
+            local = np.full(len(self.colliders), -1)
+            local[cols] = np.arange(len(cols))
+            _renumber(parts, local)
+        return {
+            "particles": parts,
+            "link_prev": self._link_prev[links],
+            "link_next": self._link_next[links],
+            "link_twist": self._link_twist[links],
+            "collider_prev": self._col_prev[cols],
+            "collider_pose": np.array([self.colliders[i].pose for i in cols]).copy(),
+            "awake": np.array([g.awake for g in G]),
+            "patch_state": np.array([g.patch_state for g in G], np.int32),
+            "hold": np.array([g.hold for g in G]), "drift": np.array([g.drift for g in G]),
+            "sleep_pose": [None if g.sleep_pose is None else g.sleep_pose.copy() for g in G],
+            "time": self.time, "step_count": self.step_count, "vmax": self._vmax,
+            "collider_impulse": self._col_impulse[cols].copy(), "last_dt_ctrl": self._last_dt_ctrl,
+            "pair_impulse": self._pairs(links, cols),
+        }
+
+    def load_state_dict(self, state: dict, env: int | None = None) -> None:
+        """Restore a state from :meth:`state_dict` of a world built the same way (bit-exact);
+        with ``env``, only that env's part (from ``state_dict(env=...)`` of this or another
+        world, or from the whole state of a world that holds that scene alone). The world's
+        clock (time, step count, last step) comes from the state; with other envs in the
+        world, its largest speed (for the next substep count) becomes the larger of the two."""
+        rows, groups, links, cols = self._env_parts(env)
+        parts = dict(state.get("particles", {}))
+        if len(rows) and "anchor" not in parts and "x" in parts:  # a state without anchors: nothing sticks
+            parts["anchor"] = no_anchor(len(parts["x"]))
+        for k in _STATE_FIELDS if len(rows) else ():
+            need = (len(rows),) + self._host[k].shape[1:]
+            if k not in parts or parts[k].shape != need:
+                got = None if k not in parts else parts[k].shape
+                raise ConfigError(f"load_state_dict: particles[{k!r}] has shape {got}, "
+                                  f"this world{'' if env is None else f's env {env}'} needs {need}")
+        if len(state["awake"]) != len(groups):
+            raise ConfigError(f"load_state_dict: state has {len(state['awake'])} groups, world"
+                              f"{'' if env is None else f' env {env}'} has {len(groups)}")
+        self._pull()
+        if len(rows) and env is not None:
+            parts = {k: v.copy() for k, v in parts.items()}
+            _renumber(parts, cols)  # the env's collider numbering back to the world's
+        for k in _STATE_FIELDS if len(rows) else ():
+            self._host[k][rows] = parts[k]
+        twist = state.get("link_twist")
+        self._link_prev[links] = np.asarray(state["link_prev"]).reshape(-1, 4, 4)
+        self._link_next[links] = np.asarray(state["link_next"]).reshape(-1, 4, 4)
+        self._link_twist[links] = 0.0 if twist is None else np.asarray(twist).reshape(-1, 6)
+        self._col_prev[cols] = np.asarray(state["collider_prev"]).reshape(-1, 4, 4)
+        for n, i in enumerate(cols):
+            self.colliders[i].pose = state["collider_pose"][n].copy()
+        patch = state.get("patch_state", np.zeros(len(groups), np.int32))
+        hold = state.get("hold", np.zeros(len(groups), bool))
+        drift = state.get("drift", np.full(len(groups), np.inf))
+        for n, i in enumerate(groups):
+            g, sp = self.groups[i], state["sleep_pose"][n]
+            g.awake, g.sleep_pose, g.patch_state = bool(state["awake"][n]), (None if sp is None else sp.copy()), \
+                int(patch[n])
+            g.drift = float(drift[n])
+            self._set_hold(g, bool(hold[n]))
+        # one clock for all envs: every env's state carries the world's scalars, so restoring
+        # all of them is exact; the largest speed (the next substep count) is kept at least
+        # where it was while other envs share the world
+        self.time, self.step_count = float(state["time"]), int(state["step_count"])
+        self._last_dt_ctrl = float(state["last_dt_ctrl"])
+        one = env is None or self.num_envs == 1
+        self._vmax = float(state["vmax"]) if one else max(self._vmax, float(state["vmax"]))
+        self._col_impulse[cols] = state["collider_impulse"]
+        self._pair_impulse[links] = 0.0
+        if "pair_impulse" in state:  # [links, cols + the other field] (see _pairs), back into the slots
+            pairs = np.asarray(state["pair_impulse"], np.float64)
+            li, ci = np.nonzero(self._same_env(links, cols))
+            self._pair_impulse[links[li], self.pair_slots()[1][cols[ci]]] = pairs[li, ci]
+            self._pair_impulse[links, -1] = pairs[:, -1]
+        elif state.get("link_impulse") is not None:  # a state without per-object pairs: the link's sum, no depth
+            self._pair_impulse[links, -1, :6] = np.asarray(state["link_impulse"], np.float64).reshape(-1, 6)
+        self._dirty = True
