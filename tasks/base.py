@@ -245,7 +245,6 @@ class GaussTacEnv(BaseEnv):
         self._contacts = np.zeros((0, 0, 1, 7))
         self._joint_contacts: list = []  # [B] the pads' reaction folded into the hand's drives (pad_reaction)
         self._object_springs: list = []  # [B][rigid object]: springs on two-way objects, else None (pad_reaction)
-        self._pad_geometry: dict = {}  # pad name -> Pad at this env's resolution
         self._cosim_stale = True
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
         self.step_timing: dict[str, float] = {}
@@ -363,7 +362,6 @@ class GaussTacEnv(BaseEnv):
         self._captured.clear()
         self._wrench = {}
         self.cosims = []
-        self._pad_geometry = {}
         self._cosim_stale = True
         super()._reconfigure(options)
 

@@ -10,6 +10,7 @@ import taichi as ti
 from ..errors import ConfigError
 from ..transforms import quat_to_matrix
 from . import kernels as K
+from .state import PARTICLE_FIELDS
 
 
 class WorldReadouts:
@@ -18,6 +19,9 @@ class WorldReadouts:
 
     def _read(self, key: str, group: str | None):
         self._pull((key,))  # only the field read comes back from the device
+        if key not in self._host:  # a world without particles
+            f = PARTICLE_FIELDS[key]
+            return np.zeros((0, *f.row), np.int32 if f.dtype == ti.i32 else np.float32)
         arr = self._host[key]
         if group is None:
             return arr.copy()

@@ -144,7 +144,7 @@ class WorldState:
         whole particle state."""
         stale = getattr(self, "_stale", None)
         if stale and self._dev:
-            for key in [k for k in keys if k in stale]:
+            for key in [k for k in keys if k in stale and k in self._dev]:
                 self._host[key] = self._dev[key].to_numpy()[: self._n]
                 stale.discard(key)
 

@@ -411,3 +411,19 @@ def test_slabs_run_across_a_slow_axis_of_the_grid():
     starts = world._dev["slab_start"].to_numpy()[: n_slabs + 1]
     assert starts[0] == 0 and starts[-1] == world._n_active and np.all(np.diff(starts) >= 0)
     assert K.TASK_SPREAD >= 512  # Taichi 1.7's smallest CPU block: one slab per thread block
+
+
+def test_world_without_particles_steps_and_reads_back():
+    """A world that holds links and colliders but no particles (every pad solved at equilibrium)
+    steps and reads back its state."""
+    world = MPMWorld(SolverSettings(dx=2e-3, gravity=(0, 0, 0)))
+    world.add_link("tip", np.eye(4))
+    world.add_collider(Sphere(radius=5e-3, pose=make_pose([0.0, 0.0, 0.02])))
+    world.step(1e-3)
+    world.step(1e-3)
+    assert world.positions().shape == (0, 3)
+    again = MPMWorld(SolverSettings(dx=2e-3, gravity=(0, 0, 0)))
+    again.add_link("tip", np.eye(4))
+    again.add_collider(Sphere(radius=5e-3, pose=make_pose([0.0, 0.0, 0.02])))
+    again.load_state_dict(world.state_dict())
+    assert again.positions().shape == (0, 3)
