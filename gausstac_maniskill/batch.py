@@ -174,8 +174,10 @@ class BatchedCosim:
     def _soft_frames(self) -> list:
         """Per env (None without Gaussians), the frames [P'_b, 3, 4] of the particles its soft
         Gaussians ride on, sleeping pads carried by their links (see
-        :func:`~gausstac_maniskill.mpm.gather.carried_frames`): one launch for every env, the
-        rows kept on the device while the envs' splat scenes stay the same."""
+        :func:`~gausstac_maniskill.mpm.gather.carried_frames`): one launch for every env's world
+        particles, the rows kept on the device while the envs' splat scenes stay the same; pads
+        solved at equilibrium from their solution, env by env
+        (:meth:`~gausstac_maniskill.render.SceneGaussians.solved_frames`)."""
         from . import backend
         from .mpm.gather import read_particle_frames
 
@@ -184,7 +186,7 @@ class BatchedCosim:
         if self._soft_key is None or any(a is not b for a, b in zip(key, self._soft_key)):
             rows, carry, sizes = [], [], []
             for b, sc in enumerate(scenes):
-                r, c = sc.soft_rows() if sc is not None else (np.zeros(0, np.int64), np.zeros(0, np.int32))
+                r, c = sc.world_rows() if sc is not None else (np.zeros(0, np.int64), np.zeros(0, np.int32))
                 rows.append(r)
                 carry.append(c + b * (1 + len(self.pad_names)))  # env b's carries follow env b-1's
                 sizes.append(len(r))
@@ -196,7 +198,8 @@ class BatchedCosim:
         rows, carry, starts = self._soft_rows
         carries = np.concatenate([s.pad_carries() for s in self.scenes])
         frames = read_particle_frames(self.world, rows, carry, carries)
-        return [frames[starts[b]:starts[b + 1]] if sc is not None else None for b, sc in enumerate(scenes)]
+        return [None if sc is None else torch.cat([sc.solved_frames(frames.device), frames[starts[b]:starts[b + 1]]])
+                for b, sc in enumerate(scenes)]
 
     def object_wrench(self, name: str) -> np.ndarray:
         """[B, 6] force [N] and torque [N·m] (about its origin) the pads exerted on rigid

@@ -5,13 +5,13 @@ Data flows one way: link poses (from SAPIEN or MuJoCo) → :meth:`GaussTacSim.st
 Splatting camera).
 
 Pads: by default (``pad_solver="auto"``) solved at equilibrium each step with linear
-cut-cell FEM (:mod:`gausstac_maniskill.pads.fem`, no pseudo-mass; their particles are also
-groups of the world, held asleep at rest); optionally MLS-MPM particles relaxed
-quasi-statically with a pseudo-mass (``pad_solver="mpm"``, :mod:`gausstac_maniskill.pads.mpm`).
-The scene holds one pad solver per kind (:class:`~gausstac_maniskill.pads.interface.PadSolver`)
-and only orchestrates: it moves the links and objects, tells each solver which of its pads an
-object nears, steps the world and has the solvers solve and read out their pads. Soft objects
-are MPM particles with their physical mass; rigid objects are SDF colliders.
+cut-cell FEM (:mod:`gausstac_maniskill.pads.fem`, no pseudo-mass, no particles in the MPM
+world); optionally MLS-MPM particles of the world relaxed quasi-statically with a pseudo-mass
+(``pad_solver="mpm"``, :mod:`gausstac_maniskill.pads.mpm`). The scene holds one pad solver per
+kind (:class:`~gausstac_maniskill.pads.interface.PadSolver`) and only orchestrates: it moves the
+links and objects, tells each solver which of its pads an object nears, steps the world and
+has the solvers solve and read out their pads. Soft objects are MPM particles with their
+physical mass; rigid objects are SDF colliders.
 
 Pads whose bounding sphere is farther than ``sleep_margin`` from every object sleep: an
 equilibrium pad is then at rest; an MPM pad once it has relaxed (no particle more than
@@ -190,8 +190,9 @@ class GaussTacSim:
         return self.solvers["fem"].solve_time
 
     def group(self, name: str):
-        """The world's :class:`~gausstac_maniskill.mpm.solver.Group` of pad or soft object
-        ``name`` (its particle rows ``start:stop`` in the world's arrays)."""
+        """The world's :class:`~gausstac_maniskill.mpm.solver.Group` of MPM pad or soft object
+        ``name`` (its particle rows ``start:stop`` in the world's arrays; equilibrium pads have
+        none: :meth:`particle_rows`)."""
         return self.world.group(self._w(name))
 
     # ------------------------------------------------------------------ objects
@@ -251,11 +252,11 @@ class GaussTacSim:
 
     def _to_mpm_pads(self) -> None:
         """``pad_solver="auto"`` with ``fem_model="neo_hookean"`` meets a soft object: the pads,
-        untouched so far, become MPM particles (the world held them asleep at rest; they wake
-        when an object nears)."""
+        untouched so far, become MPM particles: groups of the world, asleep at rest on their
+        links (they wake when an object nears)."""
         mpm = self.solvers["mpm"]
         for name in self.solvers["fem"].clear():
-            mpm.adopt(name)
+            mpm.add(name, asleep=True)
         self.pad_solver = "mpm"
         self._maps = {}
 
@@ -537,25 +538,59 @@ class GaussTacSim:
         return self.pad_solver_of(name).particles(name)
 
     def particles(self, index: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """World positions [P, 3] and F [P, 3, 3] of every particle of the world (pads, soft
-        objects), in group order, sleeping pads carried by their links (for rendering).
-        With ``index`` ([P'] ascending world particle indices) only those particles, [P', 3]
-        and [P', 3, 3]. (The splat camera reads its particles on the device instead:
-        :meth:`carry_rows`, :meth:`pad_carries`, :func:`gausstac_maniskill.mpm.gather.carried_frames`.)"""
-        x, F = self.world.positions(), self.world.deformation_gradients()
-        rows = np.arange(len(x)) if index is None else np.asarray(index)
-        if index is not None:
-            x, F = x[rows], F[rows]
-        for solver in self.solvers.values():  # sleeping MPM pads carried, equilibrium pads from their solution
-            solver.fill_particles(rows, x, F)
+        """World positions [P, 3] and F [P, 3, 3] (float32) of every particle of the scene, for
+        rendering: first the equilibrium pads' (pad after pad, from their solution:
+        :attr:`solved_rows` rows), then every particle of the world (MPM pads, soft objects, in
+        group order; row ``solved_rows + i`` is the world's particle i), sleeping pads carried by
+        their links. With ``index`` ([P'] ascending rows) only those particles, [P', 3] and
+        [P', 3, 3]. (The splat camera reads the world's on the device instead: :meth:`carry_rows`,
+        :meth:`pad_carries`, :func:`gausstac_maniskill.mpm.gather.carried_frames`.)"""
+        n, fem = self.solved_rows, self.solvers["fem"]
+        if self._world_particles():
+            x, F = self.world.positions(), self.world.deformation_gradients()
+        else:
+            x, F = np.zeros((0, 3), np.float32), np.zeros((0, 3, 3), np.float32)
+        rows = np.arange(n + len(x)) if index is None else np.asarray(index)
+        k = int(np.searchsorted(rows, n))  # rows[:k]: the equilibrium pads', rows[k:]: the world's
+        x = np.concatenate([np.zeros((k, 3), np.float32), x if index is None else x[rows[k:] - n]])
+        F = np.concatenate([np.zeros((k, 3, 3), np.float32), F if index is None else F[rows[k:] - n]])
+        self.solvers["mpm"].fill_particles(rows[k:] - n, x[k:], F[k:])  # sleeping pads carried by their links
+        fem.fill_particles(rows[:k], x[:k], F[:k])  # from their solution
         return x, F
 
+    @property
+    def solved_rows(self) -> int:
+        """The equilibrium pads' particle count: the first rows of :meth:`particles` (the world's
+        particles follow)."""
+        return self.solvers["fem"].num_particles
+
+    def particle_rows(self, name: str) -> tuple[int, int]:
+        """Rows ``start:stop`` of pad or soft object ``name`` among :meth:`particles`."""
+        fem = self.solvers["fem"]
+        if name in fem:
+            return fem.rows(name)
+        g = self.group(name)
+        return self.solved_rows + g.start, self.solved_rows + g.stop
+
+    def _world_particles(self) -> int:
+        """The world's particle count (every env's, in a shared world)."""
+        return max((g.stop for g in self.world.groups), default=0)
+
+    def rest_positions(self) -> np.ndarray:
+        """[P, 3] float32 positions [m] of the rows of :meth:`particles` as held now, sleeping
+        pads where they fell asleep (the equilibrium pads' from their solution, the world's as
+        it holds them): what the splat scene binds its soft Gaussians to, at rest."""
+        x = self.world.positions() if self._world_particles() else np.zeros((0, 3), np.float32)
+        fem = self.solvers["fem"]
+        return np.concatenate([np.zeros((0, 3), np.float32)] + [fem.particles(name)[0] for name in fem.names] + [x])
+
     def equilibrium_frames(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The frames of the world particles ``rows`` ([P'] ascending world indices) that lie on
-        pads solved at equilibrium (``pad_solver="fem"``), which the MPM world holds at rest:
-        (their positions in ``rows`` [k], their frames (F | x) [k, 3, 4] float32, world frame,
-        from :meth:`pad_particles`). The splat camera draws these pads with them."""
-        return self.solvers["fem"].frames(rows)
+        """The frames of the rows ``rows`` ([P'] ascending rows of :meth:`particles`) that lie on
+        pads solved at equilibrium (``pad_solver="fem"``): (their positions in ``rows`` [k],
+        their frames (F | x) [k, 3, 4] float32, world frame, from :meth:`pad_particles`). The
+        splat camera draws these pads with them."""
+        rows = np.asarray(rows)
+        return self.solvers["fem"].frames(rows[:int(np.searchsorted(rows, self.solved_rows))])
 
     def _carry(self, name: str) -> np.ndarray | None:
         """The rigid motion [4, 4] of pad ``name``'s link since the pad fell asleep (its particles
@@ -563,13 +598,12 @@ class GaussTacSim:
         return self.pad_solver_of(name).carry(name)
 
     def carry_rows(self, index: np.ndarray) -> np.ndarray:
-        """[P'] int32: for each world particle of ``index`` ([P'] ascending), the row of
+        """[P'] int32: for each row of :meth:`particles` in ``index`` ([P'] ascending), the row of
         :meth:`pad_carries` that carries it: 1 + the number of its pad, 0 for a soft object's."""
         index = np.asarray(index)
         rows = np.zeros(len(index), np.int32)
         for i, name in enumerate(self.pads):
-            g = self.group(name)
-            lo, hi = np.searchsorted(index, (g.start, g.stop))
+            lo, hi = np.searchsorted(index, self.particle_rows(name))
             rows[lo:hi] = 1 + i
         return rows
 

@@ -29,7 +29,7 @@ takes 1.11–1.15× as long, with Taichi's whole call 1.20–1.29× (``python -m
 gausstac_maniskill.bench kernels --launches 6``; ``BENCHMARKS.md``). ``GAUSSTAC_KERNEL_ARGS=taichi`` (or
 :data:`LEAN_ARGS` set False) hands the arguments to Taichi's own launch again.
 
-``mpm/kernels.py`` applies it to the kernels of every substep and every step. It uses members
+``mpm/kernels/`` applies it to the kernels of every substep and every step. It uses members
 of Taichi's kernel object (``arguments``, ``compiled_kernels``, ``ensure_compiled``,
 ``launch_kernel``, ``return_type``, ``has_print``, ``construct_kernel_ret``) and its launch
 context's ``set_arg_*``, present throughout Taichi 1.7 (pinned in ``pyproject.toml``); where
@@ -37,7 +37,7 @@ the first four are missing it falls back to the ordinary call, as it does everyw
 ``GAUSSTAC_KERNEL_CACHE=0`` (or :data:`ENABLED` set False: the A/B of ``BENCHMARKS.md``).
 
 :data:`NDI` and :data:`NDI2` are the declarations of int32 ndarray arguments (1-D, 2-D) that
-the kernels of both pad solvers (``mpm/kernels.py``, ``fem/neo_hookean.py``) use.
+the kernels of both pad solvers (``mpm/kernels/``, ``fem/neo_hookean.py``) use.
 """
 from __future__ import annotations
 

@@ -48,24 +48,25 @@ def box_gaussians(half_extents, spacing: float, link_id: int = 0) -> GaussianSet
 
 def particle_gaussians(sim) -> tuple[GaussianSet, np.ndarray]:
     """Soft Gaussians on the outer particles of every pad and soft object of ``sim``,
-    in the world rest frame; returns them and the world particle index of each."""
+    in the world rest frame; returns them and the particle row of each (the rows of
+    :meth:`GaussTacSim.particles <gausstac_maniskill.cosim.GaussTacSim.particles>`)."""
     from .splat.surface import gaussians_from_surface
 
-    x0 = sim.world.positions()
+    x0 = sim.rest_positions()
     h = sim.settings.particle_spacing
     pts, nrm, rgb, idx = [], [], [], []
     for name, pad in sim.pads.items():
-        g = sim.group(name)
+        start, _ = sim.particle_rows(name)
         T = sim._link_pose[pad.spec.link]
         sel = np.flatnonzero(pad.surface)
         n = pad.normal[sel] @ T[:3, :3].T
-        pts.append(x0[g.start + sel] + 0.5 * pad.spacing * n)
+        pts.append(x0[start + sel] + 0.5 * pad.spacing * n)
         nrm.append(n)
         rgb.append(np.tile(PAD_RGB, (len(sel), 1)))
-        idx.append(g.start + sel)
+        idx.append(start + sel)
     for name in sim._soft:
-        g = sim.group(name)
-        p = x0[g.start:g.stop]
+        start, stop = sim.particle_rows(name)
+        p = x0[start:stop]
         lo, hi = p.min(0), p.max(0)
         outer = np.any((p < lo + h) | (p > hi - h), axis=1)
         n = np.zeros((int(outer.sum()), 3))
@@ -78,7 +79,7 @@ def particle_gaussians(sim) -> tuple[GaussianSet, np.ndarray]:
         pts.append(q + 0.5 * h * n)
         nrm.append(n)
         rgb.append(np.clip(np.asarray(SOFT_RGB) + shade, 0, 1))
-        idx.append(g.start + np.flatnonzero(outer))
+        idx.append(start + np.flatnonzero(outer))
     if not pts:
         return GaussianSet.empty(), np.zeros(0, np.int64)
     pts, nrm, rgb = np.concatenate(pts), np.concatenate(nrm), np.concatenate(rgb)
@@ -274,7 +275,7 @@ class SceneGaussians:
         self.n_rigid = sum(len(s) for s in sets)
         sets.append(soft)
         self.gaussians = GaussianSet.cat(sets)
-        rest = torch.as_tensor(sim.world.positions())
+        rest = torch.as_tensor(sim.rest_positions())
         self.binding = SoftBinding.from_nearest(self.gaussians, rest,
                                                 gaussian_index=torch.arange(self.n_rigid, len(self.gaussians)))
         self.layers: list[RigidLayer] = []
@@ -310,6 +311,8 @@ class SceneGaussians:
             soft, particles = FramedGaussians.from_binding(self.gaussians, self.binding, lit=True)
             self._particles = particles.numpy()
             self._carry = self.sim.carry_rows(self._particles)
+            # the first rows lie on pads solved at equilibrium (posed from their solution), the others in the world
+            self._solved = int(np.searchsorted(self._particles, self.sim.solved_rows))
             self._rows_device = None  # (rows, carry) on the arch's device, at the first picture
             # polar(F) is only needed if a soft Gaussian's colour depends on the view direction
             self._soft_rotations = bool(soft.sh.shape[1] > 1 and soft.sh[:, 1:].abs().max() > 0)
@@ -343,15 +346,32 @@ class SceneGaussians:
         return mask
 
     def soft_rows(self) -> tuple[np.ndarray, np.ndarray]:
-        """(the world particles [P'] the soft Gaussians ride on, ascending; each one's row of
-        the sim's :meth:`~gausstac_maniskill.cosim.GaussTacSim.pad_carries`, [P'] int32)."""
+        """(the particles [P'] the soft Gaussians ride on, ascending rows of the sim's
+        :meth:`~gausstac_maniskill.cosim.GaussTacSim.particles`; each one's row of the sim's
+        :meth:`~gausstac_maniskill.cosim.GaussTacSim.pad_carries`, [P'] int32)."""
         self.framed()
         return self._particles, self._carry
 
+    def world_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """The part of :meth:`soft_rows` that lies in the sim's world (the rows after
+        :meth:`solved_frames`' ones): (those particles' world indices [P'_w], their carry rows)."""
+        self.framed()
+        return self._particles[self._solved:] - self.sim.solved_rows, self._carry[self._solved:]
+
+    def solved_frames(self, device) -> torch.Tensor:
+        """[k, 3, 4] frames (F | x) on ``device`` of the first k rows of :meth:`soft_rows`, those
+        on pads solved at equilibrium (from their solution: :meth:`GaussTacSim.equilibrium_frames`)."""
+        self.framed()
+        frames = torch.zeros((self._solved, 3, 4), dtype=torch.float32, device=device)
+        if self._solved:
+            where, solved = self.sim.equilibrium_frames(self._particles[:self._solved])
+            frames[torch.as_tensor(where, device=device)] = torch.as_tensor(solved, device=device)
+        return frames
+
     def soft_frames(self) -> torch.Tensor:
-        """[P', 3, 4] frames (F_p | x_p) of :meth:`soft_rows`' particles, sleeping pads carried
-        by their links, read on the device in one launch (Taichi arch's torch device); pads
-        solved at equilibrium from their solution (:meth:`GaussTacSim.equilibrium_frames`)."""
+        """[P', 3, 4] frames (F_p | x_p) of :meth:`soft_rows`' particles: the world's read on the
+        device in one launch (Taichi arch's torch device), sleeping pads carried by their links;
+        pads solved at equilibrium from their solution (:meth:`solved_frames`)."""
         from .mpm.gather import read_particle_frames
 
         self.framed()
@@ -359,13 +379,13 @@ class SceneGaussians:
             from . import backend
 
             dev = backend.torch_device()
-            self._rows_device = (torch.as_tensor(self._particles, dtype=torch.int32, device=dev),
-                                 torch.as_tensor(self._carry, device=dev))
+            rows, carry = self.world_rows()
+            self._rows_device = (torch.as_tensor(rows, dtype=torch.int32, device=dev),
+                                 torch.as_tensor(carry, device=dev))
         frames = read_particle_frames(self.sim.world, *self._rows_device, self.sim.pad_carries())
-        where, solved = self.sim.equilibrium_frames(self._particles)  # pads the world holds at rest
-        if len(where):
-            frames[torch.as_tensor(where, device=frames.device)] = torch.as_tensor(solved, device=frames.device)
-        return frames
+        if not self._solved:
+            return frames
+        return torch.cat([self.solved_frames(frames.device), frames])
 
     def posed(self, soft: torch.Tensor | None = None) -> PosedScene:
         """The scene at the simulator's current link, object and particle state, with the layers;

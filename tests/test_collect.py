@@ -72,8 +72,8 @@ def test_collect_writes_h5_and_json_with_tactile_rgb_and_mpm_state(recorded):
                 assert g[f"obs/tactile/{pad}/force"].dtype == np.float32
             rgb = g["obs/sensor_data/splat_camera/rgb"]
             assert rgb.shape == (T + 1, 128, 128, 3) and rgb.dtype == np.uint8
-            assert g["env_states/gausstac/p_x"].shape[0] == T + 1
-            assert g["env_states/gausstac/p_x"].compression == "gzip"  # merged files are compressed
+            assert g["env_states/gausstac/link_pose"].shape[0] == T + 1
+            assert g["env_states/gausstac/link_pose"].compression == "gzip"  # merged files are compressed
             if CONTACT:
                 assert np.abs(g["obs/tactile/index/force"][()]).sum() > 0.1
                 assert ep["success"]
@@ -90,7 +90,8 @@ def test_merge_renumbers_trajectories_in_seed_order(recorded, tmp_path):
         assert sorted(f) == ["traj_0", "traj_1", "traj_2", "traj_3"]
         for new, old in (("traj_1", "traj_0"), ("traj_2", "traj_1")):
             np.testing.assert_array_equal(f[new]["obs/tactile/index/depth"][()], s[old]["obs/tactile/index/depth"][()])
-            np.testing.assert_array_equal(f[new]["env_states/gausstac/p_F"][()], s[old]["env_states/gausstac/p_F"][()])
+            np.testing.assert_array_equal(f[new]["env_states/gausstac/link_pose"][()],
+                                          s[old]["env_states/gausstac/link_pose"][()])
     # ManiSkill's own merger reads the same files
     from mani_skill.trajectory.merge_trajectory import merge_trajectories as ms_merge
 

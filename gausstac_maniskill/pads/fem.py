@@ -8,7 +8,9 @@ is a collider of the world that the soft objects meet, shaped as the pad was las
 the reaction to their particles' contact impulses on it loads the pad (a staggered coupling,
 ``fem_model="linear"`` only). A pad with no object within the sleep margin is at rest and reads
 zero maps. The pads pass the contact forces to their links and the opposite to the objects
-(:meth:`EquilibriumPads.object_wrench`, :meth:`EquilibriumPads.link_contacts`). Units: SI.
+(:meth:`EquilibriumPads.object_wrench`, :meth:`EquilibriumPads.link_contacts`). The pads have
+no particles in the MPM world: their particles, numbered pad after pad (:meth:`EquilibriumPads.rows`),
+are read from their solution for rendering (:meth:`EquilibriumPads.frames`). Units: SI.
 """
 from __future__ import annotations
 
@@ -22,7 +24,6 @@ from ..fem.sensor import EquilibriumPad
 from ..tactile import pad_mesh
 from ..tactile.extract import TaxelBinning, tactile_maps
 from .interface import PadSolver
-from .mpm import add_pad_group
 
 __all__ = ["EquilibriumPads", "add_contact"]
 
@@ -57,10 +58,10 @@ class EquilibriumPads(PadSolver):
         self.solve_time = 0.0
 
     def add(self, name: str) -> None:
-        add_pad_group(self.scene, name, self.settings.surface)
+        """Pad ``name`` as an :class:`EquilibriumPad` (no particles in the world: it meets the
+        world's objects through the solver, and soft objects through its surface collider)."""
         self.pads[name] = EquilibriumPad(self._pad(name), model=self.settings.fem_model,
                                          precompute=self.settings.fem_precompute)
-        self.scene.world.set_awake(self.scene.world_name(name), False)  # the MPM never steps it
         self.names.append(name)
         self.awake[name] = True
 
@@ -307,30 +308,38 @@ class EquilibriumPads(PadSolver):
         self._maps = {}
 
     # ------------------------------------------------------------------ rendering
-    def carry(self, name: str) -> np.ndarray | None:
-        """The link's motion since the world put the pad's group to sleep (the world holds it
-        at rest)."""
-        g = self.scene.world.group(self.scene.world_name(name))
-        if g.awake or g.sleep_pose is None:
-            return None
-        return self.scene.link_pose(self._pad(name).spec.link) @ np.linalg.inv(g.sleep_pose)
+    @property
+    def num_particles(self) -> int:
+        """The particles of all these pads: the rows of :meth:`frames` (pad after pad, in order)."""
+        return sum(self._pad(name).num_particles for name in self.names)
+
+    def rows(self, name: str) -> tuple[int, int]:
+        """Pad ``name``'s rows ``start:stop`` among :attr:`num_particles` (pad after pad)."""
+        start = 0
+        for other in self.names:
+            n = self._pad(other).num_particles
+            if other == name:
+                return start, start + n
+            start += n
+        raise ConfigError(f"pad {name!r} is not solved at equilibrium; these are: {self.names}")
 
     def frames(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The frames of the world particles ``rows`` ([P'] ascending world indices) that lie on
-        these pads, which the world holds at rest: (their positions in ``rows`` [k], their frames
-        (F | x) [k, 3, 4] float32, world frame, from :meth:`particles`)."""
+        """The frames of the particles ``rows`` ([P'] ascending, of :meth:`rows`' numbering):
+        (their positions in ``rows`` [k], their frames (F | x) [k, 3, 4] float32, world frame,
+        from :meth:`particles`)."""
         where, frames = [np.zeros(0, np.int64)], [np.zeros((0, 3, 4), np.float32)]
         rows = np.asarray(rows)
         for name in self.names:
-            g = self.scene.world.group(self.scene.world_name(name))
-            lo, hi = np.searchsorted(rows, (g.start, g.stop))
+            start, stop = self.rows(name)
+            lo, hi = np.searchsorted(rows, (start, stop))
             if hi > lo:
                 x, F = self.particles(name)
-                local = rows[lo:hi] - g.start
+                local = rows[lo:hi] - start
                 where.append(np.arange(lo, hi))
                 frames.append(np.concatenate([F[local], x[local, :, None]], axis=2))
         return np.concatenate(where), np.concatenate(frames)
 
     def fill_particles(self, rows: np.ndarray, x: np.ndarray, F: np.ndarray) -> None:
+        """``rows``: of :meth:`rows`' numbering (ascending)."""
         where, frames = self.frames(rows)
         x[where], F[where] = frames[:, :, 3], frames[:, :, :3]

@@ -155,6 +155,6 @@ class PadSolver(ABC):
         return None
 
     def fill_particles(self, rows: np.ndarray, x: np.ndarray, F: np.ndarray) -> None:
-        """Write this solver's pads' state into ``x`` [P', 3] and ``F`` [P', 3, 3], the world
-        particles ``rows`` ([P'] ascending world indices), where the world's rows are not
-        where the pads are drawn."""
+        """Write where this solver's pads are drawn into ``x`` [P', 3] and ``F`` [P', 3, 3], the
+        particles ``rows`` ([P'] ascending) of the solver's own numbering (the world's particle
+        indices for pads in the world) that lie on its pads."""

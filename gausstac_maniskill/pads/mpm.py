@@ -23,13 +23,14 @@ __all__ = ["MPMPads", "REST_TOLERANCE", "add_pad_group"]
 REST_TOLERANCE = 5.0e-6
 
 
-def add_pad_group(scene, name: str, surface: str) -> None:
-    """Scene pad ``name``'s particles as a group of the world, bound to its link at the link's
-    pose; ``surface``: ``"mesh"`` (each surface particle's contact radius its depth below the
-    link mesh) or ``"particles"`` (half a spacing)."""
+def add_pad_group(scene, name: str, surface: str, pose: np.ndarray | None = None) -> None:
+    """Scene pad ``name``'s particles as a group of the world, bound to its link, at rest on
+    the link's world ``pose`` [4, 4] (default: the scene's link pose); ``surface``: ``"mesh"``
+    (each surface particle's contact radius its depth below the link mesh) or ``"particles"``
+    (half a spacing)."""
     pad = scene.pads[name]
     spec = pad.spec
-    T = scene.link_pose(spec.link)
+    T = scene.link_pose(spec.link) if pose is None else pose
     world_pts = pad.rest @ T[:3, :3].T + T[:3, 3]
     # the bond surface lies ``thickness`` below the link surface, parallel to it
     scene.world.add_group(scene.world_name(name), world_pts, spec.material, link=scene.world_name(spec.link),
@@ -50,16 +51,18 @@ class MPMPads(PadSolver):
     def _w(self, name: str) -> str:
         return self.scene.world_name(name)
 
-    def add(self, name: str) -> None:
-        add_pad_group(self.scene, name, self.settings.surface)
+    def add(self, name: str, asleep: bool = False) -> None:
+        """Pad ``name`` as a group of the world, awake at the scene's link pose; ``asleep``: at
+        rest where the world holds its link (its pose at the end of the last step) and asleep
+        (a pad that joins a scene already stepped; it wakes when an object nears)."""
+        if not asleep:
+            add_pad_group(self.scene, name, self.settings.surface)
+        else:
+            world, group = self.scene.world, self._w(name)
+            add_pad_group(self.scene, name, self.settings.surface, world.link_pose(self._w(self._pad(name).spec.link)))
+            world.set_awake(group, False)
         self.names.append(name)
-        self.awake[name] = True
-        self._readout = None
-
-    def adopt(self, name: str) -> None:
-        """Take pad ``name`` whose group the world already holds, asleep at rest."""
-        self.names.append(name)
-        self.awake[name] = False  # as the world holds its group
+        self.awake[name] = not asleep
         self._readout = None
 
     # ------------------------------------------------------------------ sleeping
@@ -146,6 +149,7 @@ class MPMPads(PadSolver):
         return self.scene.link_pose(self._pad(name).spec.link) @ np.linalg.inv(g.sleep_pose)
 
     def fill_particles(self, rows: np.ndarray, x: np.ndarray, F: np.ndarray) -> None:
+        """``rows``: world particle indices (ascending)."""
         for name in self.names:
             g = self.scene.world.group(self._w(name))
             lo, hi = np.searchsorted(rows, (g.start, g.stop))  # the group's rows among ``rows`` (ascending)

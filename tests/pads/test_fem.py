@@ -60,3 +60,31 @@ def test_finite_strain_pads_become_mpm_pads_when_a_soft_object_comes_first():
     with pytest.raises(ConfigError, match="fem_model='linear' only"):
         sim2, _ = _scene(pad_solver="fem", fem_model="neo_hookean")
         sim2.add_soft_object("block", np.zeros((8, 3)) + [0.0, 0.0, 0.2], bp.index_spec().material)
+
+
+def test_equilibrium_pads_are_no_groups_of_the_world_and_lead_the_particle_rows():
+    sim, bp = _scene(pad_solver="fem")
+    n = sim.pads[bp.INDEX].num_particles
+    assert not sim.world.groups  # nothing of the pad in the MPM world
+    assert sim.solved_rows == n and sim.particle_rows(bp.INDEX) == (0, n)
+    x, F = sim.particles()
+    assert x.shape == (n, 3) and F.shape == (n, 3, 3) and x.dtype == np.float32
+    np.testing.assert_array_equal(x, sim.pad_particles(bp.INDEX)[0])
+    np.testing.assert_array_equal(sim.rest_positions(), x)
+    assert np.array_equal(sim.carry_rows(np.arange(n)), np.ones(n, np.int32))
+    where, frames = sim.equilibrium_frames(np.arange(0, n, 7))
+    np.testing.assert_array_equal(frames[:, :, 3], x[where * 7])
+    assert sim.flat_state()["group_awake"].shape == (0,)
+
+
+def test_finite_strain_pads_join_the_world_asleep_when_they_become_mpm_pads():
+    from gausstac_maniskill.config import PadSolverSettings
+
+    sim, bp = _scene(pad_settings=PadSolverSettings(fem_model="neo_hookean"))
+    assert not sim.world.groups
+    sim.add_soft_object("block", np.zeros((8, 3)) + [0.0, 0.0, 0.2], bp.index_spec().material)
+    g = sim.world.group(sim.world_name(bp.INDEX))
+    assert [h.name for h in sim.world.groups] == [bp.INDEX, "block"] and not g.awake
+    assert sim.particle_rows(bp.INDEX) == (g.start, g.stop) and sim.solved_rows == 0
+    rest = sim.pads[bp.INDEX].rest @ bp.LINK_POSE[:3, :3].T + bp.LINK_POSE[:3, 3]
+    assert np.abs(sim.pad_particles(bp.INDEX)[0] - rest).max() < 1e-6
