@@ -1,4 +1,4 @@
-"""Hard stop (issue 11, point 1): a pad link collides in SAPIEN with its rigid core, so a
+"""Hard stop: a pad link collides in SAPIEN with its rigid core, so a
 finger closed hard on an object stops with its pad compressed in front of the core instead
 of passing through, and the crushed pad stays finite with non-negative forces."""
 import gymnasium as gym

@@ -1,4 +1,4 @@
-"""Pad reaction on the links (``pad_reaction``, issue 11 points 2-3): a finger pressed into
+"""Pad reaction on the links (``pad_reaction``): a finger pressed into
 a fixed cube yields to its pad's push until its drives balance the pad; without the
 reaction it is held where its drive puts it and crushes the pad. The reaction folded into
 the drives holds at ManiSkill's 100 Hz where the explicit coupling needs 2000 Hz."""

@@ -118,7 +118,7 @@ def test_press_cube_with_pads_at_equilibrium():
             env.unwrapped.set_state_dict(state)
             b = env.step(action)[0]["tactile"]["index"]["force"]
             assert torch.equal(a, b)
-            # random actions (seed 4 once crashed the friction solve: a warm start with no point loaded)
+            # random actions (seed 4 reaches a warm start of the friction solve with no point loaded)
             env.reset(seed=4)
             env.action_space.seed(4)
             for _ in range(60):
@@ -193,8 +193,8 @@ def test_gpu_backend_without_cuda_is_a_clear_error():
 
 
 def test_missing_physx_gpu_library_names_the_file(monkeypatch):
-    """Where SAPIEN cannot fetch its PhysX GPU library (no internet; seen on a GPU machine,
-    2026-11-24), the error names the file, the URL and the folder, before ManiSkill starts.
+    """Where SAPIEN cannot fetch its PhysX GPU library (no internet),
+    the error names the file, the URL and the folder, before ManiSkill starts.
     CUDA and the download are stubbed: this runs the check, not SAPIEN's GPU."""
     import sapien.physx
 

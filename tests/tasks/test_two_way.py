@@ -83,7 +83,7 @@ def test_two_way_push_at_20_hz_control_is_not_a_launch():
         # never launched: before the MPM stepped with every SAPIEN step, a 0.1 N touch launched
         # the cube at ~1 m/s. With the explicit wrench (pad_reaction=False) a stick–slip lurch
         # remained, 0.088 m/s with the cut-cell pad; the implicit springs, the default with a
-        # two-way cube, carry it at 0.013 m/s (2026-11-27). The hand moves at 0.02 m/s.
+        # two-way cube, carry it at 0.013 m/s. The hand moves at 0.02 m/s.
         assert u.pad_coupling == "implicit"
         assert max(speeds) < 0.05, speeds
     finally:
