@@ -1,43 +1,17 @@
 """Launching a Taichi kernel thousands of times a second with less Python in between.
 
-Every call of a ``@ti.kernel`` first derives the key of its compiled variant from all of its
-arguments: Taichi 1.7 visits every ndarray of every argpack and builds its type. The MPM
-substep's two kernels (``prepare`` and ``advance``) take about 80 ndarrays between them, and
-on the 2-core CPU machine that look-up took a third of the Python time of a substep
-(cProfile of GraspSqueezeSponge at ``mpm_dx = 3e-3``, where a substep's Python time equals
-its kernels' time).
-
-That key depends only on the values of the kernel's ``ti.template()`` arguments and on the
-types of its ndarrays (direct, or members of argpacks). The look-up is also the only place
-where Taichi checks each ndarray against its declared type (building an argpack checks
-nothing). :class:`CachedKernel` therefore remembers the key for each tuple of template values
-together with the very ndarrays and argpacks it was checked on (weak references: an array or a
-pack that is rebuilt, e.g. when the grid grows, is a new object), and launches that compiled
-variant directly while the same objects come back. The first call with new template values or
-new arrays, and any call after Taichi was reset, takes the ordinary path, which compiles and
-checks.
-
-On that direct launch it also fills the launch context itself. Taichi's ``launch_kernel``
-walks every argument through a chain of type tests (``recursive_set_args``: about 40 calls per
-launch of ``advance``, each pack member visited). The arrays and packs are the ones checked on
-the ordinary call, so their slots are planned once (``CachedKernel._plan``, laid out as
-Taichi lays them) and each launch only copies the plan into a fresh context and sets the
-scalars. A context cannot be reused: the launch rewrites the arrays' entries in place (a
-second launch from it read an invalid allocation). Measured on the index pad: the substep's
-Python time fell from 1.5 to 0.6 ms under cProfile; with Taichi's argument setting a substep
-takes 1.11–1.15× as long, with Taichi's whole call 1.20–1.29× (``python -m
-gausstac_maniskill.bench kernels --launches 6``; ``BENCHMARKS.md``). ``GAUSSTAC_KERNEL_ARGS=taichi`` (or
-:data:`LEAN_ARGS` set False) hands the arguments to Taichi's own launch again.
-
-``mpm/kernels/`` applies it to the kernels of every substep and every step. It uses members
-of Taichi's kernel object (``arguments``, ``compiled_kernels``, ``ensure_compiled``,
-``launch_kernel``, ``return_type``, ``has_print``, ``construct_kernel_ret``) and its launch
-context's ``set_arg_*``, present throughout Taichi 1.7 (pinned in ``pyproject.toml``); where
-the first four are missing it falls back to the ordinary call, as it does everywhere with
-``GAUSSTAC_KERNEL_CACHE=0`` (or :data:`ENABLED` set False: the A/B of ``BENCHMARKS.md``).
-
-:data:`NDI` and :data:`NDI2` are the declarations of int32 ndarray arguments (1-D, 2-D) that
-the kernels of both pad solvers (``mpm/kernels/``, ``fem/neo_hookean.py``) use.
+Each ``@ti.kernel`` call derives the key of its compiled variant from all its arguments (Taichi 1.7
+visits every ndarray of every argpack), and that look-up is the only place Taichi checks each ndarray
+against its declared type. The key depends only on the ``ti.template()`` values and the ndarrays'
+types, so :class:`CachedKernel` remembers it per tuple of template values together with the very
+ndarrays and argpacks it was checked on (weak references: a rebuilt array, e.g. when the grid grows,
+is a new object), and launches that variant directly, filling a fresh launch context from a plan
+made once (``CachedKernel._plan``). New template values, new arrays or a Taichi reset take the
+ordinary call, which compiles and checks. A context is never reused: a launch rewrites the arrays'
+entries in place. It relies on Taichi 1.7 kernel internals (pinned in ``pyproject.toml``) and falls
+back to the ordinary call where they are missing. ``GAUSSTAC_KERNEL_CACHE=0`` (:data:`ENABLED`)
+turns it off; ``GAUSSTAC_KERNEL_ARGS=taichi`` (:data:`LEAN_ARGS`) lets Taichi set the arguments.
+The ``ND*`` names are the ndarray argument types the kernels of both pad solvers share.
 """
 from __future__ import annotations
 

@@ -1,37 +1,18 @@
 """Tactile maps as an extra observation for ManiSkill's imitation-learning baselines.
 
-GaussTac envs return ``obs["tactile"] = {pad: {"depth" [B, 16, 16] m, "shear"
-[B, 16, 16, 2] m, "force" [B, 16, 16] N}}`` next to ManiSkill's ``agent``/``extra``/
-``sensor_data``; the recorded ``.h5`` holds the same under ``obs/tactile/<pad>/...``
-with a time axis instead of the env axis. ManiSkill's flatteners refuse arrays of more
-than 2 dims, so the maps must be turned into a vector first. One
-:class:`TactileLayout` does that the same way for the live env (:class:`TactileObsWrapper`)
-and for the recorded data (:func:`tactile_state_obs_extractor`, :func:`load_demos`,
-:func:`flatten_file`), so that a policy trained on the file sees at evaluation time the
-observation it was trained on.
-
-Vector layout (``TactileLayout.vector``): pads in sorted name order (Allegro: index, middle,
-ring, thumb), per pad the fields in ``fields`` order (default depth, shear, force), each
-map average-pooled by ``pool`` and multiplied by ``scale[field]`` (default: metres ->
-millimetres for depth and shear, newtons kept), flattened row-major (shear: x, y last).
-Size ``len(pads) * (H/pool) * (W/pool) * channels``, channels depth 1 + shear 2 + force 1:
-4 Allegro pads, 16x16, pool 1 -> 4096; pool 4 -> 256.
-
-Image layout (``TactileLayout.image``): ``[..., H/pool, W/pool, C]`` channels last (like
-ManiSkill's ``rgb``), C = pads x channels in the same order, for a CNN encoder of your own.
-
-With ManiSkill's wrappers (they read ``base_env._init_raw_obs``, which this wrapper
-updates the way ManiSkill's own wrappers do)::
+GaussTac envs return ``obs["tactile"] = {pad: {"depth" [B, 16, 16] m, "shear" [B, 16, 16, 2] m,
+"force" [B, 16, 16] N}}``; a recorded ``.h5`` holds the same under ``obs/tactile/<pad>/...`` with a
+time axis for the env axis. ManiSkill's flatteners refuse arrays of more than 2 dims, so one
+:class:`TactileLayout` turns the maps into a vector the same way for the live env
+(:class:`TactileObsWrapper`) and the recorded data (:func:`tactile_state_obs_extractor`,
+:func:`load_demos`, :func:`flatten_file`): a policy sees at evaluation what it was trained on.
+Vector: pads in sorted name order, per pad the ``fields`` in order, each map average-pooled by
+``pool``, times ``scale[field]`` (default m -> mm for depth and shear), flattened row-major (shear:
+x, y last); 4 Allegro pads of 16x16 give 4096 entries at pool 1, 256 at pool 4. Image:
+``[..., H/pool, W/pool, C]``, channels last, C = pads x channels in the same order. Example::
 
     env = gym.make("GaussTac-PressCube-v1", obs_mode="rgb", control_mode="pd_joint_delta_pos")
-    env = TactileObsWrapper(env)                    # obs["tactile"] -> [B, 4096]
-    env = FlattenRGBDObservationWrapper(env)        # {"state": [B, 89 + 4096], "rgb": [B, 128, 128, 3]}
-
-    env = gym.make(..., obs_mode="state_dict")
-    env = TactileObsWrapper(env, flatten=True)      # [B, agent + extra + 4096], one vector
-
-(ManiSkill 3.0.1's ``FlattenObservationWrapper`` fails on any nested observation dict,
-hence ``flatten=True``.)
+    env = FlattenRGBDObservationWrapper(TactileObsWrapper(env))  # state [B, 89 + 4096], rgb [B, 128, 128, 3]
 """
 from __future__ import annotations
 
@@ -152,7 +133,9 @@ class TactileObsWrapper(gym.ObservationWrapper):
     vector then joins ``"state"`` after agent and extra). ``flatten=True`` (vector layout)
     returns one ``[B, S + D]`` tensor instead: agent, extra (and any other non-camera
     entries) then tactile, flattened like ManiSkill's ``flatten_state_dict`` — the obs of
-    ManiSkill's state-based baselines, for obs_mode ``state_dict``. Keyword arguments other
+    ManiSkill's state-based baselines, for obs_mode ``state_dict`` (ManiSkill's
+    ``FlattenObservationWrapper`` fails on nested observation dicts). ManiSkill's wrappers
+    read ``base_env._init_raw_obs``, which this one updates as theirs do. Keyword arguments other
     than ``layout``, ``key`` and ``flatten`` are those of :class:`TactileLayout`; ``key``
     renames the entry (default ``"tactile"``).
     """

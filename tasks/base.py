@@ -1,51 +1,19 @@
-"""GaussTacEnv: a ManiSkill task whose hand has soft MPM pads and whose camera splats Gaussians.
+"""GaussTacEnv: a ManiSkill task whose hand has soft tactile pads and whose camera splats Gaussians.
 
-One control step (``env.step``)::
+``env.step``: SAPIEN physics (``sim_freq`` substeps) -> link poses [B, L, 4, 4] and object poses
+-> ``BatchedCosim.step`` (every env's pads and soft objects in one batch, dt = control timestep)
+-> evaluate / reward -> obs: agent/extra, splat ``sensor_data``, ``obs["tactile"]``. Tasks subclass
+it like any ManiSkill task and register what the pads touch with :meth:`GaussTacEnv.add_mpm_rigid`
+and :meth:`GaussTacEnv.add_mpm_soft` in ``_load_scene``; the co-simulators are rebuilt each episode
+from the poses ``_initialize_episode`` leaves, and their state is in ``get_state_dict`` (exact replay).
 
-    SAPIEN physics (sim_freq substeps; the MPM reaction wrench of the last step is
-    applied to two-way-coupled rigid objects)
-      -> link poses [B, L, 4, 4] and object poses
-      -> BatchedCosim.step: every env's pads and soft objects in one MPM world, one set of
-         kernel launches (dt = control timestep)
-      -> evaluate / reward (may read the tactile maps)
-      -> obs: agent/extra (+ sensor_data from the GaussianSplatCamera) + obs["tactile"]
-
-Tasks subclass it like any ManiSkill task (``_load_scene``, ``_initialize_episode``,
-``evaluate``, ``compute_dense_reward``) and declare what the MPM sees with
-:meth:`GaussTacEnv.add_mpm_rigid` and :meth:`GaussTacEnv.add_mpm_soft` in
-``_load_scene``. The co-simulators are (re)built at the start of every episode from the
-poses ``_initialize_episode`` leaves, and their state is part of ``get_state_dict`` so
-that replaying recorded env states reproduces the tactile maps exactly.
-
-A captured 3DGS scene (``scene_ply=``, placed by ``scene_pose=``) replaces SAPIEN's picture
-of the surroundings for the splat camera, and captured objects (:meth:`GaussTacEnv.add_captured_object`)
-ride on SAPIEN actors; both are splatted in the same rasterizer pass as the hand, so
-occlusion between them is depth-correct.
-
-Pads touch objects through the MPM. In SAPIEN a pad link collides with its rigid core
-only, its collision geometry without the soft layer (:func:`~gausstac_maniskill.agents.core_urdf`):
-the MPM pad handles the contact in the layer in front of the core, and an object that
-reaches the core stops the finger (hard stop: a finger never passes through an object).
-The pad reaction goes back to SAPIEN as an external wrench on two-way-coupled dynamic
-objects and, with ``pad_reaction``, equal and opposite on the pad links (the MPM then
-steps after every SAPIEN step instead of once per control step). By default the links'
-share is folded into the hand's joint drives, which PhysX integrates implicitly
-(:mod:`.joint_contact`: the finger settles where its drives balance the pad, at ManiSkill's
-100 Hz), and a two-way object's share acts through one implicit spring per object
-(:mod:`.contact_spring`: the pads' summed wrench, never pulling along a one-sided push);
-``pad_reaction="explicit"`` applies it as forces one SAPIEN step late (stable from
-:data:`PAD_REACTION_MIN_FREQ`). The pad is
-massless on the SAPIEN side: what its particles take from an object in a step, its link
-takes back, so the impulses on the two bodies cancel.
-
-The class holds the ManiSkill hooks; the mechanism they call lives in the package:
-:mod:`~gausstac_maniskill.tactile_env` (splat source, pad contacts and reaction, state dict parts),
-:mod:`~gausstac_maniskill.task_checks` (argument and action checks),
-:mod:`~gausstac_maniskill.scene_objects` (what tasks register) and
-:mod:`~gausstac_maniskill.physx` (wrenches, poses, the PhysX GPU library).
-
-Units: SI. ``physx_cpu`` runs one env per process (use ``gym.vector.AsyncVectorEnv``);
-the code keeps a batch axis everywhere.
+In SAPIEN a pad link collides only with its rigid core (:func:`~gausstac_maniskill.agents.core_urdf`):
+the pad solver owns the contact in the soft layer, the core is a hard stop. Two-way objects take the
+pads' reaction; with ``pad_reaction`` the links take it too, through the hand's joint drives
+(:mod:`.joint_contact`) and one implicit spring per two-way object (:mod:`.contact_spring`), or with
+``"explicit"`` as forces one SAPIEN step late (stable from :data:`PAD_REACTION_MIN_FREQ` Hz). The hooks
+call :mod:`~gausstac_maniskill.tactile_env`, :mod:`~gausstac_maniskill.task_checks`,
+:mod:`~gausstac_maniskill.scene_objects` and :mod:`~gausstac_maniskill.physx`. Units: SI.
 """
 from __future__ import annotations
 

@@ -1,56 +1,18 @@
-"""The pads' reaction on a two-way object as a spring that PhysX integrates implicitly.
+"""The pads' reaction on a two-way object as one spring that PhysX integrates implicitly.
 
-A pad pressed on a free object pushes it with the force F(x) of the MPM layer. Applied as an
-external force, one SAPIEN step late, that is an explicit spring: with a light object
-(10-50 g) and a crushed pad's contact stiffness (1e4-1e5 N/m) it is stable only for SAPIEN
-steps below about 2 sqrt(m/k).
+The pads push a free object with the force F(x) of the pad solver. Applied as an external force
+one SAPIEN step late, that is an explicit spring, stable only for steps below about 2 sqrt(m/k)
+(objects of 10-50 g, contact stiffness k of 1e4-1e5 N/m). :class:`ObjectSpring` hands it to PhysX
+as one D6 joint from the world to the object's centre of mass: at the pose F was computed at, its
+drives push exactly the pads' summed force [N] and moment [N·m]; as the object moves within the
+step the push changes by ``K = OBJECT_GAIN |F| / δ`` [N/m] per contact (δ the pad's indentation
+[m]; :data:`GAIN` says why a multiple of the secant stiffness converges).
 
-:class:`ObjectSpring` hands the pads' forces on one object to PhysX as one implicit spring
-instead: a D6 joint from the world to the object's centre of mass, with linear drives along
-three axes and angular drives about them, which PhysX's solver integrates with the object's
-motion like a joint drive:
-
-* at the pose the MPM forces were computed at, the spring pushes with exactly the pads'
-  summed force and moment (each pad's force through its centre of pressure, plus its twist
-  couple about its force);
-* when the object moves during the SAPIEN step, the push changes by the contacts' stiffness:
-  ``K = OBJECT_GAIN |F| / δ`` per contact (δ the pad's indentation; the secant stiffness of
-  the contact times :data:`OBJECT_GAIN`) along the contact's force, as much across it when
-  the contact has friction (a stuck contact resists slip within the step, up to what
-  ``μ |F|`` can carry), ``K r²`` about it (r = :data:`TWIST_RADIUS`); summed over the
-  contacts and bounded from above per axis (Gershgorin, as :mod:`.joint_contact` does);
-* the axes are the principal directions of the pads' normal forces, x along the strongest
-  push: when every pad pushes along +x, x is a one-sided limit that never pulls; when pads
-  push from both sides (a pinch) it is a drive, which keeps every pad compressed as long as
-  the object moves less than the pads' gaps;
-* the spring's target moves with the pads (the stiffness-weighted velocity of the contact
-  points on their links), so the object follows the fingers within the step (a spring fixed
-  in the world held the cube back while the hand lifted it).
-
-Why one joint per object, not one per pad: PhysX's PGS solver settles two soft constraints
-acting along the same direction of one body at a wrong balance. A 10 g box between two
-one-sided D6 soft limits preloaded with the held cube's pad forces (0.115 N at 9.2e3 N/m and
-1.897 N at 2.7e4 N/m, 100 Hz) moves +4.08 µm in one step where their implicit Euler step is
--49.60 µm (each limit alone is exact: +12.36 and -70.98 µm; at three times the stiffness,
-+2.66 µm for -16.5, and -3.8 µm with 100 solver iterations instead of 15). One soft row per
-direction is exact: the joint of this class moves it -49.60 µm. With one spring per pad a
-pinched 10 g cube hung still while its pads' MPM forces differed by 1.8 N (0.115 and
-1.897 N at dx = 2 mm); with one spring per object they add up to the cube's weight within
-0.3 % (``python -m gausstac_maniskill.bench hold``).
-
-Each SAPIEN step the MPM recomputes F at the new pose, so the spring only has to predict how
-F changes within one step. For a power-law contact F ∝ δ^p the tangent stiffness is
-``p |F| / δ``, and the quasi-static iteration ``δ ← δ + (F_drive - F(δ)) / K`` converges when
-``K`` exceeds half of it: ``GAIN = 3`` covers 1 <= p < 6 (flat and Hertzian contacts, thin
-bonded layers), and a stiffer spring than the contact only makes the settling slower
-(never faster than the MPM's own response).
-
-On a free rigid body PhysX's PGS solver holds such a spring to 1e-4 (a 10 g body pushed by
-10 N against a 1e4 N/m spring settles 1.0000 mm deep), its TGS solver does not (0.33 mm at
-ManiSkill's 15 position iterations, on the wrong side at 4); hence
-``GaussTacEnv(pad_reaction=True)`` runs SAPIEN with ``enable_tgs=False``. The hand's side of
-the contact is not a spring but folded into its joint drives (:mod:`.joint_contact`): a
-PhysX joint on an articulation link does not converge against the link's drives.
+One joint per object, not one per pad: PhysX's PGS solver settles two soft constraints along one
+direction of one body at a wrong balance; one soft row per direction is exact. Its TGS solver does
+not hold such a spring on a free body, hence ``GaussTacEnv(pad_reaction=True)`` runs SAPIEN with
+``enable_tgs=False``. The hand's side is folded into its joint drives instead (:mod:`.joint_contact`):
+a PhysX joint on an articulation link does not converge against the link's drives.
 """
 from dataclasses import dataclass
 
@@ -62,7 +24,10 @@ from ..transforms import matrix_to_quat
 __all__ = ["ObjectSpring", "GAIN", "OBJECT_GAIN", "MIN_DEPTH", "TWIST_RADIUS", "centre_of_pressure", "frame_along",
            "skew"]
 
-#: spring stiffness over the contact's secant stiffness |F|/δ (see the module docstring)
+#: spring stiffness over the contact's secant stiffness |F|/δ: for F ∝ δ^p the tangent stiffness is
+#: p |F|/δ, and the quasi-static iteration δ ← δ + (F_drive - F(δ)) / K converges when K exceeds half
+#: of it, so 3 covers 1 <= p < 6 (flat and Hertzian contacts, thin bonded layers); a stiffer spring
+#: only slows the settling
 GAIN = 3.0
 #: the object spring's stiffness over each contact's secant stiffness: a light object held
 #: between two pads needs more than GAIN (a 10 g cube pinched by the thumb and index pads at
@@ -91,6 +56,8 @@ class ObjectSpring:
     wrench: linear drives (or a one-sided limit) along three axes and twist/swing drives
     about them, each preloaded so that it pushes exactly the MPM's wrench at the pose it was
     computed at, with the contacts' summed stiffness for the motion within the step. Its
+    axes are the principal directions of the pads' normal forces, x along the strongest push:
+    a one-sided limit that never pulls when every pad pushes along +x, a drive in a pinch. Its
     target moves with the pads (their links' velocity at the contacts), so the object
     follows the fingers within the step.
 
@@ -212,7 +179,8 @@ def _contact_part(row: np.ndarray, link, friction: float):
 
 def _stiffness(parts: list, com: np.ndarray, R: np.ndarray, friction: float):
     """Per axis of the joint frame ``R``: the linear and angular stiffness [N/m, N·m/rad]
-    that bound the contacts' summed stiffness from above (row sums of its absolute values,
+    (per contact ``K`` along its force, also across it with friction, ``K r²`` about it with
+    r = :data:`TWIST_RADIUS`) that bound the contacts' summed stiffness from above (row sums of its absolute values,
     Gershgorin, like :mod:`.joint_contact`), and the force [N] and torque [N·m] the drives may
     reach (what the contacts' forces and their friction can carry)."""
     S_lin, S_ang = np.zeros((3, 3)), np.zeros((3, 3))

@@ -1,38 +1,18 @@
 """The pads' reaction on the hand, folded into the hand's joint drives for one SAPIEN step.
 
-A pad pressed on an object pushes its link back with the force F(x) of the MPM layer. On a
-fixed-base articulation a wrench ``w = (f, τ)`` on a link (τ about the link origin) acts
-exactly as the generalized force ``Jᵀ w`` on its joints (virtual work; ``J`` the link's
-[6, dof] Jacobian). A PD joint drive with stiffness ``kp`` and target ``q*`` plus that
-contact torque, linearised about the joints' positions ``q₀`` at the start of the step with
-a contact stiffness ``D``, is again a PD drive::
+On a fixed-base articulation a link wrench ``w = (f, τ)`` (τ about the link origin) acts as the
+joint torque ``τc = Jᵀ w`` (``J`` the link's [6, dof] Jacobian). A PD drive (stiffness ``kp``,
+target ``q*``) plus that torque, linearised about the joints' positions ``q₀`` with a contact
+stiffness ``D``, is again a PD drive::
 
     kp (q* - q) + τc - D (q - q₀)  =  (kp + D) (q' - q),   q' = (kp q* + D q₀ + τc) / (kp + D)
 
-so :class:`JointContact` sets each touched finger joint's drive to stiffness ``kp + D`` and
-target ``q'`` for the coming SAPIEN step, and PhysX integrates the contact implicitly with
-the drives, exactly as it integrates the drives. At rest (``q = q₀``) the joints feel
-exactly ``kp (q* - q) + Jᵀ w``: the statics are those of the real drives against the pad.
-
-``D`` is the diagonal bound of the contacts' joint stiffness ``Σ K aaᵀ`` (``a = J_cᵀ n``, the
-joint-space direction of the centre of pressure's motion along the force ``n``, ``K =
-GAIN |F| / δ`` the contact's secant stiffness times
-:data:`~gausstac_maniskill.tasks.contact_spring.GAIN`): ``D_j = K |a_j| Σ_k |a_k|`` dominates
-``K aaᵀ`` (Gershgorin), so the fold never under-estimates the contact's stiffness and each
-step only damps the joints' approach to the balance (stable for any step, never faster than
-the MPM's own response).
-
-Why not a PhysX joint (a D6 soft limit) on the link, the natural implicit spring: PhysX
-solves such a constraint iteratively against the articulation's drives, and neither of its
-solvers converges there. Measured on ManiSkill's Allegro index tip (kp = 400 N·m/rad, three
-joints 0.01 rad past their targets, a 6 kN/m spring; static balance 9.83 N; 100 Hz):
-PGS with ManiSkill's 15 position iterations reaches 0.57 N after 1 s (the finger creeps;
-255 iterations: 7.2 N), TGS oscillates and diverges at 50 iterations. The fold reaches
-9.83 N within 0.2 s under both (``bench drive_contact``).
-
-The drives' own force limit is kept: the target is clamped to within ``force_limit / kp`` of
-``q₀`` before folding, and the folded drive's limit is ``force_limit + |τc|``. Only
-``"force"``-mode drives can be folded (an ``"acceleration"`` drive scales by inertia).
+so :class:`JointContact` sets each touched joint's drive to ``kp + D`` and ``q'``, and PhysX
+integrates the contact implicitly with the drives; at rest the statics are the real drives'
+against the pad. ``D_j = K |a_j| Σ_k |a_k|`` (``a = J_cᵀ n``, ``K = GAIN |F| / δ``) bounds
+``Σ K aaᵀ`` from above (Gershgorin), so a step only damps the approach to the balance. Not a PhysX
+joint on the link: neither PhysX solver converges such a constraint against the articulation's
+drives. Only ``"force"``-mode drives fold (an ``"acceleration"`` drive scales by inertia).
 """
 import numpy as np
 
@@ -90,7 +70,9 @@ class JointContact:
 
     def fold(self, contacts: np.ndarray, friction=None) -> bool:
         """Set the drives for the coming SAPIEN step from the pad links' contacts of the last
-        MPM step (computed at the joints' positions now).
+        MPM step (computed at the joints' positions now). A drive keeps its force limit: its
+        target is clamped to within ``force_limit / kp`` of ``q₀`` before folding, and the
+        folded drive's limit is ``force_limit + |τc|``.
 
         Args:
             contacts: [links, objects, 7] per pad link and object touched: force [N] and

@@ -1,35 +1,18 @@
 """``GaussTac-Touch-v1``: a sandbox for any GaussTac hand — one cube in front of one pad.
 
-The hand starts open (its ``rest`` keyframe if it has one, else zero joint angles) with
-its root at the origin. A cube is placed ``cube_gap`` in front of the apex of pad
-``touch_pad``, along the pad's outward normal:
+The hand starts open (its ``rest`` keyframe, else zero joint angles) with its root at the origin; a
+cube is placed ``cube_gap`` [m] in front of the apex of pad ``touch_pad``, along the pad's outward
+normal. ``free_cube=False`` (default): the cube is kinematic, one face parallel to the pad.
+``free_cube=True``: the cube is dynamic and upright on a small fixed pedestal, ``cube_gap`` beyond
+the pad's front-most point along the horizontal part of the pad normal (the pad must not face
+straight up or down), registered with ``two_way=two_way`` so that a pad can push it.
 
-* ``free_cube=False`` (default): the cube is kinematic (fixed in SAPIEN), turned so that
-  one face is parallel to the pad; pressing into it compresses the pad.
-* ``free_cube=True``: the cube is dynamic and upright, resting on a small fixed pedestal,
-  ``cube_gap`` beyond the pad's front-most point along the horizontal part of the pad
-  normal (the pad must not face straight up or down). It is registered with
-  ``two_way=two_way``: the pads' MPM reaction wrench is applied to it in SAPIEN, so a
-  pad can push it.
-
-Two-way coupling is implicit by default: with a two-way cube, ``pad_reaction`` defaults to
-``True``, so the pads' push reaches the cube through one implicit spring per object
-(:mod:`.contact_spring`) and the hand through its joint drives (:mod:`.joint_contact`),
-renewed after every SAPIEN step. Pushed at 20 mm/s, the default 62 g steel cube then moves
-with the hand and peaks at 0.013 m/s (the hand: 0.02 m/s).
-
-``pad_reaction=False`` selects the explicit coupling: the wrench of one MPM step acts on
-the cube as a force during the next SAPIEN step. That is stable only if the cube's mass
-m > k·dt²/4 (k the contact stiffness of a pad on a cube face, dt the SAPIEN timestep), and
-even above it the cube moves in stick–slip lurches: 0.088 m/s peaks on the Ability index
-pad's cut-cell body, pushed at 20 mm/s. A cube too light for the rate gets a warning there.
-
-The pads feel the cube through the MPM; in SAPIEN a pad link collides with its rigid core
-only (the link without its soft layer), so the cube reaches the core only once it has
-compressed the pad through its thickness. There is no goal
-beyond touching: ``success`` when the touch pad's normal force exceeds
-``force_threshold``. ``info`` also carries every pad's force and the cube's displacement
-since the episode start. Units: SI.
+With a two-way cube ``pad_reaction`` defaults to ``True``: the push reaches the cube through one
+implicit spring (:mod:`.contact_spring`) and the hand through its joint drives (:mod:`.joint_contact`).
+``pad_reaction=False`` couples explicitly (one pad step's wrench acts as a force in the next SAPIEN
+step), stable only for a cube mass m > k·dt²/4 (k the pad's contact stiffness, dt the SAPIEN
+timestep; a lighter cube gets a warning). ``success``: the touch pad's normal force exceeds
+``force_threshold``; ``info`` also has every pad's force and the cube's displacement. Units: SI.
 """
 from __future__ import annotations
 
@@ -70,7 +53,7 @@ class TouchEnv(GaussTacEnv):
         two_way: with ``free_cube``, apply the pads' reaction wrench to the cube in SAPIEN.
         pad_reaction: as :class:`~gausstac_maniskill.tasks.base.GaussTacEnv`; default
             (None): ``True`` (implicit coupling) with a two-way cube, else ``False``.
-        cube_density: [kg/m^3] (free cube; default steel, see above).
+        cube_density: [kg/m^3] (free cube; default steel).
         cube_friction: Coulomb friction of the cube, in SAPIEN (with the pedestal) and
             against the pads in the MPM.
         ground: a ground plane at ``ground_altitude`` [m] (in [-1, 0]: below the hand; looks only).
