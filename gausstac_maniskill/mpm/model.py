@@ -329,6 +329,7 @@ class WorldModel:
             "radius": radius.astype(np.float32), "kind": kin.astype(np.int32),
             "matid": np.full(n, mid, np.int32), "link": np.full(n, lidx, np.int32),
             "group": np.full(n, gid, np.int32), "X0": np.zeros((n, 3), np.float32),
+            "env": np.full(n, env, np.int32),
         }
         if lidx >= 0:
             T = self._link_next[lidx]
@@ -337,8 +338,10 @@ class WorldModel:
             new["C"][kin] = 0.0  # kinematic_update gives them their link's gradient
             bond[:, :3] = bond[:, :3] @ T[:3, :3]  # normals to the link frame
         new["bond"] = bond.astype(np.float32)
+        hp = self._host_parts
         for key, arr in new.items():
-            self._host[key] = arr if key not in self._host else np.concatenate([self._host[key], arr])
+            old = hp.get(key)
+            hp.set(key, arr if old is None else np.concatenate([old, arr]))
         bind = matrix_to_quat(self._link_next[lidx][:3, :3]) if lidx >= 0 else np.array([1.0, 0, 0, 0])
         self._host["group_bind"] = np.concatenate(
             [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])

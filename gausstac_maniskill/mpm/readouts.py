@@ -19,10 +19,10 @@ class WorldReadouts:
 
     def _read(self, key: str, group: str | None):
         self._pull((key,))  # only the field read comes back from the device
-        if key not in self._host:  # a world without particles
+        arr = self._host_parts.get(key)
+        if arr is None:  # a world without particles
             f = PARTICLE_FIELDS[key]
             return np.zeros((0, *f.row), np.int32 if f.dtype == ti.i32 else np.float32)
-        arr = self._host[key]
         if group is None:
             return arr.copy()
         g = self.group(group)
@@ -52,10 +52,11 @@ class WorldReadouts:
         the host: for kernels that read the state without copying it back
         (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`). Do not write them."""
         self._push()
-        missing = [k for k in keys if k not in self._dev]
+        arrays = {k: self._dev_parts.get(k) if k in PARTICLE_FIELDS else self._dev.get(k) for k in keys}
+        missing = [k for k, a in arrays.items() if a is None]
         if missing:
             raise ConfigError(f"device_state: the world has no particles (no device array {missing[0]!r})")
-        return {k: self._dev[k] for k in keys}
+        return arrays
 
     def rest_positions(self, group: str | None = None) -> np.ndarray:
         """Kinematic particles' rest coordinates [N, 3] in their link frame (0 for others)."""

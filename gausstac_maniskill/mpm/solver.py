@@ -40,7 +40,7 @@ from .model import Group, WorldModel, _collider_bound, _velocity_gradient, no_an
 from .patch import ActivePatch
 from .readouts import WorldReadouts
 from .rows import forget_contact, move_rigidly, put_at_rest
-from .state import WorldState
+from .state import ParticleArrays, WorldState
 from .stepper import StepInfo, WorldStepper, atomic_scatter
 
 __all__ = ["MPMWorld", "StepInfo", "Group"]
@@ -101,8 +101,10 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
         self.step_count = 0
         self.last_step: StepInfo | None = None
         self._n = 0
-        self._host: dict[str, np.ndarray] = {}
-        self._dev: dict[str, object] = {}
+        self._host_parts = ParticleArrays()  # per-particle host arrays (numpy)
+        self._dev_parts = ParticleArrays()  # their device copies (Taichi ndarrays)
+        self._host: dict[str, np.ndarray] = {}  # per-group host rows (group_bind)
+        self._dev: dict[str, object] = {}  # the other device arrays (grid, links, colliders, ...)
         self._grid_cap = 0
         self._dirty = True
         self._awake_changed = False  # groups woke or slept after the last push (the active lists are old)
@@ -185,12 +187,12 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
                 self._stale |= {"x", "v", "C", "tau", "F"}
             else:
                 sl = slice(g.start, g.stop)
-                h = self._host
-                h["x"][sl] = (h["x"][sl].astype(np.float64) @ R.T + t).astype(np.float32)
-                h["v"][sl] = (h["v"][sl] @ R.T).astype(np.float32)
+                hp = self._host_parts
+                hp.x[sl] = (hp.x[sl].astype(np.float64) @ R.T + t).astype(np.float32)
+                hp.v[sl] = (hp.v[sl] @ R.T).astype(np.float32)
                 for key in ("C", "tau"):
-                    h[key][sl] = (R @ h[key][sl] @ R.T).astype(np.float32)
-                h["F"][sl] = (R @ h["F"][sl]).astype(np.float32)
+                    hp.get(key)[sl] = (R @ hp.get(key)[sl] @ R.T).astype(np.float32)
+                hp.F[sl] = (R @ hp.F[sl]).astype(np.float32)
         g.awake = bool(awake)
         if on_device:
             self._awake_changed = True  # the active lists follow at the next push; the state stays
@@ -216,18 +218,18 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
         bind = quat_to_matrix(self._host["group_bind"][self.groups.index(g)].astype(np.float64))
         F_rest = T[:3, :3] @ bind.T
         if on_device:  # X0 as built (the active patch rebinds some rows of the device's X0)
-            X0 = self._dev["X_rest" if self._patch is not None else "X0"]
+            X0 = self._dev["X_rest"] if self._patch is not None else self._dev_parts.X0
             put_at_rest(self._pack["P"], X0, g.start, g.stop, ti.math.mat3(T[:3, :3]), ti.math.vec3(T[:3, 3]),
                              ti.math.mat3(F_rest))
             self._stale |= {"x", "v", "C", "tau", "Jp", "F", "impulse", "contact_id", "anchor"}
         else:
-            sl, h = slice(g.start, g.stop), self._host
-            h["x"][sl] = (h["X0"][sl].astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
-            h["v"][sl] = 0.0
-            h["C"][sl] = 0.0
-            h["tau"][sl] = 0.0
-            h["Jp"][sl] = 1.0
-            h["F"][sl] = F_rest.astype(np.float32)
+            sl, hp = slice(g.start, g.stop), self._host_parts
+            hp.x[sl] = (hp.X0[sl].astype(np.float64) @ T[:3, :3].T + T[:3, 3]).astype(np.float32)
+            hp.v[sl] = 0.0
+            hp.C[sl] = 0.0
+            hp.tau[sl] = 0.0
+            hp.Jp[sl] = 1.0
+            hp.F[sl] = F_rest.astype(np.float32)
             self._forget_contact(g, False)
             self._dirty = True
         g.patch_state = 0
@@ -239,7 +241,7 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
             forget_contact(self._pack["P"], g.start, g.stop)
             self._stale |= {"impulse", "contact_id", "anchor"}
             return
-        sl, h = slice(g.start, g.stop), self._host
-        h["impulse"][sl] = 0.0
-        h["contact_id"][sl] = -1
-        h["anchor"][sl] = no_anchor(g.count)
+        sl, hp = slice(g.start, g.stop), self._host_parts
+        hp.impulse[sl] = 0.0
+        hp.contact_id[sl] = -1
+        hp.anchor[sl] = no_anchor(g.count)

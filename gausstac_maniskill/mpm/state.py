@@ -1,11 +1,13 @@
 """Where an MPM world keeps its state (:class:`WorldState`, part of
-:class:`~gausstac_maniskill.mpm.solver.MPMWorld`): host arrays and their device copies, the
-kernels' argument packs over them, the active lists, the per-step uploads (constants, poses),
-and ``state_dict`` / ``load_state_dict``, whole or per env."""
+:class:`~gausstac_maniskill.mpm.solver.MPMWorld`): the per-particle arrays on the host and their
+device copies (:class:`ParticleArrays`), the other device arrays, the kernels' argument packs over
+them, the active lists, the per-step uploads (constants, poses), and ``state_dict`` /
+``load_state_dict``, whole or per env."""
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from dataclasses import dataclass, fields
+from typing import Any, NamedTuple
 
 import numpy as np
 import taichi as ti
@@ -20,8 +22,9 @@ from .model import _collider_bound, _env_index, no_anchor
 
 
 class ParticleField(NamedTuple):
-    """One per-particle array of the world (host ``_host[key]``, device ``_dev[key]``, [N, *row]
-    rows in group order; a row's env is its group's ``env``)."""
+    """One per-particle array of the world (host ``_host_parts.<key>``, device
+    ``_dev_parts.<key>``: :class:`ParticleArrays`, [N, *row] rows in group order; a row's env is
+    its group's ``env``)."""
 
     dtype: object  # Taichi scalar type of the device array
     row: tuple  # shape of one row: () scalar, (k,) vector, (k, k) matrix
@@ -50,6 +53,52 @@ PARTICLE_FIELDS = {
     "group": ParticleField(ti.i32, (), "-", "group"),
     "contact_id": ParticleField(ti.i32, (), "-", "collider touched (-1: none, kernels.SOFT_CONTACT the other field)"),
 }
+@dataclass(eq=False)
+class ParticleArrays:
+    """The per-particle arrays of a world, one attribute per entry of :data:`PARTICLE_FIELDS`
+    (same name, dtype, row and unit), plus ``env``. Rows are particles in group order ([N, ...],
+    N = the world's particle count). The world holds two: ``_host_parts`` (numpy arrays, the
+    state as built and as last read back) and ``_dev_parts`` (their Taichi ndarray copies, which
+    the kernels step). An attribute is None until the first group (host) or the first upload
+    with particles (device). ``env`` is host-only (None on the device: the kernels find a
+    particle's env through its group). The other device arrays (grid, cells, links, colliders,
+    counts, constants, SDF, active lists, the patch's arrays) stay in the world's ``_dev`` dict,
+    the per-group host rows (``group_bind``) in its ``_host`` dict."""
+
+    x: Any = None  #: [N, 3] f32, m: position
+    v: Any = None  #: [N, 3] f32, m/s: velocity
+    impulse: Any = None  #: [N, 3] f32, N s: contact impulse of the last control step
+    X0: Any = None  #: [N, 3] f32, m: rest coordinates in the link frame (0 without a link)
+    bond: Any = None  #: [N, 4] f32, (-, m): bond surface normal (link frame), signed distance (0: none)
+    anchor: Any = None  #: [N, 4] f32, (m, -): static friction: stuck point in its collider's frame, collider
+    C: Any = None  #: [N, 3, 3] f32, 1/s: APIC velocity gradient
+    F: Any = None  #: [N, 3, 3] f32, -: deformation gradient
+    tau: Any = None  #: [N, 3, 3] f32, Pa: Kirchhoff stress
+    Jp: Any = None  #: [N] f32, -: plastic volume change
+    mass: Any = None  #: [N] f32, kg: mass (a quasi-static group's pseudo-mass)
+    vol: Any = None  #: [N] f32, m³: rest volume
+    radius: Any = None  #: [N] f32, m: contact radius
+    kind: Any = None  #: [N] i32: kernels.DYNAMIC or KINEMATIC
+    matid: Any = None  #: [N] i32: material row
+    link: Any = None  #: [N] i32: link (-1: none)
+    group: Any = None  #: [N] i32: group
+    contact_id: Any = None  #: [N] i32: collider touched (-1: none, kernels.SOFT_CONTACT the other field)
+    env: Any = None  #: [N] i32: env of the particle's group (host only)
+
+    def get(self, key: str):
+        """The array called ``key`` (None where there is none yet)."""
+        return getattr(self, key)
+
+    def set(self, key: str, arr) -> None:
+        """Make ``arr`` the array called ``key``."""
+        if key not in _PARTICLE_KEYS:
+            raise KeyError(key)
+        setattr(self, key, arr)
+
+
+_PARTICLE_KEYS = frozenset(f.name for f in fields(ParticleArrays))
+assert [f.name for f in fields(ParticleArrays)] == [*PARTICLE_FIELDS, "env"]
+
 #: the particle fields a step changes: what state_dict holds and _pull brings back
 _STATE_FIELDS = ("x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor")
 
@@ -144,8 +193,9 @@ class WorldState:
         whole particle state."""
         stale = getattr(self, "_stale", None)
         if stale and self._dev:
-            for key in [k for k in keys if k in stale and k in self._dev]:
-                self._host[key] = self._dev[key].to_numpy()[: self._n]
+            hp, dp = self._host_parts, self._dev_parts
+            for key in [k for k in keys if k in stale and dp.get(k) is not None]:
+                hp.set(key, dp.get(key).to_numpy()[: self._n])
                 stale.discard(key)
 
     def _push(self) -> None:
@@ -163,19 +213,22 @@ class WorldState:
         if self._n == 0 and not self.groups:
             self._n_active = 0
             self._n_kin = 0
-        h, d = self._host, self._dev
+        h, d, hp, dp = self._host, self._dev, self._host_parts, self._dev_parts
         n = max(self._n, 1)
 
-        def upload(key, arr, dtype, shape=()):
+        def make(arr, dtype, shape=()):
             nd = (ti.Vector.ndarray(shape[0], dtype, shape=len(arr)) if len(shape) == 1 else
                   ti.Matrix.ndarray(shape[0], shape[1], dtype, shape=len(arr)) if len(shape) == 2 else
                   ti.ndarray(dtype, shape=arr.shape))
             nd.from_numpy(np.ascontiguousarray(arr))
-            d[key] = nd
+            return nd
+
+        def upload(key, arr, dtype, shape=()):
+            d[key] = make(arr, dtype, shape)
 
         if self._n:
             for key, f in PARTICLE_FIELDS.items():
-                upload(key, h[key], f.dtype, f.row)
+                dp.set(key, make(hp.get(key), f.dtype, f.row))
             upload("group_bind", h["group_bind"].astype(np.float32), ti.f32)
         self._fbar, self._cellp = self._stress_flags()  # from the materials, which only _push sees change
         # room for every particle: the lists are rewritten when groups wake or sleep, and with
@@ -184,7 +237,7 @@ class WorldState:
         d["env_rows"] = ti.ndarray(ti.i32, shape=self.num_envs + 1)
         if self._patch is not None:
             self._patch.forget()
-            upload("X_rest", h["X0"] if self._n else np.zeros((1, 3), np.float32), ti.f32, (3,))
+            upload("X_rest", hp.X0 if self._n else np.zeros((1, 3), np.float32), ti.f32, (3,))
             for key in ("patch_gap", "patch_cand", "patch_frozen", "patch_bind"):
                 d[key] = ti.ndarray(ti.f32 if key == "patch_gap" else ti.i32, shape=n)
             d["patch_contact"] = ti.ndarray(ti.i32, shape=max(len(self.groups), 1))
@@ -254,8 +307,8 @@ class WorldState:
             self._alloc_cells()  # the particle count or the materials may have changed
         self._link_radius = np.zeros(len(self.link_names))
         if self._n:
-            bound = (h["kind"] == 1) & (h["link"] >= 0)
-            np.maximum.at(self._link_radius, h["link"][bound], np.linalg.norm(h["X0"][bound], axis=1))
+            bound = (hp.kind == 1) & (hp.link >= 0)
+            np.maximum.at(self._link_radius, hp.link[bound], np.linalg.norm(hp.X0[bound], axis=1))
         self._dirty = False
         self._stale = set()
 
@@ -264,7 +317,7 @@ class WorldState:
         its kinematic ones, each env's rows, the counts, and whether two velocity fields are
         awake (then the grid holds two box copies per env: see add_group's ``field``)."""
         d, n = self._dev, max(self._n, 1)
-        kind = self._host["kind"] if self._n else np.zeros(n, np.int32)
+        kind = self._host_parts.kind if self._n else np.zeros(n, np.int32)
         active, env_rows = self._env_major([(g.env, np.arange(g.start, g.stop, dtype=np.int32))
                                             for g in self.groups if g.awake])
         active_kin = active[kind[active] == 1]
@@ -283,14 +336,15 @@ class WorldState:
         """Group the device arrays into the kernels' argument packs (kernels.Particles, Scene,
         Order, Placement, Reduction; the Grid pack is built with the grid in _alloc_grid). Built
         once per rebuild of the arrays: a kernel_launch.CachedKernel re-checks a new pack."""
-        d, pk = self._dev, self._pack
+        d, dp, pk = self._dev, self._dev_parts, self._pack
         pk["W"] = None  # World is assembled on first use (_world_pack)
         if self._n:
-            pk["P"] = K.Particles(**{k: d[k] for k in (
+            pk["P"] = K.Particles(**{k: dp.get(k) for k in (
                 "x", "v", "C", "F", "tau", "Jp", "impulse", "contact_id", "anchor", "mass", "vol", "radius",
                 "kind", "link", "matid", "group", "bond")})
             pk["placement"] = K.Placement(
-                **{k: d[k] for k in ("x", "v", "C", "X0", "link", "counts", "consts", "link_frames", "col_frames",
+                **{k: dp.get(k) for k in ("x", "v", "C", "X0", "link")},
+                **{k: d[k] for k in ("counts", "consts", "link_frames", "col_frames",
                                      "group_bind", "group_link", "group_frames", "active", "bounds", "slab_of",
                                      "cursor", "order", "slab_start")},
                 link_poses=d["link_pose"], col_poses=d["col_pose"], kin=d["active_kin"], active_box=d["box"])
@@ -344,7 +398,7 @@ class WorldState:
         self._pull()
         rows, groups, links, cols = self._env_parts(env)
         G = [self.groups[i] for i in groups]
-        parts = {k: self._host[k][rows].copy() for k in _STATE_FIELDS} if len(rows) else {}
+        parts = {k: self._host_parts.get(k)[rows].copy() for k in _STATE_FIELDS} if len(rows) else {}
         if parts and env is not None:  # collider ids of contacts and anchors: the env's own numbering
             local = np.full(len(self.colliders), -1)
             local[cols] = np.arange(len(cols))
@@ -376,7 +430,7 @@ class WorldState:
         if len(rows) and "anchor" not in parts and "x" in parts:  # a state without anchors: nothing sticks
             parts["anchor"] = no_anchor(len(parts["x"]))
         for k in _STATE_FIELDS if len(rows) else ():
-            need = (len(rows),) + self._host[k].shape[1:]
+            need = (len(rows),) + self._host_parts.get(k).shape[1:]
             if k not in parts or parts[k].shape != need:
                 got = None if k not in parts else parts[k].shape
                 raise ConfigError(f"load_state_dict: particles[{k!r}] has shape {got}, "
@@ -389,7 +443,7 @@ class WorldState:
             parts = {k: v.copy() for k, v in parts.items()}
             _renumber(parts, cols)  # the env's collider numbering back to the world's
         for k in _STATE_FIELDS if len(rows) else ():
-            self._host[k][rows] = parts[k]
+            self._host_parts.get(k)[rows] = parts[k]
         twist = state.get("link_twist")
         self._link_prev[links] = np.asarray(state["link_prev"]).reshape(-1, 4, 4)
         self._link_next[links] = np.asarray(state["link_next"]).reshape(-1, 4, 4)

@@ -119,7 +119,7 @@ class WorldStepper:
             far = ~np.isfinite(r)
             if far.any():  # no bound: the farthest particle from the collider's end origin
                 self._pull(("x",))
-                x = self._host["x"] if self._n else np.zeros((1, 3))
+                x = self._host_parts.x if self._n else np.zeros((1, 3))
                 r[far] = [float(np.linalg.norm(x - T[:3, 3], axis=1).max()) for T in nxt[far]]
             cols = _surface_travel(self._col_prev, nxt, r)
         return links, cols
@@ -193,7 +193,7 @@ class WorldStepper:
         if self._patched and self._n_active:
             self._note_patch_contact()
         if self._n_active and self.contact == "particle":
-            K.reduce_contact(self._pack["P"], d["X0"], d["active"], self._pack["R"], self.num_envs,
+            K.reduce_contact(self._pack["P"], self._dev_parts.X0, d["active"], self._pack["R"], self.num_envs,
                              self._pair_impulse.shape[1])
         self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
         n_slot = self._pair_impulse.shape[1]
@@ -246,10 +246,10 @@ class WorldStepper:
             return
         g.hold = hold
         mass = np.float32(g.material.density * g.mass_scale * self._hold_factor(g)
-                          * float(self._host["vol"][g.start]))
+                          * float(self._host_parts.vol[g.start]))
         if self._on_device():
             K.fill_mass(self._pack["P"], g.start, g.stop, float(mass))
-        self._host["mass"][g.start:g.stop] = mass
+        self._host_parts.mass[g.start:g.stop] = mass
 
     def _torn_groups(self) -> list[tuple[Group, int]]:
         """Awake quasi-static groups with particles beyond their ``tear`` distance from their
@@ -258,7 +258,7 @@ class WorldStepper:
             return []
         d = self._dev
         d["torn"].fill(0)
-        K.torn_particles(self._pack["P"], d["X_rest" if self._patch is not None else "X0"], d["active"],
+        K.torn_particles(self._pack["P"], d["X_rest"] if self._patch is not None else self._dev_parts.X0, d["active"],
                          self._n_active, d["link_pose"], d["group_tear"], d["torn"])
         counts = d["torn"].to_numpy()
         return [(g, int(counts[i])) for i, g in enumerate(self.groups) if g.awake and counts[i] > 0]
@@ -306,11 +306,11 @@ class WorldStepper:
         awake lists, the kinematic flags and the shell's rest coordinates on the device.
         Returns the indices of the frozen particles (carried rigidly after the substeps),
         or None when every awake particle is simulated."""
-        h, d, n = self._host, self._dev, max(self._n, 1)
+        hp, dp, d, n = self._host_parts, self._dev_parts, self._dev, max(self._n, 1)
         self._patched = []
         if not any(g.awake for g in self.groups):
             return None
-        kind = h["kind"]
+        kind = hp.kind
         gids = [i for i, g in enumerate(self.groups) if g.awake and g.quasi_static and g.link >= 0
                 and g.count > g.n_kinematic and g.patch_state != 2]
         gaps = {}
@@ -331,7 +331,7 @@ class WorldStepper:
                 continue
             idx = np.arange(g.start, g.stop, dtype=np.int32)
             sl = slice(g.start, g.stop)
-            split = self._patch.split(i, h["X0"][sl], kind[sl] == 0, gaps[i]) if i in gaps else None
+            split = self._patch.split(i, hp.X0[sl], kind[sl] == 0, gaps[i]) if i in gaps else None
             if split is not None and not split[0].any() and g.patch_state == 1:
                 g.patch_state, split = 2, None  # its contact has just ended: relax it whole
             if split is None:
@@ -348,14 +348,14 @@ class WorldStepper:
         bind = np.concatenate(bind) if bind else np.zeros(0, np.int32)
         kd[bind] = 1
         active_kin = active[kd[active] == 1]
-        d["kind"].from_numpy(np.resize(kd, n))
+        dp.kind.from_numpy(np.resize(kd, n))
         d["active"].from_numpy(np.resize(active, n))
         d["active_kin"].from_numpy(np.resize(active_kin, n))
         self._n_active, self._n_kin = len(active), len(active_kin)
         self._upload_counts()
         if len(bind):
             d["patch_bind"].from_numpy(np.resize(bind, n))
-            bind_in_place(self._pack["P"], d["X0"], d["patch_bind"], len(bind), d["link_pose"])
+            bind_in_place(self._pack["P"], dp.X0, d["patch_bind"], len(bind), d["link_pose"])
         if not frozen:
             return None
         frozen = np.concatenate(frozen)
@@ -399,7 +399,7 @@ class WorldStepper:
         return ncell
 
     def _explode_message(self, lo, hi) -> str:
-        x = self._dev["x"].to_numpy()
+        x = self._dev_parts.x.to_numpy()
         parts = []
         for g in self.groups:
             if g.awake:

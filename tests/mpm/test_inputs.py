@@ -114,7 +114,7 @@ def test_default_bond_of_a_flat_layer_is_exact():
     pts = box_particles([0, 0, 0], [0.004] * 3, h)
     z_bond = 1e-3
     world.add_group("pad", pts, Material(E=3.0e5, nu=0.45, density=1100.0), link="base", kinematic=pts[:, 2] < z_bond)
-    bond = world._host["bond"]
+    bond = world._host_parts.bond
     kin = pts[:, 2] < z_bond
     np.testing.assert_allclose(bond[kin, 3], pts[kin, 2] - z_bond, atol=1e-7)
     np.testing.assert_allclose(bond[kin, :3], np.tile([0.0, 0.0, 1.0], (kin.sum(), 1)), atol=1e-6)

@@ -349,7 +349,7 @@ def test_nan_is_detected_and_named():
     world = pad_world(dx=2e-3)
     world.step(1e-5)
     world._pull()
-    world._host["v"][5] = np.nan
+    world._host_parts.v[5] = np.nan
     world._dirty = True
     with pytest.raises(SimulationError, match=r"group 'pad'.*NaN"):
         world.step(1e-5)
