@@ -277,16 +277,16 @@ class PadSolverSettings:
 
     def __post_init__(self) -> None:
         if self.surface not in ("particles", "mesh"):
-            raise ConfigError(f"GaussTacSim(pad_surface={self.surface!r}) must be 'particles' or 'mesh'")
+            raise ConfigError(f"pad_surface={self.surface!r} must be 'particles' or 'mesh'")
         if self.solver not in ("auto", "mpm", "fem"):
-            raise ConfigError(f"GaussTacSim(pad_solver={self.solver!r}) must be 'auto', 'mpm' or 'fem'")
+            raise ConfigError(f"pad_solver={self.solver!r} must be 'auto', 'mpm' or 'fem'")
         if self.fem_model not in ("linear", "neo_hookean"):
             raise ConfigError(f"pad_solver={self.solver!r}, fem_model={self.fem_model!r}: use pad_solver 'auto', "
                               "'mpm' or 'fem' and fem_model 'linear' or 'neo_hookean'")
         if self.fem_precompute not in (None, True, False):
             raise ConfigError(f"fem_precompute={self.fem_precompute!r} must be None, True or False")
         if self.solver == "fem" and self.surface != "mesh":
-            raise ConfigError("GaussTacSim(pad_solver='fem') needs pad_surface='mesh' "
+            raise ConfigError("pad_solver='fem' needs pad_surface='mesh' "
                               "(the equilibrium pads are touched on the link mesh)")
         margin = _finite("PadSolverSettings.sleep_margin", self.sleep_margin)
         if margin < 0.0:

@@ -719,7 +719,6 @@ def _pad_settings(settings: PadSolverSettings | None, **loose) -> PadSolverSetti
     return settings
 
 
-
 def _sweep(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, float]:
     """Spheres that hold a sphere of ``radius`` [m] moved along the segment a -> b: centres
     at most ``radius`` apart on it ([n + 1, 3]) and their radius, grown by half the spacing."""

@@ -33,9 +33,8 @@ from mani_skill.utils import common
 
 from .. import backend
 from ..agents.base import GaussTacAgent, load_hand_closed_links, load_hand_gaussians, load_hand_lod
-from ..config import Material
 from ..batch import BatchedCosim
-from ..config import SolverSettings
+from ..config import Material, PadSolverSettings, SolverSettings
 from ..cosim import GaussTacSim
 from ..errors import ConfigError
 from ..geometry.colliders import Collider
@@ -180,8 +179,6 @@ class GaussTacEnv(BaseEnv):
             check_flag(task, name, flag)
         check_splat_look(task, splat_background, splat_lighting)
         self.mpm_settings = SolverSettings(dx=float(mpm_dx))
-        from ..config import PadSolverSettings
-
         #: the pads' solver settings, from the kwargs pad_solver, fem_model, fem_precompute, mpm_sleep_margin
         self.pad_settings = PadSolverSettings(solver=pad_solver, fem_model=fem_model, fem_precompute=fem_precompute,
                                               sleep_margin=mpm_sleep_margin)
