@@ -1,19 +1,21 @@
-"""What an MPM world is built from: its links, particle groups, materials, colliders and walls
-as added (:class:`WorldModel`, the building half of :class:`~gausstac_maniskill.mpm.solver.MPMWorld`),
-the book-keeping of a group (:class:`Group`), and the checks and estimates a group is added with
-(bond table, initial velocity gradient, layer thickness, relaxation rate, collider bounds)."""
+"""The immutable description of an MPM world (:class:`Model`): its links, particle groups,
+materials, colliders, slip walls and the per-particle rest data (:class:`ParticleModel`), like
+MuJoCo's ``mjModel``. What changes while the world steps (positions, velocities, stresses, poses,
+which groups are awake) is its state (:mod:`.state`). A model is never changed in place: adding
+a link, group, collider or wall gives a new model (``with_*``), which the world then builds its
+device arrays from. Units: metres, kilograms, seconds."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Mapping, NamedTuple
 
 import numpy as np
 
-from ..config import Material, _finite
+from ..config import Material, SolverSettings
 from ..errors import ConfigError
 from ..geometry.colliders import Collider, MeshCollider
-from ..transforms import as_pose_matrix, matrix_to_quat
-from . import kernels as K
 
 
 def no_anchor(n: int) -> np.ndarray:
@@ -23,9 +25,9 @@ def no_anchor(n: int) -> np.ndarray:
     return out
 
 
-@dataclass
-class Group:
-    """Book-keeping of one particle group (a contiguous block of particle indices)."""
+@dataclass(frozen=True)
+class GroupModel:
+    """One particle group as built: a contiguous block of particle rows ``start:stop``."""
 
     name: str
     start: int
@@ -33,103 +35,209 @@ class Group:
     material: Material
     link: int  # -1: not bound to a link
     n_kinematic: int
-    spacing: float
+    spacing: float  # [m]
     quasi_static: bool = False  # pseudo-mass (settings.mass_scaling) + relaxation; see add_group
     mass_scale: float = 1.0  # density multiplier of its dynamic particles (1: physical inertia)
     relaxation: float = 0.0  # damping rate ζ [1/s] of its motion relative to its link
     field: int = 0  # velocity field (0 or 1): groups of different fields are separate bodies in contact
-    awake: bool = True
-    sleep_pose: np.ndarray | None = None  # link pose when the group fell asleep
-    patch_state: int = 0  # active patch (mpm.patch): 0 at rest, 1 patched in contact, 2 released (whole)
     env: int = 0  # the env (scene) of a batched world it belongs to: it touches only that env's groups and colliders
     tear: float = 0.0  # quasi-static: a particle this far [m] from its rest place has lost its core (0: no check)
-    hold: bool = False  # quasi-static: held and settled, its pseudo-mass times settings.hold_scaling
-    drift: float = math.inf  # quasi-static: largest particle speed relative to its link at the last step's end [m/s]
 
     @property
     def stop(self) -> int:
         return self.start + self.count
 
 
-def _bond_table(name: str, pts: np.ndarray, kin: np.ndarray, spacing: float, distance, normal) -> np.ndarray:
-    """[N, 4] bond rows of add_group (world-frame normal, signed distance [m]); zero rows for
-    dynamic particles and where the group has no kinematic or no dynamic particle."""
-    n = len(pts)
-    out = np.zeros((n, 4))
-    if not kin.any() or kin.all():
-        return out
-    if (distance is None) != (normal is None):
-        raise ConfigError(f"add_group({name!r}): give bond_distance and bond_normal together")
-    if distance is None:
-        from scipy.spatial import cKDTree
+class LinkModel(NamedTuple):
+    """A rigid link that kinematic particles follow."""
 
-        # nearest dynamic particle of each kinematic one: the bond is half a spacing short of it
-        r, j = cKDTree(pts[~kin]).query(pts[kin])
-        out[kin, :3] = (pts[~kin][j] - pts[kin]) / np.maximum(r, 1e-12)[:, None]
-        out[kin, 3] = 0.5 * spacing - r
-        return out
-    dist = np.broadcast_to(np.asarray(distance, np.float64), (n,))
-    nrm = np.broadcast_to(np.asarray(normal, np.float64), (n, 3))
-    if not (np.all(np.isfinite(dist[kin])) and np.all(np.isfinite(nrm[kin]))):
-        raise ConfigError(f"add_group({name!r}): bond_distance / bond_normal contain NaN or inf")
-    length = np.linalg.norm(nrm[kin], axis=1)
-    if np.any(np.abs(length - 1.0) > 1e-3):
-        raise ConfigError(f"add_group({name!r}): bond_normal must be unit vectors (lengths "
-                          f"{length.min():.3g}..{length.max():.3g})")
-    out[kin, :3], out[kin, 3] = nrm[kin], dist[kin]
-    return out
+    name: str
+    env: int
 
 
-def _velocity_gradient(pts: np.ndarray, vel: np.ndarray, neighbours: int = 19) -> np.ndarray:
-    """[N, 3, 3] least-squares velocity gradient C_ab = ∂v_a/∂x_b [1/s] of an initial velocity
-    ``vel`` [N, 3] given at ``pts`` [N, 3] [m], fitted on each point's nearest ``neighbours``
-    (itself, its 6 face and 12 edge neighbours on a lattice) within 1.75 lattice spacings (the
-    median nearest-neighbour distance): the affine velocity APIC carries (Jiang et al. 2015). A
-    rigid spin is affine and fitted exactly; with C = 0 its first transfer to the grid loses 11 %
-    of its angular momentum (``test_free_body_keeps_its_spin``). Zero for a uniform velocity; the
-    least-norm fit (pseudo-inverse) where the points around one are too few or flat to give all
-    three directions. The radius keeps the fit inside one body where a group holds several
-    bodies apart by more than 1.75 spacings: across the gap between two bodies moving apart, a
-    fit over plain nearest neighbours gives their facing layers a strain rate they do not have."""
-    n = len(pts)
-    out = np.zeros((n, 3, 3))
-    if n < 2 or np.all(vel == vel[0]):
-        return out
-    from scipy.spatial import cKDTree
+class Wall(NamedTuple):
+    """A bilateral frictionless slip wall on the grid: nodes on the side opposite ``side`` of
+    ``position`` [m] along ``axis`` get zero velocity along it."""
 
-    tree = cKDTree(pts)
-    reach = 1.75 * float(np.median(tree.query(pts, k=2)[0][:, 1]))
-    pts_pad = np.vstack([pts, np.zeros((1, 3))])  # row n: where a point has fewer neighbours in reach
-    vel_pad = np.vstack([vel, np.zeros((1, 3))])
-    for lo in range(0, n, 65536):  # in chunks: [chunk, k, 3] float64 temporaries
-        rows = slice(lo, min(n, lo + 65536))
-        _, nb = tree.query(pts[rows], k=min(n, neighbours), distance_upper_bound=reach)
-        near = (nb < n)[..., None]
-        dX = np.where(near, pts_pad[nb] - pts[rows, None], 0.0)  # [chunk, k, 3]
-        dV = np.where(near, vel_pad[nb] - vel[rows, None], 0.0)
-        # normal equations per point: (Σ dX dXᵀ) Cᵀ = Σ dX dVᵀ
-        Ct = np.linalg.pinv(np.einsum("nki,nkj->nij", dX, dX)) @ np.einsum("nki,nkj->nij", dX, dV)
-        out[rows] = np.swapaxes(Ct, 1, 2)
-    return out
+    axis: int
+    position: float
+    side: float  # +1.0: keep the + side, -1.0: keep the - side
 
 
-def _layer_thickness(pts: np.ndarray, kin: np.ndarray) -> float:
-    """L [m]: the largest distance of a dynamic particle from the kinematic core (the layer
-    thickness of a pad; 0 without dynamic particles)."""
-    from scipy.spatial import cKDTree
+@dataclass(frozen=True)
+class ColliderModel:
+    """What the kernels need of a rigid collider's shape, fixed when it is added: its kind,
+    shape parameters (4 floats), friction, whether it is sticky, bounding radius [m] and, for a
+    mesh, its SDF grid's shape. Its pose and SDF values move with the scene and are state (the
+    collider object the world holds: ``MPMWorld.colliders``)."""
 
-    dyn = pts[~kin]
-    return float(cKDTree(pts[kin]).query(dyn)[0].max()) if len(dyn) else 0.0
+    name: str
+    kind: int
+    params: tuple[float, float, float, float]
+    friction: float
+    sticky: bool
+    bound: float  # [m] (:func:`_collider_bound`)
+    sdf_shape: tuple[int, int, int] | None  # a mesh collider's SDF grid (None for analytic shapes)
+    env: int
+
+    @classmethod
+    def of(cls, c: Collider, env: int) -> "ColliderModel":
+        sdf = tuple(int(s) for s in c.sdf.shape) if isinstance(c, MeshCollider) else None
+        return cls(c.name, int(c.kind), tuple(float(p) for p in np.asarray(c.params(), np.float32)),
+                   float(c.friction), bool(c.sticky), _collider_bound(c), sdf, int(env))
 
 
-def _relaxation_rate(L: float, material: Material, scale: float) -> float:
-    """Relaxation rate ζ = ω1 [1/s], the lowest shear frequency of a layer of thickness L [m]
-    (:func:`_layer_thickness`), ω1 = (π/2)·c_s/L, c_s = √(μ/(ρ·scale)) the shear wave speed
-    with the pseudo-mass (0 for no layer)."""
-    if L <= 0.0:
-        return 0.0
-    c_s = math.sqrt(material.mu / (material.density * scale))
-    return (math.pi / 2.0) * c_s / L
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    arr = np.ascontiguousarray(arr)
+    arr.flags.writeable = False
+    return arr
+
+
+#: the per-particle arrays of the model: (dtype, row shape, unit, meaning); the state's are in state.PARTICLE_FIELDS
+REST_FIELDS = {
+    "X0": (np.float32, (3,), "m", "rest coordinates in the link frame (0 without a link)"),
+    "bond": (np.float32, (4,), "-, m", "bond surface normal (link frame), signed distance (0: none)"),
+    "vol": (np.float32, (), "m³", "rest volume"),
+    "radius": (np.float32, (), "m", "contact radius"),
+    "kind": (np.int32, (), "-", "kernels.DYNAMIC or KINEMATIC"),
+    "matid": (np.int32, (), "-", "material row"),
+    "link": (np.int32, (), "-", "link (-1: none)"),
+    "group": (np.int32, (), "-", "group"),
+    "env": (np.int32, (), "-", "env of the particle's group"),
+}
+
+
+@dataclass(frozen=True, eq=False)
+class ParticleModel:
+    """The per-particle rest data of a model, [N, ...] rows in group order, read-only
+    (:data:`REST_FIELDS`)."""
+
+    X0: np.ndarray
+    bond: np.ndarray
+    vol: np.ndarray
+    radius: np.ndarray
+    kind: np.ndarray
+    matid: np.ndarray
+    link: np.ndarray
+    group: np.ndarray
+    env: np.ndarray
+
+    @classmethod
+    def empty(cls) -> "ParticleModel":
+        return cls(**{k: _frozen(np.zeros((0, *row), dt)) for k, (dt, row, _, _) in REST_FIELDS.items()})
+
+    def joined(self, rows: dict) -> "ParticleModel":
+        """A new ParticleModel with ``rows`` (one array per :data:`REST_FIELDS` entry) after these."""
+        return ParticleModel(**{k: _frozen(np.concatenate([getattr(self, k), np.asarray(rows[k], dt)]))
+                                for k, (dt, _, _, _) in REST_FIELDS.items()})
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """The immutable description of an MPM world (see the module docstring).
+
+    Attributes:
+        settings: the numerical settings.
+        contact: ``"particle"`` or ``"grid"`` (where colliders are enforced).
+        links: [L] the links, in order of addition.
+        groups: [G] the particle groups, in order (rows ``start:stop`` of ``particles``).
+        materials: the distinct materials, the rows of the kernels' material table.
+        colliders: [C] the colliders' shapes, in order of addition.
+        walls: the slip walls.
+        particles: the per-particle rest data.
+        group_bind: [G, 4] float32, the world quaternion (w, x, y, z) of each group's link when
+            the group was added (identity without a link): the frame its deformation gradients
+            are measured from.
+        num_envs: 1 + the largest env index of a link, group or collider.
+    """
+
+    settings: SolverSettings
+    contact: str = "particle"
+    links: tuple[LinkModel, ...] = ()
+    groups: tuple[GroupModel, ...] = ()
+    materials: tuple[Material, ...] = ()
+    colliders: tuple[ColliderModel, ...] = ()
+    walls: tuple[Wall, ...] = ()
+    particles: ParticleModel = field(default_factory=ParticleModel.empty)
+    group_bind: np.ndarray = field(default_factory=lambda: _frozen(np.zeros((0, 4), np.float32)))
+    num_envs: int = 1
+    _link_at: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}), repr=False)
+    _group_at: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}), repr=False)
+
+    def __post_init__(self) -> None:
+        if self.contact not in ("particle", "grid"):
+            raise ConfigError(f"MPMWorld(contact={self.contact!r}) must be 'particle' or 'grid'")
+
+    @property
+    def num_particles(self) -> int:
+        return len(self.particles)
+
+    @property
+    def link_names(self) -> tuple[str, ...]:
+        return tuple(link.name for link in self.links)
+
+    def link_index(self, link) -> int:
+        """Index of a link given by name or index; a clear error if it does not exist."""
+        if isinstance(link, (int, np.integer)):
+            if not 0 <= link < len(self.links):
+                raise ConfigError(f"link index {link} out of range (have {len(self.links)} links)")
+            return int(link)
+        if link not in self._link_at:
+            raise ConfigError(f"unknown link {link!r}; registered links: {list(self.link_names)}")
+        return self._link_at[link]
+
+    def has_link(self, name: str) -> bool:
+        return name in self._link_at
+
+    def group_index(self, name: str) -> int:
+        """Index of the group called ``name`` (a clear error if unknown)."""
+        if name not in self._group_at:
+            raise ConfigError(f"unknown group {name!r}; groups: {[g.name for g in self.groups]}")
+        return self._group_at[name]
+
+    def pair_slots(self) -> tuple[int, np.ndarray]:
+        """(slots per link, [C] each collider's slot): a link's contact pairs are its env's
+        colliders, numbered in their order of addition, then one slot for the other field."""
+        env = np.asarray([c.env for c in self.colliders], np.int64)
+        count = np.bincount(env, minlength=1)
+        order = np.argsort(env, kind="stable")  # env by env, each in its order of addition
+        slot = np.empty(len(env), np.int64)
+        slot[order] = np.arange(len(env)) - (np.cumsum(count) - count)[env[order]]
+        return int(count.max()) + 1, slot
+
+    def with_link(self, name: str, env: int) -> "Model":
+        """This model with one more link (a clear error if the name is taken)."""
+        if name in self._link_at:
+            raise ConfigError(f"link {name!r} is already registered")
+        return replace(self, links=self.links + (LinkModel(name, env),), num_envs=max(self.num_envs, env + 1),
+                       _link_at=MappingProxyType({**self._link_at, name: len(self.links)}))
+
+    def with_group(self, group: GroupModel, rows: dict, bind: np.ndarray) -> "Model":
+        """This model with one more group: its description (``start`` = the current particle
+        count, ``material`` a row of the material table, added if new), its rest rows
+        (:data:`REST_FIELDS`, ``matid`` and ``group`` filled here) and its link's quaternion."""
+        if group.name in self._group_at:
+            raise ConfigError(f"group {group.name!r} already exists")
+        materials = self.materials if group.material in self.materials else self.materials + (group.material,)
+        n = group.count
+        rows = {**rows, "matid": np.full(n, materials.index(group.material), np.int32),
+                "group": np.full(n, len(self.groups), np.int32), "env": np.full(n, group.env, np.int32)}
+        return replace(self, groups=self.groups + (replace(group, start=self.num_particles),),
+                       materials=materials, particles=self.particles.joined(rows),
+                       group_bind=_frozen(np.concatenate([self.group_bind, np.asarray(bind, np.float32)[None]])),
+                       num_envs=max(self.num_envs, group.env + 1),
+                       _group_at=MappingProxyType({**self._group_at, group.name: len(self.groups)}))
+
+    def with_collider(self, collider: ColliderModel) -> "Model":
+        """This model with one more collider."""
+        return replace(self, colliders=self.colliders + (collider,), num_envs=max(self.num_envs, collider.env + 1))
+
+    def with_wall(self, wall: Wall) -> "Model":
+        """This model with one more slip wall."""
+        return replace(self, walls=self.walls + (wall,))
 
 
 def _env_index(env, where: str) -> int:
@@ -165,273 +273,3 @@ def _collider_radius(c: Collider) -> float:
     return math.inf
 
 
-class WorldModel:
-    """The links, groups, materials, colliders and walls of an :class:`~gausstac_maniskill.mpm.solver.MPMWorld`
-    as added (a part of it: the lists are the world's)."""
-
-    def add_link(self, name: str, pose, env: int = 0) -> int:
-        """Register a rigid link that kinematic particles can bind to, in env ``env`` of a
-        batched world (see :attr:`num_envs`); returns its index."""
-        if name in self._link_at:
-            raise ConfigError(f"link {name!r} is already registered")
-        T = as_pose_matrix(pose, f"pose of link {name!r}")
-        self._link_env.append(self._note_env(env, f"add_link({name!r})"))
-        self._link_at[name] = len(self.link_names)
-        self.link_names.append(name)
-        self._link_prev = np.concatenate([self._link_prev, T[None]])
-        self._link_next = np.concatenate([self._link_next, T[None]])
-        self._link_twist = np.concatenate([self._link_twist, np.zeros((1, 6))])
-        self._pair_impulse = np.concatenate([self._pair_impulse, np.zeros((1,) + self._pair_impulse.shape[1:])])
-        self._dirty = True
-        return len(self.link_names) - 1
-
-    def link_index(self, link) -> int:
-        """Index of a link given by name or index; a clear error if it does not exist."""
-        if isinstance(link, (int, np.integer)):
-            if not 0 <= link < len(self.link_names):
-                raise ConfigError(f"link index {link} out of range (have {len(self.link_names)} links)")
-            return int(link)
-        if link not in self._link_at:
-            raise ConfigError(f"unknown link {link!r}; registered links: {self.link_names}")
-        return self._link_at[link]
-
-    def has_link(self, name: str) -> bool:
-        """Whether a link called ``name`` is registered."""
-        return name in self._link_at
-
-    def add_group(self, name: str, positions, material: Material, *, link=None, kinematic=None,
-                  velocity=None, particle_volume: float | None = None,
-                  spacing: float | None = None, quasi_static: bool | None = None,
-                  relaxation: float | None = None, field: int = 0, contact_radius=None,
-                  bond_distance=None, bond_normal=None, env: int | None = None) -> Group:
-        """Add a group of particles.
-
-        Args:
-            name: unique group name (used in error messages and :meth:`group`).
-            positions: [N, 3] world positions [m] in the current configuration,
-                which is taken as the rest configuration (F = I).
-            material: constitutive model and parameters of the dynamic particles.
-            link: name or index of the link that kinematic particles follow.
-            kinematic: [N] bool mask (or ``True`` for all) of particles bound to ``link``.
-            velocity: optional [N, 3] or [3] initial velocity [m/s].
-            particle_volume: rest volume per particle [m^3]; default ``spacing**3``.
-            spacing: particle spacing [m] of these positions; default
-                ``settings.particle_spacing``.
-            contact_radius: [N] or scalar distance [m] from a particle's centre to the
-                surface it stands for (colliders touch that surface); default ``spacing / 2``.
-            bond_distance, bond_normal: where the dynamic particles are bonded to the
-                kinematic ones: [N] signed distance [m] of each particle from the bond surface
-                (negative in the kinematic core) and [N, 3] that surface's normal pointing into
-                the soft layer (world frame, current configuration); only the kinematic
-                particles' values are used. The grid then holds the layer at that surface, not
-                at the nearest node plane (``kernels.bond_ghosts``). Default: estimated from
-                the kinematic mask, from each kinematic particle's nearest dynamic particle
-                (exact for a flat bond on the particle lattice). Pads pass their geometry.
-            quasi_static: solve the group by dynamic relaxation (pseudo-mass
-                ``settings.mass_scaling``, damping relative to its link). Default: True
-                when the group has kinematic particles. A free group (no kinematic
-                particle) always keeps its physical inertia; asking otherwise is an error.
-            relaxation: damping rate ζ [1/s] of a quasi-static group's motion relative
-                to its link. Default: ω1 = (π/2)·c_s/L, the layer's lowest shear
-                frequency, with c_s the (pseudo-mass) shear wave speed and L the largest
-                distance of a dynamic particle from the kinematic core (on a block pad
-                ζ = ω1/4 … ω1 relax alike, 2·ω1 is slower).
-            field: velocity field, 0 or 1 (multi-field MPM). Groups in one field form one
-                continuum where they touch (their particles share grid velocities); groups
-                in different fields are separate bodies that touch through a frictional,
-                non-adhesive contact rule on the grid (friction
-                ``settings.soft_friction``). Pads use field 0 and soft objects field 1
-                (:class:`~gausstac_maniskill.cosim.GaussTacSim` does this). While groups
-                of both fields are awake the grid holds two copies of the active box.
-            env: the env (independent scene) of a batched world the group belongs to
-                (default: its link's env, or 0). Groups of different envs never interact
-                and touch only their own env's colliders, yet all envs step in the same
-                kernel launches (:attr:`num_envs`).
-        """
-        if name in self._group_at:
-            raise ConfigError(f"group {name!r} already exists")
-        if field not in (0, 1) or isinstance(field, bool):
-            raise ConfigError(f"add_group({name!r}): field={field!r} must be 0 or 1")
-        if not isinstance(material, Material):
-            raise ConfigError(f"add_group({name!r}): material must be a Material, got {type(material).__name__}")
-        pts = np.asarray(positions, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise ConfigError(f"add_group({name!r}): positions must have shape [N, 3], got {pts.shape}")
-        if len(pts) == 0:
-            raise ConfigError(f"add_group({name!r}): positions is empty (the particle set has no particles)")
-        if not np.all(np.isfinite(pts)):
-            raise ConfigError(f"add_group({name!r}): positions contain NaN or inf")
-        n = len(pts)
-        kin = np.zeros(n, bool)
-        if kinematic is not None:
-            kin = np.broadcast_to(np.asarray(kinematic, bool), (n,)).copy()
-        lidx = -1
-        if kin.any() or link is not None:
-            if link is None:
-                raise ConfigError(f"add_group({name!r}): kinematic particles need a link")
-            lidx = self.link_index(link)
-        if env is None:
-            env = self._link_env[lidx] if lidx >= 0 else 0
-        env = self._note_env(env, f"add_group({name!r})")
-        if lidx >= 0 and self._link_env[lidx] != env:
-            raise ConfigError(f"add_group({name!r}): env={env} but its link {self.link_names[lidx]!r} is in env "
-                              f"{self._link_env[lidx]}")
-        h = float(spacing if spacing is not None else self.settings.particle_spacing)
-        if not (h > 0 and math.isfinite(h)):
-            raise ConfigError(f"add_group({name!r}): spacing={spacing!r} must be > 0")
-        vol = float(particle_volume if particle_volume is not None else h ** 3)
-        if not (vol > 0 and math.isfinite(vol)):
-            raise ConfigError(f"add_group({name!r}): particle_volume={particle_volume!r} must be > 0")
-        radius = np.full(n, 0.5 * h)
-        if contact_radius is not None:
-            radius = np.broadcast_to(np.asarray(contact_radius, np.float64), (n,)).copy()
-            if not (np.all(np.isfinite(radius)) and np.all(radius > 0)):
-                raise ConfigError(f"add_group({name!r}): contact_radius must be > 0 and finite")
-        bond = _bond_table(name, pts, kin, h, bond_distance, bond_normal)
-        vel = np.zeros((n, 3))
-        if velocity is not None:
-            vel = np.broadcast_to(np.asarray(velocity, np.float64), (n, 3)).copy()
-            if not np.all(np.isfinite(vel)):
-                raise ConfigError(f"add_group({name!r}): velocity contains NaN or inf")
-
-        if quasi_static is None:
-            quasi_static = bool(kin.any())
-        if quasi_static and not kin.any():
-            raise ConfigError(f"add_group({name!r}): quasi_static=True needs kinematic particles; a free "
-                              f"group keeps its physical inertia (it must fall and move at its real mass)")
-        scale = self.settings.mass_scaling if quasi_static else 1.0
-        relax = tear = 0.0
-        if quasi_static:
-            layer = _layer_thickness(pts, kin)
-            # farther than the layer's largest stretch, plus the grid stencil's reach, from its rest
-            # place, a particle cannot be held by its core any more (_rest_torn)
-            tear = K.MAX_STRETCH * layer + 2.0 * self.settings.dx
-            relax = _relaxation_rate(layer, material, scale) if relaxation is None else relaxation
-            relax = _finite(f"add_group({name!r}): relaxation", relax)
-            if relax < 0.0:
-                raise ConfigError(f"add_group({name!r}): relaxation={relax!r} must be a rate >= 0 [1/s]")
-        elif relaxation is not None:
-            raise ConfigError(f"add_group({name!r}): relaxation is for quasi-static groups only")
-
-        self._pull()
-        if material not in self.materials:
-            self.materials.append(material)
-        mid = self.materials.index(material)
-        gid = len(self.groups)
-        rho = material.density * scale
-        new = {
-            "x": pts.astype(np.float32), "v": vel.astype(np.float32),
-            "C": _velocity_gradient(pts, vel).astype(np.float32), "F": np.tile(np.eye(3, dtype=np.float32), (n, 1, 1)),
-            "tau": np.zeros((n, 3, 3), np.float32), "Jp": np.ones(n, np.float32),
-            "impulse": np.zeros((n, 3), np.float32), "contact_id": np.full(n, -1, np.int32),
-            "anchor": no_anchor(n),
-            "mass": np.full(n, rho * vol, np.float32), "vol": np.full(n, vol, np.float32),
-            "radius": radius.astype(np.float32), "kind": kin.astype(np.int32),
-            "matid": np.full(n, mid, np.int32), "link": np.full(n, lidx, np.int32),
-            "group": np.full(n, gid, np.int32), "X0": np.zeros((n, 3), np.float32),
-            "env": np.full(n, env, np.int32),
-        }
-        if lidx >= 0:
-            T = self._link_next[lidx]
-            new["X0"] = ((pts - T[:3, 3]) @ T[:3, :3]).astype(np.float32)
-            new["v"][kin] = 0.0
-            new["C"][kin] = 0.0  # kinematic_update gives them their link's gradient
-            bond[:, :3] = bond[:, :3] @ T[:3, :3]  # normals to the link frame
-        new["bond"] = bond.astype(np.float32)
-        hp = self._host_parts
-        for key, arr in new.items():
-            old = hp.get(key)
-            hp.set(key, arr if old is None else np.concatenate([old, arr]))
-        bind = matrix_to_quat(self._link_next[lidx][:3, :3]) if lidx >= 0 else np.array([1.0, 0, 0, 0])
-        self._host["group_bind"] = np.concatenate(
-            [self._host.get("group_bind", np.zeros((0, 4), np.float32)), bind[None].astype(np.float32)])
-        group = Group(name, self._n, n, material, lidx, int(kin.sum()), h, bool(quasi_static), scale, relax,
-                      int(field), env=env, tear=tear)
-        self._group_at[name] = len(self.groups)
-        self.groups.append(group)
-        self._n += n
-        self._dirty = True
-        return group
-
-    def add_collider(self, collider: Collider, env: int = 0) -> int:
-        """Add a rigid SDF collider that the groups of env ``env`` touch; returns its index
-        (for poses and wrenches)."""
-        if not isinstance(collider, Collider) or type(collider) is Collider:
-            raise ConfigError(f"add_collider expects a Sphere, Box, Capsule, HalfSpace or MeshCollider, "
-                              f"got {type(collider).__name__}")
-        self._col_env.append(self._note_env(env, "add_collider"))
-        self.colliders.append(collider)
-        self._col_prev = np.concatenate([self._col_prev, collider.pose[None]])
-        # one impulse row per collider from the start, so the state keeps its shape before
-        # and after the first step (recorders stack states of successive steps)
-        self._col_impulse = np.concatenate([self._col_impulse, np.zeros((1, 6))])
-        n_slot = self.pair_slots()[0]
-        if n_slot > self._pair_impulse.shape[1]:  # the env with the most colliders got one more
-            self._pair_impulse = np.insert(self._pair_impulse, self._pair_impulse.shape[1] - 1, 0.0, axis=1)
-        self._dirty = True
-        return len(self.colliders) - 1
-
-    def pair_slots(self) -> tuple[int, np.ndarray]:
-        """(slots per link, [C] each collider's slot): a link's contact pairs are its env's
-        colliders, numbered in their order of addition, then one slot for the other field."""
-        env = np.asarray(self._col_env, np.int64)
-        count = np.bincount(env, minlength=1)
-        order = np.argsort(env, kind="stable")  # env by env, each in its order of addition
-        slot = np.empty(len(env), np.int64)
-        slot[order] = np.arange(len(env)) - (np.cumsum(count) - count)[env[order]]
-        return int(count.max()) + 1, slot
-
-    def _pairs(self, links: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """[len(links), len(cols) + 1, 7] pair sums of ``links`` with colliders ``cols`` (zero
-        for a collider of another env), then with the other field."""
-        n_slot, slot = self.pair_slots()
-        sums = self._pair_impulse[links]
-        out = np.zeros((len(links), len(cols) + 1, 7))
-        out[:, :-1] = np.where(self._same_env(links, cols)[..., None], sums[:, slot[cols]], 0.0)
-        out[:, -1] = sums[:, n_slot - 1]
-        return out
-
-    def _same_env(self, links: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """[len(links), len(cols)] whether link links[i] and collider cols[j] share an env."""
-        return np.asarray(self._link_env)[links][:, None] == np.asarray(self._col_env, np.int64)[cols][None, :]
-
-    def add_slip_wall(self, axis: int, position: float, keep: str = "+") -> None:
-        """A bilateral frictionless wall on the grid (e.g. a symmetry plane).
-
-        Grid nodes with coordinate ``axis`` on the ``keep``-opposite side of
-        ``position`` [m], or on it, get zero velocity along ``axis``.
-        """
-        if axis not in (0, 1, 2) or keep not in ("+", "-"):
-            raise ConfigError(f"add_slip_wall(axis={axis!r}, keep={keep!r}): axis in 0..2, keep '+' or '-'")
-        self._walls.append((axis, float(position), 1.0 if keep == "+" else -1.0))
-        self._dirty = True
-
-    def group(self, name: str) -> Group:
-        """The group called ``name`` (clear error if unknown)."""
-        if name not in self._group_at:
-            raise ConfigError(f"unknown group {name!r}; groups: {[g.name for g in self.groups]}")
-        return self.groups[self._group_at[name]]
-
-    @property
-    def num_envs(self) -> int:
-        """Number of envs (independent scenes) in this world: 1 + the largest env index given
-        to :meth:`add_link`, :meth:`add_group` or :meth:`add_collider`. Every env has its own
-        copy of the grid box; all step together, in the same kernel launches, with one
-        substep count (the smallest that every env's CFL bound allows)."""
-        return self._num_envs
-
-    def _note_env(self, env, where: str) -> int:
-        """``env`` checked (:func:`_env_index`) and counted in :attr:`num_envs`."""
-        env = _env_index(env, where)
-        self._num_envs = max(self._num_envs, env + 1)
-        return env
-
-    @property
-    def num_particles(self) -> int:
-        return self._n
-
-    def _collider(self, index: int) -> Collider:
-        """Collider ``index`` (a clear error where there is none)."""
-        if not 0 <= index < len(self.colliders):
-            raise ConfigError(f"collider index {index} out of range ({len(self.colliders)} colliders)")
-        return self.colliders[index]

@@ -52,7 +52,7 @@ class WorldReadouts:
         the host: for kernels that read the state without copying it back
         (:class:`~gausstac_maniskill.tactile.readout.TactileReadout`). Do not write them."""
         self._push()
-        arrays = {k: self._dev_parts.get(k) if k in PARTICLE_FIELDS else self._dev.get(k) for k in keys}
+        arrays = {k: self._dev_parts.get(k) if k in PARTICLE_FIELDS else getattr(self._dev, k, None) for k in keys}
         missing = [k for k, a in arrays.items() if a is None]
         if missing:
             raise ConfigError(f"device_state: the world has no particles (no device array {missing[0]!r})")
@@ -93,7 +93,7 @@ class WorldReadouts:
         deformation gradients are measured from (identity for a group without a link)."""
         self._pull()
         self.group(group)  # clear error if unknown
-        return quat_to_matrix(self._host["group_bind"][self._group_at[group]].astype(np.float64))
+        return quat_to_matrix(self.model.group_bind[self.model.group_index(group)].astype(np.float64))
 
     def kinematic_mask(self, group: str | None = None) -> np.ndarray:
         """[N] bool: which particles are kinematic."""
@@ -140,8 +140,8 @@ class WorldReadouts:
         APIC's, with the affine velocity's share (:func:`kernels.energies`)."""
         self._push()
         out = ti.ndarray(ti.f32, shape=2)
-        active = self._dev["active"]
-        K.energies(self._pack["P"], active, self._n_active, self._dev["mat_table"], self.settings.dx, out)
+        active = self._dev.active
+        K.energies(self._pack["P"], active, self._n_active, self._dev.mat_table, self.settings.dx, out)
         e = out.to_numpy()
         return float(e[0]), float(e[1])
 

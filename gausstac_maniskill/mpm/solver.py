@@ -36,14 +36,15 @@ from ..config import Material, SolverSettings
 from ..errors import ConfigError
 from ..geometry.colliders import Collider, MeshCollider
 from ..transforms import as_pose_matrices, as_pose_matrix, quat_to_matrix
-from .model import Group, WorldModel, _collider_bound, _velocity_gradient, no_anchor  # noqa: F401
+from .building import WorldBuilder, _velocity_gradient  # noqa: F401
+from .model import Model, _collider_bound, no_anchor  # noqa: F401
 from .patch import ActivePatch
 from .readouts import WorldReadouts
 from .rows import forget_contact, move_rigidly, put_at_rest
-from .state import ParticleArrays, WorldState
+from .state import DeviceArrays, Group, ParticleArrays, WorldState
 from .stepper import StepInfo, WorldStepper, atomic_scatter
 
-__all__ = ["MPMWorld", "StepInfo", "Group"]
+__all__ = ["MPMWorld", "StepInfo", "Group", "Model"]
 
 _WORLDS: "weakref.WeakSet[MPMWorld]" = weakref.WeakSet()
 
@@ -56,7 +57,7 @@ def _release_packs() -> None:
         world._pack.clear()
 
 
-class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
+class MPMWorld(WorldBuilder, WorldReadouts, WorldStepper, WorldState):
     """A partly controlled MLS-MPM world. See the module docstring.
 
     Example::
@@ -79,32 +80,19 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
 
     def __init__(self, settings: SolverSettings | None = None, contact: str = "particle"):
         backend.ensure_init()
-        self.settings = settings or SolverSettings()
-        if contact not in ("particle", "grid"):
-            raise ConfigError(f"MPMWorld(contact={contact!r}) must be 'particle' or 'grid'")
-        self.contact = contact
-        self.groups: list[Group] = []
-        self.materials: list[Material] = []
-        self.link_names: list[str] = []
+        self.model = Model(settings or SolverSettings(), contact)  # the immutable description (add_* replace it)
+        self.groups: list[Group] = []  # each group's description (model.groups) and its awake/hold/patch state
         self._link_prev = np.zeros((0, 4, 4))  # [L, 4, 4] pose at the start of the next step
         self._link_next = np.zeros((0, 4, 4))  # [L, 4, 4] pose at its end (last set)
         self._link_twist = np.zeros((0, 6))  # [L, 6] (v_origin, ω) [m/s, rad/s] of the last step
-        self._link_env: list[int] = []
-        self._link_at: dict[str, int] = {}  # link name -> index
-        self._group_at: dict[str, int] = {}  # group name -> index
-        self._num_envs = 1
-        self.colliders: list[Collider] = []
-        self._col_env: list[int] = []
+        self.colliders: list[Collider] = []  # their shapes are the model's, their poses (and SDF values) state
         self._col_prev = np.zeros((0, 4, 4))  # [C, 4, 4] collider poses at the start of the next step
-        self._walls: list[tuple[int, float, float]] = []
         self.time = 0.0
         self.step_count = 0
         self.last_step: StepInfo | None = None
-        self._n = 0
         self._host_parts = ParticleArrays()  # per-particle host arrays (numpy)
         self._dev_parts = ParticleArrays()  # their device copies (Taichi ndarrays)
-        self._host: dict[str, np.ndarray] = {}  # per-group host rows (group_bind)
-        self._dev: dict[str, object] = {}  # the other device arrays (grid, links, colliders, ...)
+        self._dev = DeviceArrays()  # the other device arrays (grid, links, colliders, ...)
         self._grid_cap = 0
         self._dirty = True
         self._awake_changed = False  # groups woke or slept after the last push (the active lists are old)
@@ -126,6 +114,26 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
         self._patch = ActivePatch(r, self.settings.dx) if r else None
         self._patched: list[int] = []  # groups simulated by patch in the current step
         _WORLDS.add(self)
+
+    @property
+    def settings(self) -> SolverSettings:
+        """The numerical settings (the model's)."""
+        return self.model.settings
+
+    @property
+    def contact(self) -> str:
+        """Where colliders are enforced: ``"particle"`` or ``"grid"`` (the model's)."""
+        return self.model.contact
+
+    @property
+    def materials(self) -> tuple[Material, ...]:
+        """The distinct materials of the groups, in the order of the kernels' material table."""
+        return self.model.materials
+
+    @property
+    def link_names(self) -> tuple[str, ...]:
+        """The links' names, in order of addition."""
+        return self.model.link_names
 
     def set_link_pose(self, link, pose) -> None:
         """Target world pose (4x4) of a link at the end of the next control step."""
@@ -202,7 +210,7 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
     def _on_device(self) -> bool:
         """Whether the device holds the world as built (no structural change pending), so a
         group's rows can be changed there in place (mpm/rows.py) instead of on the host."""
-        return not self._dirty and self._n > 0 and "P" in self._pack
+        return not self._dirty and self.num_particles > 0 and "P" in self._pack
 
     def rest_group(self, name: str) -> None:
         """Put a link-bound group exactly on its rest shape on the link's current pose
@@ -215,10 +223,10 @@ class MPMWorld(WorldModel, WorldReadouts, WorldStepper, WorldState):
         if not on_device:
             self._pull()
         T = self._link_prev[g.link]
-        bind = quat_to_matrix(self._host["group_bind"][self.groups.index(g)].astype(np.float64))
+        bind = quat_to_matrix(self.model.group_bind[self.groups.index(g)].astype(np.float64))
         F_rest = T[:3, :3] @ bind.T
         if on_device:  # X0 as built (the active patch rebinds some rows of the device's X0)
-            X0 = self._dev["X_rest"] if self._patch is not None else self._dev_parts.X0
+            X0 = self._dev.X_rest if self._patch is not None else self._dev_parts.X0
             put_at_rest(self._pack["P"], X0, g.start, g.stop, ti.math.mat3(T[:3, :3]), ti.math.vec3(T[:3, 3]),
                              ti.math.mat3(F_rest))
             self._stale |= {"x", "v", "C", "tau", "Jp", "F", "impulse", "contact_id", "anchor"}

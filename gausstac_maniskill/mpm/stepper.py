@@ -16,7 +16,8 @@ from ..errors import ConfigError, SimulationError, SimulationWarning
 from ..transforms import turn_angle
 from . import kernels as K
 from .materials import cell_pressure
-from .model import Group, _collider_radius
+from .model import _collider_radius
+from .state import Group
 from .patch import bind_in_place, carry_rigidly, groups_in_contact, rest_gap
 from .state import _STATE_FIELDS
 
@@ -119,7 +120,7 @@ class WorldStepper:
             far = ~np.isfinite(r)
             if far.any():  # no bound: the farthest particle from the collider's end origin
                 self._pull(("x",))
-                x = self._host_parts.x if self._n else np.zeros((1, 3))
+                x = self._host_parts.x if self.num_particles else np.zeros((1, 3))
                 r[far] = [float(np.linalg.norm(x - T[:3, 3], axis=1).max()) for T in nxt[far]]
             cols = _surface_travel(self._col_prev, nxt, r)
         return links, cols
@@ -160,14 +161,14 @@ class WorldStepper:
             change = np.zeros((max(len(twists), 1), 9), np.float32)
             change[:len(twists)] = np.concatenate([twists - self._link_twist, self._link_prev[:, :3, 3]], 1)
             if np.any(change[:, :6]) and any(g.awake and g.quasi_static for g in self.groups):
-                d["twist_change"].from_numpy(change)
-                d["group_touched"].fill(0)
-                groups_in_contact(self._pack["P"], d["active"], self._n_active, True, d["group_touched"])
-                K.follow_links(self._pack["P"], d["active"], self._n_active, d["group_qs"], d["group_touched"],
-                               d["twist_change"])
-            K.reset_contact(self._pack["P"], d["active"], self._n_active)
-        d["col_impulse"].fill(0.0)
-        d["pair_impulse"].fill(0.0)
+                d.twist_change.from_numpy(change)
+                d.group_touched.fill(0)
+                groups_in_contact(self._pack["P"], d.active, self._n_active, True, d.group_touched)
+                K.follow_links(self._pack["P"], d.active, self._n_active, d.group_qs, d.group_touched,
+                               d.twist_change)
+            K.reset_contact(self._pack["P"], d.active, self._n_active)
+        d.col_impulse.fill(0.0)
+        d.pair_impulse.fill(0.0)
         self._stale = set(_STATE_FIELDS)  # from here on the device holds the newer state
         cells = 0
         flags = self._advance_flags()
@@ -176,10 +177,10 @@ class WorldStepper:
                 break
             cells = self._substep(k / n_sub, (k + 1) / n_sub, dt_sub, flags)
         self._check_health()
-        if self._cellp and self._n_active and int(d["cell_count"].to_numpy()[1]):
+        if self._cellp and self._n_active and int(d.cell_count.to_numpy()[1]):
             raise SimulationError(
-                f"the cell pressure ran out of cell slots at step {self.step_count + 1} ({d['slot_cell'].shape[0]} "
-                f"for {self._n} particles): the material spread to more than one cell per two particles. "
+                f"the cell pressure ran out of cell slots at step {self.step_count + 1} ({d.slot_cell.shape[0]} "
+                f"for {self.num_particles} particles): the material spread to more than one cell per two particles. "
                 f"Use SolverSettings(pressure='explicit') for such strongly expanding bodies.")
         if self._n_active and n_sub:
             # kinematic particles onto the link's end pose (the substeps place them at each
@@ -189,21 +190,21 @@ class WorldStepper:
                 K.fbar_update(self._world_pack(), self._nh_only(), self._two_fields, self._atomic, self._fbar,
                               self._cellp)
         if frozen is not None and len(frozen):
-            carry_rigidly(self._pack["P"], d["patch_frozen"], len(frozen), float(dt), d["link_pose"])
+            carry_rigidly(self._pack["P"], d.patch_frozen, len(frozen), float(dt), d.link_pose)
         if self._patched and self._n_active:
             self._note_patch_contact()
         if self._n_active and self.contact == "particle":
-            K.reduce_contact(self._pack["P"], self._dev_parts.X0, d["active"], self._pack["R"], self.num_envs,
+            K.reduce_contact(self._pack["P"], self._dev_parts.X0, d.active, self._pack["R"], self.num_envs,
                              self._pair_impulse.shape[1])
-        self._col_impulse = d["col_impulse"].to_numpy().astype(np.float64)[: len(self.colliders)]
+        self._col_impulse = d.col_impulse.to_numpy().astype(np.float64)[: len(self.colliders)]
         n_slot = self._pair_impulse.shape[1]
-        pairs = d["pair_impulse"].to_numpy().astype(np.float64)
+        pairs = d.pair_impulse.to_numpy().astype(np.float64)
         self._pair_impulse = pairs[: len(self.link_names) * n_slot].reshape(len(self.link_names), n_slot, 7)
         torn = self._torn_groups() if self._n_active else []
         if self.settings.hold_scaling > 1.0 and self._n_active and any(g.quasi_static for g in self.groups):
-            d["group_drift"].fill(0.0)
-            K.group_drift(self._pack["P"], d["active"], self._n_active, d["link_pose"], float(dt), d["group_drift"])
-            drift = d["group_drift"].to_numpy()
+            d.group_drift.fill(0.0)
+            K.group_drift(self._pack["P"], d.active, self._n_active, d.link_pose, float(dt), d.group_drift)
+            drift = d.group_drift.to_numpy()
             for i, g in enumerate(self.groups):
                 g.drift = float(drift[i]) if g.awake else math.inf
         self._link_prev = self._link_next.copy()
@@ -229,7 +230,7 @@ class WorldStepper:
             if not (g.awake and g.quasi_static and g.link >= 0):
                 continue
             still = links[g.link] <= limit and all(cols[k] <= limit for k in range(len(cols))
-                                                   if self._col_env[k] == g.env)
+                                                   if self.model.colliders[k].env == g.env)
             still = still and not any(h.awake and not h.quasi_static and h.env == g.env for h in self.groups)
             self._set_hold(g, still and (g.hold or g.drift < s.hold_speed))
 
@@ -257,10 +258,10 @@ class WorldStepper:
         if not any(g.awake and g.tear > 0.0 for g in self.groups):
             return []
         d = self._dev
-        d["torn"].fill(0)
-        K.torn_particles(self._pack["P"], d["X_rest"] if self._patch is not None else self._dev_parts.X0, d["active"],
-                         self._n_active, d["link_pose"], d["group_tear"], d["torn"])
-        counts = d["torn"].to_numpy()
+        d.torn.fill(0)
+        K.torn_particles(self._pack["P"], d.X_rest if self._patch is not None else self._dev_parts.X0, d.active,
+                         self._n_active, d.link_pose, d.group_tear, d.torn)
+        counts = d.torn.to_numpy()
         return [(g, int(counts[i])) for i, g in enumerate(self.groups) if g.awake and counts[i] > 0]
 
     def _rest_torn(self, torn: list[tuple[Group, int]], driver: float) -> None:
@@ -286,7 +287,7 @@ class WorldStepper:
         s = self.settings
         ncell = int(K.prepare(self._pack["placement"], a0, a1, dt, self._atomic))
         if ncell > s.max_grid_cells or ncell < 0:
-            ox, oy, oz, nx, ny, nz = (int(b) for b in self._dev["box"].to_numpy()[:6])
+            ox, oy, oz, nx, ny, nz = (int(b) for b in self._dev.box.to_numpy()[:6])
             raise SimulationError(self._explode_message(np.array([ox, oy, oz]) + s.grid_margin,
                                                         np.array([ox + nx, oy + ny, oz + nz]) - s.grid_margin - 3))
         need = ncell * (2 if self._two_fields else 1) * self.num_envs
@@ -306,7 +307,7 @@ class WorldStepper:
         awake lists, the kinematic flags and the shell's rest coordinates on the device.
         Returns the indices of the frozen particles (carried rigidly after the substeps),
         or None when every awake particle is simulated."""
-        hp, dp, d, n = self._host_parts, self._dev_parts, self._dev, max(self._n, 1)
+        hp, dp, d, n = self._host_parts, self._dev_parts, self._dev, max(self.num_particles, 1)
         self._patched = []
         if not any(g.awake for g in self.groups):
             return None
@@ -317,10 +318,10 @@ class WorldStepper:
         if gids and self.colliders and not self._two_fields:
             cand = np.concatenate([np.arange(self.groups[i].start, self.groups[i].stop, dtype=np.int32)
                                    for i in gids])
-            d["patch_cand"].from_numpy(np.resize(cand, n))
-            rest_gap(self._pack["P"], self._pack["S"], d["X_rest"], d["link_pose"], d["col_pose"],
-                     d["patch_cand"], len(cand), d["patch_gap"])
-            gap = d["patch_gap"].to_numpy()
+            d.patch_cand.from_numpy(np.resize(cand, n))
+            rest_gap(self._pack["P"], self._pack["S"], d.X_rest, d.link_pose, d.col_pose,
+                     d.patch_cand, len(cand), d.patch_gap)
+            gap = d.patch_gap.to_numpy()
             start = 0
             for i in gids:
                 gaps[i] = gap[start:start + self.groups[i].count]
@@ -343,32 +344,32 @@ class WorldStepper:
             bind.append(idx[shell & (kind[sl] == 0)])
             frozen.append(idx[~(patch | shell)])
         active, env_rows = self._env_major(parts)
-        d["env_rows"].from_numpy(env_rows)
+        d.env_rows.from_numpy(env_rows)
         kd = kind.copy()
         bind = np.concatenate(bind) if bind else np.zeros(0, np.int32)
         kd[bind] = 1
         active_kin = active[kd[active] == 1]
         dp.kind.from_numpy(np.resize(kd, n))
-        d["active"].from_numpy(np.resize(active, n))
-        d["active_kin"].from_numpy(np.resize(active_kin, n))
+        d.active.from_numpy(np.resize(active, n))
+        d.active_kin.from_numpy(np.resize(active_kin, n))
         self._n_active, self._n_kin = len(active), len(active_kin)
         self._upload_counts()
         if len(bind):
-            d["patch_bind"].from_numpy(np.resize(bind, n))
-            bind_in_place(self._pack["P"], dp.X0, d["patch_bind"], len(bind), d["link_pose"])
+            d.patch_bind.from_numpy(np.resize(bind, n))
+            bind_in_place(self._pack["P"], dp.X0, d.patch_bind, len(bind), d.link_pose)
         if not frozen:
             return None
         frozen = np.concatenate(frozen)
-        d["patch_frozen"].from_numpy(np.resize(frozen, n))
+        d.patch_frozen.from_numpy(np.resize(frozen, n))
         return frozen
 
     def _note_patch_contact(self) -> None:
         """After a patched step: a patched group in contact holds frozen deformation (state 1);
         once its contact ends it is simulated whole until put back at rest (state 2)."""
         d = self._dev
-        d["patch_contact"].from_numpy(np.zeros(max(len(self.groups), 1), np.int32))
-        groups_in_contact(self._pack["P"], d["active"], self._n_active, False, d["patch_contact"])
-        touched = d["patch_contact"].to_numpy()
+        d.patch_contact.from_numpy(np.zeros(max(len(self.groups), 1), np.int32))
+        groups_in_contact(self._pack["P"], d.active, self._n_active, False, d.patch_contact)
+        touched = d.patch_contact.to_numpy()
         for i in self._patched:
             g = self.groups[i]
             if touched[i]:
@@ -416,9 +417,9 @@ class WorldStepper:
             self._vmax = 0.0
             return
         d = self._dev
-        K.chunk_health(self._pack["P"], d["active"], self._n_active, K.NCHUNK, d["first_bad"], d["vmax_chunk"])
-        bad = d["first_bad"].to_numpy()
-        self._vmax = float(d["vmax_chunk"].to_numpy().max())
+        K.chunk_health(self._pack["P"], d.active, self._n_active, K.NCHUNK, d.first_bad, d.vmax_chunk)
+        bad = d.first_bad.to_numpy()
+        self._vmax = float(d.vmax_chunk.to_numpy().max())
         bad = bad[bad >= 0]
         if len(bad):
             p = int(bad.min())

@@ -80,7 +80,7 @@ def test_contact_skips_far_colliders_without_changing_the_step(monkeypatch):
     a few cells away, steps bit-exactly as when no collider is ever skipped (every bound
     infinite). Compares the code with itself: it guards that the skip (kernels.beyond_bound)
     changes nothing; the time it saves is in BENCHMARKS.md."""
-    from gausstac_maniskill.mpm import state as solver  # the module whose _collider_bound _push uses
+    from gausstac_maniskill.mpm import model  # the module whose _collider_bound ColliderModel.of uses
 
     def run():
         world = pad_world(dx=1e-3, damping=2000.0)
@@ -97,7 +97,7 @@ def test_contact_skips_far_colliders_without_changing_the_step(monkeypatch):
         return world.positions("pad"), world.collider_wrench(c)[0]
 
     x, f = run()
-    monkeypatch.setattr(solver, "_collider_bound", lambda collider: 1e30)
+    monkeypatch.setattr(model, "_collider_bound", lambda collider: 1e30)
     x_all, f_all = run()
     assert f[2] > 0
     np.testing.assert_array_equal(x, x_all)

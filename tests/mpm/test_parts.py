@@ -1,5 +1,5 @@
-"""The MPM solver's parts fit together: the world is composed of model, state, stepper and
-readouts, the kernel package re-exports its modules' names, and the record layouts agree with
+"""The MPM solver's parts fit together: the world is composed of its builder, state, stepper and
+readouts over an immutable model, the kernel package re-exports its modules' names, and the record layouts agree with
 each other (static checks, no Taichi launch)."""
 import ast
 import importlib
@@ -7,25 +7,27 @@ import inspect
 from pathlib import Path
 
 import gausstac_maniskill.mpm.kernels as K
-from gausstac_maniskill.mpm import model, readouts, state, stepper
+from gausstac_maniskill.mpm import building, readouts, state, stepper
 from gausstac_maniskill.mpm.solver import MPMWorld
 
 KERNEL_MODULES = ["layout", "slabs", "grid", "transfer", "contact", "pressure", "readouts", "launch"]
 
 
 def test_the_world_is_composed_of_its_parts():
-    for part in (model.WorldModel, readouts.WorldReadouts, stepper.WorldStepper, state.WorldState):
+    for part in (building.WorldBuilder, readouts.WorldReadouts, stepper.WorldStepper, state.WorldState):
         assert issubclass(MPMWorld, part)
     own = [n for n, v in vars(MPMWorld).items() if inspect.isfunction(v)]
-    for part in (model.WorldModel, readouts.WorldReadouts, stepper.WorldStepper, state.WorldState):
+    for part in (building.WorldBuilder, readouts.WorldReadouts, stepper.WorldStepper, state.WorldState):
         twice = set(own) & set(vars(part))
         assert not twice, f"{part.__name__} and MPMWorld both define {twice}"
 
 
 def test_the_parts_do_not_import_the_facade():
     """Layering: solver.py composes the parts; no part imports solver.py (or a later part)."""
-    later = {"model": {"solver", "state", "stepper", "readouts"}, "state": {"solver", "stepper", "readouts"},
-             "stepper": {"solver", "readouts"}, "readouts": {"solver"}}
+    later = {"model": {"solver", "state", "building", "stepper", "readouts"},
+             "state": {"solver", "building", "stepper", "readouts"},
+             "building": {"solver", "stepper", "readouts"}, "stepper": {"solver", "building", "readouts"},
+             "readouts": {"solver", "building"}}
     for name, banned in later.items():
         tree = ast.parse(Path(importlib.import_module(f"gausstac_maniskill.mpm.{name}").__file__).read_text())
         for node in ast.walk(tree):

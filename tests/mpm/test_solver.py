@@ -404,11 +404,11 @@ def test_slabs_run_across_a_slow_axis_of_the_grid():
 
     world = pad_world(size=(0.004, 0.006, 0.02))  # tallest along z
     world.step(1e-3)
-    box = world._dev["box"].to_numpy()
+    box = world._dev.box.to_numpy()
     nx, ny, nz, n_slabs, axis = box[3], box[4], box[5], box[6], box[7]
     assert nz > max(nx, ny)
     assert axis == 1 and n_slabs >= 2  # y, the longer slow axis
-    starts = world._dev["slab_start"].to_numpy()[: n_slabs + 1]
+    starts = world._dev.slab_start.to_numpy()[: n_slabs + 1]
     assert starts[0] == 0 and starts[-1] == world._n_active and np.all(np.diff(starts) >= 0)
     assert K.TASK_SPREAD >= 512  # Taichi 1.7's smallest CPU block: one slab per thread block
 
