@@ -10,6 +10,7 @@ surface point, which the tactile maps use.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
@@ -193,7 +194,8 @@ def pad_core_meshes(specs, mesh, mesh_name: str = "") -> list:
 
 
 def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "") -> Pad:
-    """Fill ``spec``'s region of ``mesh`` (link frame) with particles.
+    """Fill ``spec``'s region of ``mesh`` (link frame) with particles: a new Pad at each call
+    (:func:`pad_geometry` is the cached way a scene gets its pads).
 
     Args:
         spec: the pad description.
@@ -207,12 +209,6 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
     """
     label = mesh_name or f"collision mesh of {spec.link!r}"
     check_layer_resolution(spec, dx)
-    key = (hash(mesh.vertices.tobytes()), hash(mesh.faces.tobytes()), spec.axis, spec.along, spec.cone_deg,
-           spec.thickness, float(spacing), float(dx))
-    if key in _CACHE:
-        rest, kin, dist, nrm, surface, S = _CACHE[key]
-        return Pad(spec, rest.copy(), kin.copy(), dist.copy(), nrm.copy(), surface.copy(), S.copy(), spacing,
-                   float(dx))
     if not mesh.is_watertight or not mesh.volume > 0:
         raise AssetError(f"{label}: the pad mesh must be watertight with positive volume "
                          f"(watertight={mesh.is_watertight}, volume={mesh.volume:.3g} m^3)")
@@ -242,28 +238,50 @@ def build_pad(spec: PadSpec, mesh, spacing: float, dx: float, mesh_name: str = "
     x /= np.linalg.norm(x)
     S = np.eye(4)
     S[:3, 0], S[:3, 1], S[:3, 2], S[:3, 3] = x, np.cross(axis, x), axis, origin
-    pad = Pad(spec, rest, kin[keep], dist, nrm, dist < spacing, S, spacing, float(dx))
-    _CACHE[key] = (pad.rest, pad.kinematic, pad.depth, pad.normal, pad.surface, pad.sensor_frame)
-    return pad
+    return Pad(spec, rest, kin[keep], dist, nrm, dist < spacing, S, spacing, float(dx))
 
 
-_CACHE: dict = {}
-_PADS: dict = {}  # (spec, urdf, spacing, dx) -> Pad, see pad_geometry
+class _PadCache:
+    """The built pads of this process (:func:`pad_geometry`): by request (spec, URDF, spacing,
+    grid spacing), so that a scene's pads are found without reading a mesh; and by shape (the
+    mesh's vertices and faces, the spec's axis, along, cone and thickness, the spacings), so
+    that pads cut alike from one mesh are built once."""
+
+    def __init__(self):
+        self.by_request: dict = {}
+        self.by_shape: dict = {}
+
+    def get(self, spec: PadSpec, urdf: str, spacing: float, dx: float) -> Pad:
+        request = (spec, str(urdf), float(spacing), float(dx))
+        pad = self.by_request.get(request)
+        if pad is not None:
+            return pad
+        mesh = pad_mesh(spec, urdf)
+        shape = (mesh.vertices.tobytes(), mesh.faces.tobytes(), spec.axis, spec.along, spec.cone_deg,
+                 spec.thickness, float(spacing), float(dx))
+        twin = self.by_shape.get(shape)
+        if twin is None:
+            twin = self.by_shape[shape] = build_pad(spec, mesh, spacing, dx)
+            for arr in (twin.rest, twin.kinematic, twin.depth, twin.normal, twin.surface, twin.sensor_frame):
+                arr.flags.writeable = False  # shared by every scene that asks
+        else:
+            check_layer_resolution(spec, dx)
+        pad = self.by_request[request] = dataclasses.replace(twin, spec=spec)
+        return pad
+
+
+_PADS = _PadCache()
 
 
 def pad_geometry(spec: PadSpec, urdf: str, spacing: float, dx: float) -> Pad:
     """The pad of ``spec`` cut from its mesh (``spec.mesh`` or the link's collision mesh in
-    ``urdf``) at particle ``spacing`` [m] on a grid of spacing ``dx`` [m]: :func:`build_pad`,
-    built once per process for each (spec, urdf, spacing, dx) and then shared, read-only, by
-    every scene and task that asks (the co-simulator's pads and a task's ``pad_geometry``).
-    Warns about an under-resolved layer on every call, as :func:`build_pad` does."""
-    key = (spec, str(urdf), float(spacing), float(dx))
-    pad = _PADS.get(key)
-    if pad is None:
-        pad = _PADS[key] = build_pad(spec, pad_mesh(spec, urdf), spacing, dx)
-    else:
-        check_layer_resolution(spec, dx)
-    return pad
+    ``urdf``) at particle ``spacing`` [m] on a grid of spacing ``dx`` [m], built by
+    :func:`build_pad` once per process and then shared, with read-only arrays, by every scene
+    and task that asks. Specs that differ only in what does not shape a pad (name, link,
+    material, taxel layout) on the same mesh share one build: the four Allegro tips are cut
+    once. Warns about an under-resolved layer the first time a spec is asked for."""
+    return _PADS.get(spec, urdf, spacing, dx)
+
 
 #: Grid cells the soft layer must span for its contact force to converge (with 1–2 cells the
 #: force is off by 2.7–11× against Hertz theory: ``bench hand``'s fingertip press).
@@ -293,7 +311,7 @@ def check_layer_resolution(spec: PadSpec, dx: float) -> None:
 #: Thickness of the kinematic layer in grid cells. With one cell, the grid nodes at the
 #: soft/kinematic interface get only ~half their mass from kinematic particles and stay
 #: free, and the soft layer slips 0.5 mm after a frictional slide; two cells pin them.
-KINEMATIC_CELLS = 2  # pads from the same mesh and geometry (e.g. the four Allegro tips) are built once
+KINEMATIC_CELLS = 2
 
 
 def pad_specs_for_links(links, **fields) -> list[PadSpec]:
