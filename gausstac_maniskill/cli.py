@@ -1,4 +1,4 @@
-"""Command line: ``gausstac demo | bench <name> | build-asset | collect``.
+"""Command line: ``gausstac demo | bench <name> | build-asset | collect | replay``.
 
 * ``gausstac demo`` — the main demo (see README); writes PNG/MP4 files under ``out/``.
 * ``gausstac bench <name> [options]`` — benchmarks (``hertz``, ``pad``, ``splat``, ...) that
@@ -7,6 +7,8 @@
   from a URDF's visual meshes, or aligned from a scan.
 * ``gausstac collect <env_id> [options]`` — record scripted-expert demonstrations (h5 + json),
   same as ``python -m gausstac_maniskill.collect``.
+* ``gausstac replay --traj-path T.h5 [options]`` — ManiSkill's trajectory replay with the GaussTac
+  tasks registered, same as ``python -m gausstac_maniskill.replay``.
 """
 from __future__ import annotations
 
@@ -38,7 +40,16 @@ def _collect(argv: list[str]) -> int:
     return collect.main(argv)
 
 
-COMMANDS = {"demo": _demo, "bench": _bench, "build-asset": _build_asset, "collect": _collect}
+def _replay(argv: list[str]) -> int:
+    import multiprocessing as mp
+
+    from . import replay
+
+    mp.set_start_method("spawn", force=True)  # as ManiSkill's script: -n N workers must not fork Taichi/SAPIEN
+    return replay.main(argv)
+
+
+COMMANDS = {"demo": _demo, "bench": _bench, "build-asset": _build_asset, "collect": _collect, "replay": _replay}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -23,6 +23,10 @@ Output (ManiSkill's naming ``<name>.<obs_mode>.<control_mode>.<sim_backend>.h5``
     <out>/<env_id>/trajectory.rgb.pd_joint_delta_pos.physx_cpu.h5   (+ .json)
     <out>/<env_id>/videos/seed<seed>.mp4                           (--save-video)
 
+A collection never replaces existing files silently: if the ``.h5``, its ``.json`` or one of
+the videos it may write exists, it refuses before recording anything (:func:`existing_outputs`)
+unless ``--overwrite`` is given.
+
 Per trajectory ``traj_<n>``: ``actions [T, A]``, ``obs`` (``agent``, ``extra``,
 ``sensor_data/splat_camera/rgb [T+1, H, W, 3] uint8`` in rgb mode, and
 ``tactile/<pad>/depth [T+1, 16, 16]``, ``shear [T+1, 16, 16, 2]``, ``force [T+1, 16, 16]``),
@@ -51,7 +55,7 @@ import numpy as np
 from . import environment
 from .errors import ConfigError
 
-__all__ = ["CollectConfig", "collect", "merge_trajectories", "output_path", "main"]
+__all__ = ["CollectConfig", "collect", "merge_trajectories", "output_path", "existing_outputs", "main"]
 
 
 @dataclass
@@ -80,6 +84,8 @@ class CollectConfig:
     #: uses the one this process already joined), any other string is a cluster's address
     #: (``ray.init(address=...)``, e.g. ``"auto"`` or ``"ray://head:10001"``); None: processes
     ray: str | None = None
+    #: replace the output files (.h5, .json, videos) if they exist; else :func:`collect` refuses
+    overwrite: bool = False
 
     def validate(self) -> None:
         if not isinstance(self.env_id, str) or not self.env_id:
@@ -118,6 +124,24 @@ def output_path(cfg: CollectConfig) -> Path:
         return out
     control = cfg.control_mode or "default"
     return out / cfg.env_id / f"trajectory.{cfg.obs_mode}.{control}.physx_cpu.h5"
+
+
+def _video_seeds(cfg: CollectConfig) -> list[int]:
+    """The seeds whose videos ``cfg`` may write: every episode index a worker may try."""
+    procs = min(cfg.num_procs, cfg.num_episodes)
+    cfg = dataclasses.replace(cfg, num_procs=procs)
+    return sorted(cfg.seed + k + attempt * procs for k in range(procs)
+                  for attempt in range(_worker_episodes(cfg, k)[1]))
+
+
+def existing_outputs(cfg: CollectConfig) -> list[Path]:
+    """The files :func:`collect` would write for ``cfg`` that exist already: the merged ``.h5``,
+    its ``.json`` and (``save_video``) the ``videos/seed<s>.mp4`` of the seeds it may try."""
+    out = output_path(cfg)
+    paths = [out, out.with_suffix(".json")]
+    if cfg.save_video:
+        paths += [out.parent / "videos" / f"seed{s}.mp4" for s in _video_seeds(cfg)]
+    return [p for p in paths if p.exists()]
 
 
 # ---------------------------------------------------------------------------- workers
@@ -238,14 +262,16 @@ def _copy_group(src, dst, compression: str | None) -> None:
 
 
 def merge_trajectories(out_h5: str | os.PathLike, inputs: Sequence[str | os.PathLike], *,
-                       sort_by_seed: bool = True, compression: str | None = "gzip") -> dict:
+                       sort_by_seed: bool = True, compression: str | None = "gzip",
+                       overwrite: bool = False) -> dict:
     """Merge ManiSkill trajectory files (``.h5`` + ``.json`` each) into ``out_h5`` (+ .json).
 
     Trajectories are renumbered ``traj_0 .. traj_{N-1}`` (and ``episode_id`` in the json)
     in ``episode_seed`` order (``sort_by_seed``) or in input order. The json keeps the
     first file's non-episode keys; files recorded from different envs or env kwargs are
     refused. Unlike ``mani_skill.trajectory.merge_trajectory.merge_trajectories`` (which
-    copies groups as they are, in file order) this compresses the uncompressed datasets.
+    copies groups as they are, in file order) this compresses the uncompressed datasets, and
+    it refuses an ``out_h5`` (or its ``.json``) that exists unless ``overwrite``.
 
     Returns the merged json dict.
     """
@@ -258,6 +284,10 @@ def merge_trajectories(out_h5: str | os.PathLike, inputs: Sequence[str | os.Path
     out_h5 = Path(out_h5)
     if any(p.resolve() == out_h5.resolve() for p in inputs if p.exists()):
         raise ConfigError(f"merge_trajectories: output {out_h5} is also an input")
+    out_json = out_h5.with_suffix(".json")
+    if not overwrite and (taken := [str(p) for p in (out_h5, out_json) if p.exists()]):
+        raise ConfigError(f"merge_trajectories: {' and '.join(taken)} exist(s); pass overwrite=True to replace "
+                          "it, or another output path")
     metas = []
     for p in inputs:
         jp = p.with_suffix(".json")
@@ -276,7 +306,11 @@ def merge_trajectories(out_h5: str | os.PathLike, inputs: Sequence[str | os.Path
     episodes = []
     files = [h5py.File(p, "r") for p in inputs]
     try:
-        with h5py.File(out_h5, "w") as dst:
+        try:  # w-: fails if the file appeared since the check above
+            dst_file = h5py.File(out_h5, "w" if overwrite else "w-")
+        except FileExistsError as exc:
+            raise ConfigError(f"merge_trajectories: {out_h5} exists; pass overwrite=True to replace it") from exc
+        with dst_file as dst:
             for new_id, (_, i, _, ep) in enumerate(entries):
                 name = f"traj_{ep['episode_id']}"
                 if name not in files[i]:
@@ -287,7 +321,7 @@ def merge_trajectories(out_h5: str | os.PathLike, inputs: Sequence[str | os.Path
         for f in files:
             f.close()
     merged = {**head, "episodes": episodes}
-    dump_json(str(out_h5.with_suffix(".json")), merged, indent=2)
+    dump_json(str(out_json), merged, indent=2)
     return merged
 
 
@@ -310,6 +344,11 @@ def collect(cfg: CollectConfig) -> dict:
     if cfg.env_id not in EXPERTS:
         raise ConfigError(f"no scripted expert for {cfg.env_id!r}; experts exist for {sorted(EXPERTS)}")
     out = output_path(cfg)
+    if not cfg.overwrite and (taken := existing_outputs(cfg)):
+        shown = ", ".join(map(str, taken[:4])) + (f" and {len(taken) - 4} more" if len(taken) > 4 else "")
+        raise ConfigError(f"{shown} already exist(s): a collection there would replace it; nothing was "
+                          "recorded. Pass --overwrite (CollectConfig(overwrite=True)) to replace it, or another "
+                          "--out (a folder, or a .h5 path)")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.parent / f".{out.stem}.workers.{os.getpid()}"
     if tmp.exists():
@@ -341,7 +380,11 @@ def collect(cfg: CollectConfig) -> dict:
     inputs = [p for p in paths if Path(p).exists() and Path(p).with_suffix(".json").exists()]
     merged = {"episodes": []}
     if inputs:
-        merged = merge_trajectories(out, inputs, compression="gzip" if cfg.compress else None)
+        try:
+            merged = merge_trajectories(out, inputs, compression="gzip" if cfg.compress else None,
+                                        overwrite=cfg.overwrite)
+        except ConfigError as exc:  # e.g. the output appeared during the recording: keep the episodes
+            raise ConfigError(f"{exc}; the recorded episodes are kept in {tmp}") from exc
     if not cfg.keep_worker_files:
         shutil.rmtree(tmp, ignore_errors=True)
     kept = [r for r in records if r[5]]
@@ -514,6 +557,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave the MPM state out of env_states (smaller files; replay by states then "
                         "restarts the pads at rest and is not exact)")
     p.add_argument("--no-compress", action="store_true", help="do not gzip the merged file's datasets")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing output (.h5, .json, videos); without it collect refuses to start")
     p.add_argument("--keep-worker-files", action="store_true", help="keep the per-worker .h5/.json")
     p.add_argument("--arch", choices=["cpu", "cuda", "auto"], default=None,
                    help="Taichi backend of the workers (default: $GAUSSTAC_ARCH or auto)")
@@ -535,7 +580,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         save_video=args.save_video, mpm_dx=args.mpm_dx, max_episode_steps=args.max_episode_steps,
                         record_mpm_state=not args.no_mpm_state, compress=not args.no_compress,
                         keep_worker_files=args.keep_worker_files, arch=args.arch,
-                        progress=not args.no_progress, env_kwargs=_parse_kv(args.env_kwarg), ray=args.ray)
+                        progress=not args.no_progress, env_kwargs=_parse_kv(args.env_kwarg), ray=args.ray,
+                        overwrite=args.overwrite)
     try:
         summary = collect(cfg)
     except ConfigError as exc:

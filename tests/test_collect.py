@@ -167,6 +167,157 @@ def test_replay_launcher_by_env_states_and_its_overwrite_guard(recorded, tmp_pat
                                           s[f"traj_0/obs/tactile/{pad}/force"][()])
 
 
+def _copy_trajectory(src, dst) -> None:
+    shutil.copy(src, dst)
+    shutil.copy(str(src).replace(".h5", ".json"), str(dst).replace(".h5", ".json"))
+
+
+def _bytes(*paths) -> list[bytes]:
+    return [open(p, "rb").read() for p in paths]
+
+
+def test_replay_refuses_to_overwrite_an_existing_file_unless_told(recorded, tmp_path, capsys, monkeypatch):
+    """ManiSkill names the replay's output <name>.<obs_mode>.<control_mode>.<backend>.h5 next to
+    the source, where a collection of that name may already be: the launcher refuses before
+    writing anything (the files stay byte-identical); --overwrite replaces them."""
+    from gausstac_maniskill import cli, replay
+
+    src = tmp_path / "trajectory.rgb.pd_joint_delta_pos.physx_cpu.h5"
+    _copy_trajectory(recorded["path"], src)
+    # an earlier state_dict collection, under the name the replay below writes
+    old = tmp_path / "trajectory.state_dict.pd_joint_delta_pos.physx_cpu.h5"
+    old_json = tmp_path / "trajectory.state_dict.pd_joint_delta_pos.physx_cpu.json"
+    with h5py.File(old, "w") as f:
+        f["traj_0/actions"] = np.arange(6.0).reshape(3, 2)
+        f["traj_9/actions"] = np.zeros((1, 2))
+    old_json.write_text('{"env_info": {}, "episodes": []}')
+    before = _bytes(old, old_json, src)
+    argv = ["--traj-path", str(src), "--use-env-states", "-o", "state_dict", "--save-traj", "--allow-failure",
+            "--count", "1"]
+    assert replay.main(argv) == 2
+    err = capsys.readouterr().err
+    assert str(old) in err and str(old_json) in err and "--overwrite" in err and "nothing was written" in err
+    monkeypatch.setattr("multiprocessing.set_start_method", lambda *a, **k: None)  # cli's, for the -n workers
+    assert cli.main(["replay", *argv]) == 2  # `gausstac replay`: the same launcher
+    assert str(old) in capsys.readouterr().err
+    # the .json alone, a worker's file of -n 2 (merged, then deleted), a video: refused the same way
+    old.rename(tmp_path / "moved.h5")
+    assert replay.main(argv) == 2 and str(old_json) in capsys.readouterr().err
+    old_json.rename(tmp_path / "moved.json")
+    worker = tmp_path / "trajectory.state_dict.pd_joint_delta_pos.physx_cpu.1.json"
+    worker.write_text("{}")
+    assert replay.main([*argv, "-n", "2"]) == 2 and str(worker) in capsys.readouterr().err
+    assert worker.read_text() == "{}"
+    video = tmp_path / "0.mp4"
+    video.write_bytes(b"video")
+    assert replay.main(["--traj-path", str(src), "--use-env-states", "--save-video", "--count", "1"]) == 2
+    assert str(video) in capsys.readouterr().err and video.read_bytes() == b"video"
+    # -n 2 workers on the CPU would write each other's 0.mp4, 1.mp4
+    assert replay.main(["--traj-path", str(src), "--use-env-states", "--save-video", "-n", "2",
+                        "--overwrite"]) == 2
+    assert "overwrite each other's" in capsys.readouterr().err
+    # the source itself: refused even with --overwrite
+    assert replay.main(["--traj-path", str(src), "--save-traj", "--overwrite"]) == 2
+    assert "file being replayed" in capsys.readouterr().err
+    (tmp_path / "moved.h5").rename(old)
+    (tmp_path / "moved.json").rename(old_json)
+    assert _bytes(old, old_json, src) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([src.name, src.with_suffix(".json").name, old.name,
+                                                                old_json.name, worker.name, video.name])
+    # --overwrite: the replay replaces the old collection
+    assert replay.main([*argv, "--overwrite"]) == 0
+    with h5py.File(old, "r") as f, h5py.File(src, "r") as s:
+        assert sorted(f) == ["traj_0"] and "sensor_data" not in f["traj_0/obs"]
+        np.testing.assert_array_equal(f["traj_0/obs/tactile/index/force"][()], s["traj_0/obs/tactile/index/force"][()])
+    assert _load_json(old)["env_info"]["env_kwargs"]["obs_mode"] == "state_dict"
+    assert _bytes(src) == before[2:]
+
+
+def test_replay_outputs_follow_maniskills_naming(recorded, tmp_path):
+    from mani_skill.trajectory import replay_trajectory
+
+    from gausstac_maniskill.replay import replay_outputs, replayed_path
+
+    src = tmp_path / "demo.h5"  # a name without ManiSkill's suffixes
+    _copy_trajectory(recorded["path"], src)
+
+    def outputs(*argv):
+        return [p.replace(str(tmp_path) + "/", "") for p in replay_outputs(
+            replay_trajectory.parse_args(["--traj-path", str(src), *argv]))]
+
+    assert outputs() == [] and outputs("-n", "2") == []
+    assert outputs("--save-traj") == ["demo.rgb.pd_joint_delta_pos.physx_cpu.h5",
+                                      "demo.rgb.pd_joint_delta_pos.physx_cpu.json"]
+    assert outputs("--save-traj", "-o", "state", "-n", "2", "-b", "cpu")[2:] == [
+        "demo.state.pd_joint_delta_pos.physx_cpu.0.h5", "demo.state.pd_joint_delta_pos.physx_cpu.0.json",
+        "demo.state.pd_joint_delta_pos.physx_cpu.1.h5", "demo.state.pd_joint_delta_pos.physx_cpu.1.json"]
+    assert outputs("--save-traj", "-b", "physx_cuda", "-n", "2")[:1] == ["demo.rgb.pd_joint_delta_pos.physx_cuda.h5"]
+    assert outputs("--save-video") == ["0.mp4", "1.mp4"] and outputs("--save-video", "--count", "1") == ["0.mp4"]
+    args = replay_trajectory.parse_args(["--traj-path", str(src), "--save-traj", "-o", "state_dict"])
+    assert replayed_path(args) == str(tmp_path / "demo.state_dict.pd_joint_delta_pos.physx_cpu.h5")
+    # a file whose env_kwargs name no modes: the env's defaults (BaseEnv: "state"; the hand's first controller)
+    from mani_skill.utils.io_utils import dump_json
+
+    meta = _load_json(src)
+    for key in ("obs_mode", "control_mode"):
+        meta["env_info"]["env_kwargs"].pop(key)
+    dump_json(str(src.with_suffix(".json")), meta)
+    assert outputs("--save-traj")[0] == "demo.state.pd_joint_delta_pos.physx_cpu.h5"
+
+
+def test_collect_refuses_to_overwrite_an_existing_collection_unless_told(recorded, tmp_path, monkeypatch):
+    """collect checks its output names before recording anything; --overwrite replaces them.
+    The workers are replaced by a copy of the module's recording (what they would write)."""
+    import dataclasses
+
+    from gausstac_maniskill import collect as collect_mod
+    from gausstac_maniskill.collect import existing_outputs, output_path
+
+    calls = []
+
+    def fake_worker(cfg, worker, h5_path, report):
+        calls.append(worker)
+        _copy_trajectory(recorded["path"], h5_path)
+
+    monkeypatch.setattr(collect_mod, "_run_worker", fake_worker)
+    cfg = CollectConfig(env_id=TASK, num_episodes=2, obs_mode="rgb", seed=3, out=str(tmp_path), progress=False)
+    out = output_path(cfg)
+    out.parent.mkdir(parents=True)
+    with h5py.File(out, "w") as f:  # an earlier collection
+        f["traj_0/actions"] = np.arange(6.0).reshape(3, 2)
+    out.with_suffix(".json").write_text('{"env_info": {}, "episodes": []}')
+    before = _bytes(out, out.with_suffix(".json"))
+    assert existing_outputs(cfg) == [out, out.with_suffix(".json")]
+    with pytest.raises(ConfigError, match=r"already exist.*nothing was recorded.*--overwrite"):
+        collect(cfg)
+    assert calls == [] and _bytes(out, out.with_suffix(".json")) == before
+    assert sorted(p.name for p in out.parent.iterdir()) == sorted([out.name, out.with_suffix(".json").name])
+    # the .json alone, or a video of a seed it may record (-o state_dict: another .h5 name), likewise
+    out.rename(tmp_path / "moved.h5")
+    with pytest.raises(ConfigError, match=out.with_suffix(".json").name):
+        collect(cfg)
+    (tmp_path / "moved.h5").rename(out)
+    video = out.parent / "videos" / "seed4.mp4"
+    video.parent.mkdir()
+    video.write_bytes(b"video")
+    with pytest.raises(ConfigError, match="seed4.mp4"):
+        collect(dataclasses.replace(cfg, obs_mode="state_dict", save_video=True))
+    assert calls == [] and video.read_bytes() == b"video"
+    # merge_trajectories itself refuses an existing output
+    with pytest.raises(ConfigError, match="exist"):
+        merge_trajectories(out, [recorded["path"]])
+    assert _bytes(out, out.with_suffix(".json")) == before
+    # --overwrite: recorded again, the old collection replaced
+    assert collect_mod.main([TASK, "-n", "2", "-s", "3", "--out", str(tmp_path), "--no-progress"]) == 2
+    assert calls == []
+    summary = collect(dataclasses.replace(cfg, overwrite=True))
+    assert calls == [0] and summary["episodes"] == 2 and summary["path"] == str(out)
+    with h5py.File(out, "r") as f:
+        assert sorted(f) == ["traj_0", "traj_1"] and f["traj_0/actions"].shape[1] == 16
+    assert [e["episode_seed"] for e in _load_json(out)["episodes"]] == [3, 4]
+    assert video.read_bytes() == b"video"
+
+
 def test_obs_wrapper_shapes_and_loader_match_the_live_env(recorded, tmp_path):
     from mani_skill.utils.wrappers.flatten import FlattenRGBDObservationWrapper
 
