@@ -30,7 +30,7 @@ from mani_skill.trajectory.dataset import load_h5_data
 from .errors import ConfigError
 
 __all__ = ["TACTILE_FIELDS", "DEFAULT_SCALE", "TactileLayout", "TactileObsWrapper", "tactile_state_obs_extractor",
-           "load_demos", "flatten_file", "main"]
+           "load_demos", "recorded_env_kwargs", "flatten_file", "main"]
 
 #: Tactile fields in the observation and their channel counts.
 TACTILE_FIELDS = {"depth": 1, "shear": 2, "force": 1}
@@ -200,6 +200,32 @@ def _flat(d: Mapping, n: int) -> np.ndarray:
                 raise ConfigError(f"cannot flatten an observation leaf of shape {v.shape} (more than [T, D])")
             parts.append(v.reshape(n, -1).astype(np.float32))
     return np.concatenate(parts, axis=1) if parts else np.zeros((n, 0), np.float32)
+
+
+#: env kwargs of a recording that a training script sets itself (or that belong to the recorder)
+_SET_BY_THE_SCRIPT = ("obs_mode", "control_mode", "sim_backend", "render_mode", "num_envs", "reward_mode")
+
+
+def recorded_env_kwargs(path: str) -> dict:
+    """The task's own keyword arguments a recording was made with (``mpm_dx``, ``pad_solver``,
+    ``--env-kwarg`` values, ...), read from the ``.json`` beside the ``.h5`` at ``path``, without
+    the ones a training script passes itself (obs and control mode, backend, render mode, env
+    count): pass them to the evaluation env, ``gym.make(env_id, **recorded_env_kwargs(path), ...)``,
+    so that it steps the physics the demos were recorded with.
+
+    Raises:
+        ConfigError: there is no ``.json`` beside ``path``, or it has no ``env_info.env_kwargs``.
+    """
+    import json
+    from pathlib import Path
+
+    meta = Path(path).with_suffix(".json")
+    if not meta.is_file():
+        raise ConfigError(f"recorded_env_kwargs: {meta} not found (ManiSkill writes it beside the .h5 {path})")
+    info = json.loads(meta.read_text()).get("env_info", {})
+    if "env_kwargs" not in info:
+        raise ConfigError(f"recorded_env_kwargs: {meta} has no env_info.env_kwargs (not a ManiSkill trajectory json)")
+    return {k: v for k, v in info["env_kwargs"].items() if k not in _SET_BY_THE_SCRIPT}
 
 
 def load_demos(path: str, num_traj: int | None = None, *, include_last: bool = False, rgb: bool = True,

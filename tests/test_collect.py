@@ -318,6 +318,24 @@ def test_collect_refuses_to_overwrite_an_existing_collection_unless_told(recorde
     assert video.read_bytes() == b"video"
 
 
+def test_recorded_env_kwargs_give_the_eval_env_the_recorded_physics(recorded, tmp_path):
+    from gausstac_maniskill.obs_wrappers import recorded_env_kwargs
+
+    kw = recorded_env_kwargs(recorded["path"])
+    assert kw["mpm_dx"] == 2e-3  # recorded with --mpm-dx 2e-3: the default (1e-3) would step other physics
+    assert not {"obs_mode", "control_mode", "sim_backend", "render_mode", "num_envs"} & set(kw)
+    env = gym.make(TASK, obs_mode="state_dict", **kw)
+    try:
+        assert env.unwrapped.mpm_settings.dx == 2e-3
+    finally:
+        env.close()
+    with pytest.raises(ConfigError, match="not found"):
+        recorded_env_kwargs(tmp_path / "none.h5")
+    (tmp_path / "bare.json").write_text("{}")
+    with pytest.raises(ConfigError, match="env_kwargs"):
+        recorded_env_kwargs(tmp_path / "bare.h5")
+
+
 def test_obs_wrapper_shapes_and_loader_match_the_live_env(recorded, tmp_path):
     from mani_skill.utils.wrappers.flatten import FlattenRGBDObservationWrapper
 
