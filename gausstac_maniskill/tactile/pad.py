@@ -255,6 +255,7 @@ class _PadCache:
         request = (spec, str(urdf), float(spacing), float(dx))
         pad = self.by_request.get(request)
         if pad is not None:
+            check_layer_resolution(spec, dx)  # each scene built from it is told
             return pad
         mesh = pad_mesh(spec, urdf)
         shape = (mesh.vertices.tobytes(), mesh.faces.tobytes(), spec.axis, spec.along, spec.cone_deg,
@@ -279,7 +280,7 @@ def pad_geometry(spec: PadSpec, urdf: str, spacing: float, dx: float) -> Pad:
     :func:`build_pad` once per process and then shared, with read-only arrays, by every scene
     and task that asks. Specs that differ only in what does not shape a pad (name, link,
     material, taxel layout) on the same mesh share one build: the four Allegro tips are cut
-    once. Warns about an under-resolved layer the first time a spec is asked for."""
+    once. Warns about an under-resolved layer at every call, as :func:`build_pad` does."""
     return _PADS.get(spec, urdf, spacing, dx)
 
 
