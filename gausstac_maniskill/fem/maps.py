@@ -12,13 +12,14 @@ the loaded points' columns only.
 displacement is the mean of its element's eight nodes, its stress the element's at its centre
 (σ = λ tr ε I + 2μ ε, :func:`~.hex.centre_state`), each shared among taxels by its footprint
 (:class:`~gausstac_maniskill.tactile.extract.TaxelBinning`). The force map needs no solve: it
-bins the point forces directly (:meth:`PadMaps.maps`).
+bins the point forces directly, then moves any taxel's pull onto its pressed neighbours
+(:func:`~gausstac_maniskill.tactile.extract.compressive_force`; :meth:`PadMaps.maps`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..tactile.extract import map_tensors
+from ..tactile.extract import compressive_force, map_tensors
 from .signorini import _xyz_rows
 from .hex import _gauss_gradients, _moduli
 
@@ -100,5 +101,5 @@ class PadMaps:
         r = force[loaded].ravel() @ self.Mt[_xyz_rows(loaded)].astype(np.float64)
         fn = np.zeros(self.pad.num_particles)  # pressing force along −z on each particle
         np.add.at(fn, self.point_particles[loaded], -(force[loaded] @ S[:, 2]))
-        return map_tensors(r[:T], r[T:2 * T], r[2 * T:3 * T], b.accumulate(self._inside, fn), r[3 * T:],
-                           b.rows, b.cols)
+        force = compressive_force(b.accumulate(self._inside, fn), b.rows, b.cols)
+        return map_tensors(r[:T], r[T:2 * T], r[2 * T:3 * T], force, r[3 * T:], b.rows, b.cols)

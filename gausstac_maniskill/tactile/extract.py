@@ -19,7 +19,9 @@ position and shared among the taxels it overlaps in proportion to the overlap (a
 box-filter remap). Depth and shear are the overlap-weighted means over a taxel's surface
 particles (empty taxels read 0), pressure the same over its soft particles; the force map sums
 the overlap-weighted component along -z of the contact force on the particles [N], so it adds
-up to the pad's total normal contact force within the layout. A square one cell wide filters
+up to the pad's total normal contact force within the layout; a taxel that would read a pull
+(friction along a wall the pad wraps round) gives it to its pressed neighbours instead
+(:func:`compressive_force`): no taxel reads below 0. A square one cell wide filters
 out the period-dx pattern the grid imprints on the particles' motion and contact, at the price
 of a one-cell blur (``bench pad`` measures the maps' L2 between resolutions).
 """
@@ -32,7 +34,7 @@ import torch
 
 from .pad import Pad
 
-__all__ = ["TaxelBinning", "tactile_maps", "map_tensors", "MAP_KEYS"]
+__all__ = ["TaxelBinning", "tactile_maps", "map_tensors", "MAP_KEYS", "compressive_force"]
 
 #: The maps a pad gives, in this order (:func:`tactile_maps`, the device read, the sensor).
 MAP_KEYS = ("depth", "shear", "force", "pressure")
@@ -118,7 +120,7 @@ def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_po
     depth = binning.accumulate(surf, -un) / safe
     sx = binning.accumulate(surf, shear[:, 0]) / safe
     sy = binning.accumulate(surf, shear[:, 1]) / safe
-    force = binning.accumulate(inside, fn)
+    force = compressive_force(binning.accumulate(inside, fn), H, W)
     pressure = np.zeros(H * W)
     if stresses is not None:
         zw = R @ S[:, 2]
@@ -127,6 +129,62 @@ def tactile_maps(pad: Pad, binning: TaxelBinning, positions: np.ndarray, link_po
         cnt = binning.accumulate(soft)
         pressure = binning.accumulate(soft, -snn) / np.where(cnt > 1e-9, cnt, 1.0)
     return map_tensors(depth, sx, sy, force, pressure, H, W)
+
+
+def _box_sum(x: torch.Tensor, r: int) -> torch.Tensor:
+    """[..., H, W] the sum of ``x`` over the (2r + 1)² taxels around each taxel (those inside the
+    layout): sums of the values themselves, no differences of running sums, so a window of
+    zeros sums to exactly 0."""
+    x = torch.nn.functional.pad(x, (r, r, r, r))
+    return x.unfold(-2, 2 * r + 1, 1).sum(-1).unfold(-1, 2 * r + 1, 1).sum(-1)
+
+
+def compressive_force(force, rows: int | None = None, cols: int | None = None):
+    """The force map with every taxel ≥ 0 and, wherever the layout's total is positive, the same
+    total, changed only where a taxel is negative (bit-identical otherwise).
+
+    A taxel's raw force is the component along −z of the contact forces on its particles. Each
+    point's contact is compressive (Signorini: λ ≥ 0, with friction |f_t| ≤ μλ), but where the
+    contact normal lies across the sensor axis (a collider's side wall that the pad wraps round,
+    or the pad's own rim and side faces) its −z component is the friction along that wall (of
+    either sign) and the wall's tilt, and the edge taxels that hold only such points read a pull (tens of mN
+    under random actions). That pull is part of the pad's net normal force (the map's total,
+    :meth:`~gausstac_maniskill.cosim.GaussTacSim.pad_normal_force`), carried by the compressed
+    contact next to it through the elastic layer; it is therefore taken from the positive taxels
+    nearest it: each negative taxel takes its deficit from the positive taxels within Chebyshev
+    distance r = 1, 2, … (in proportion to their force, none giving more than it has), until it
+    is 0. Taxels that read 0 (no contact) stay 0, and the total is kept to rounding. Where the
+    taxels within the layout pull more than they press (a pad touched only on its sides and
+    dragged: no compressive load on the sensing face), the map reads 0 there.
+
+    Args:
+        force: the raw map, a float NumPy array [rows·cols] (then ``rows``, ``cols`` given; a
+            float64 array comes back) or a torch tensor [..., rows, cols] (maps of a batch; one
+            of the same dtype and device comes back, computed in float64 except on MPS).
+    """
+    if isinstance(force, np.ndarray):
+        if not (force < 0).any():
+            return force
+        out = compressive_force(torch.from_numpy(np.asarray(force, np.float64).reshape(rows, cols)))
+        return out.numpy().reshape(force.shape)
+    if not bool((force < 0).any()):
+        return force
+    dtype = force.dtype
+    f = force.to(torch.float32 if force.device.type == "mps" else torch.float64)
+    H, W = f.shape[-2:]
+    for r in range(1, max(H, W)):  # r = max(H, W) - 1: every window covers the whole layout
+        deficit = (-f).clamp(min=0.0)
+        if not bool((deficit > 0).any()):
+            break
+        supply = f.clamp(min=0.0)
+        near = _box_sum(supply, r)  # what the positive taxels around each taxel hold
+        ask = torch.where(near > 0, torch.minimum(deficit, near) / torch.where(near > 0, near, 1.0), 0.0)
+        asked = _box_sum(ask, r)  # the share of its force each taxel is asked for, by all around it
+        share = torch.where(asked > 1.0, 1.0 / torch.where(asked > 1.0, asked, 1.0), 1.0)  # never more than all
+        # a taxel asked for more than it holds gives all it holds, in proportion to what each asked
+        f = f - supply * asked * share + ask * _box_sum(supply * share, r)
+        f = torch.where(deficit > 0, f.clamp(max=0.0), f)  # a pull at most repaid (not past 0 by rounding)
+    return f.clamp(min=0.0).to(dtype)  # (the rounding left, and a pull no press within the layout balances)
 
 
 def map_tensors(depth, shear_x, shear_y, force, pressure, rows: int, cols: int) -> dict[str, torch.Tensor]:

@@ -16,7 +16,8 @@ frame), world position x_i, contact impulse J_i of the control step Δt, Kirchho
 
 * u_i = Sᵀ (Rᵀ (x_i − o) − X_i), the displacement on the sensor axes;
 * depth = Σ w (−u_z) / Σ w, shear = Σ w (u_x, u_y) / Σ w over the surface particles;
-* force = Σ w (−J_i · R S z) / Δt over all of the taxel's particles [N];
+* force = Σ w (−J_i · R S z) / Δt over all of the taxel's particles [N], then any taxel's pull
+  moved onto its pressed neighbours (:func:`~.extract.compressive_force`, on the device);
 * pressure = Σ w (−z_wᵀ σ_i z_w) / Σ w over the soft ones, σ = τ / det F, z_w = R S z [Pa].
 """
 
@@ -28,7 +29,7 @@ import torch
 
 from .. import backend
 from ..kernel_launch import NDF, NDF2, NDI, NDI2, NDM, NDV
-from .extract import TaxelBinning
+from .extract import TaxelBinning, compressive_force
 from .pad import Pad
 
 __all__ = ["TactileReadout"]
@@ -174,9 +175,11 @@ class TactileReadout:
         if device is not None:
             out = out.to(device)
         B, res = self.num_envs, {}
+        pull = bool((out[..., 3] < 0).any())  # one check (one device sync) for every pad
         for p, pad in enumerate(self.pads):
             lay = pad.spec.layout
             m = out[:, self.offsets[p]:self.offsets[p + 1]].reshape(B, lay.rows, lay.cols, CHANNELS)
             res[pad.name] = {"depth": m[..., 0].contiguous(), "shear": m[..., 1:3].contiguous(),
-                             "force": m[..., 3].contiguous(), "pressure": m[..., 4].contiguous()}
+                             "force": compressive_force(m[..., 3].contiguous()) if pull else m[..., 3].contiguous(),
+                             "pressure": m[..., 4].contiguous()}
         return res
