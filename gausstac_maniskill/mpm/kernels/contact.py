@@ -12,7 +12,7 @@ from ...geometry.kinematics import frame_at
 from ..colliders import collider_contact
 from .grid import field_offset, node_position, pinned, slip_walls
 from .layout import DYNAMIC, FIELD_MU, FILL, RECOVERY, SHARE, vec3
-from .slabs import TASK_SPREAD, add_to, scatter_tasks, slab_range
+from .slabs import add_to, scatter_particles
 from .transfer import stencil
 
 @ti.func
@@ -121,78 +121,78 @@ def contact_scatter(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.
     the substep. A particle that leaves contact forgets its anchor.
     Slab-ordered like :func:`p2g` (atomic-free and deterministic), or atomic.
     """
-    origin = ti.Vector([B.ox, B.oy, B.oz])
-    for color in ti.static(range(1 if ti.static(flags.atomic) else 2)):
-        ti.loop_config(block_dim=128 if ti.static(flags.atomic) else TASK_SPREAD)
-        for q in range(scatter_tasks(O, B, flags, color)):
-            lo, hi = slab_range(O, flags, color, q)
-            for ii in range(lo, hi):
-                p = O.order[ii]
-                if P.kind[p] == DYNAMIC:
-                    env = S.group_env[P.group[p]]  # a particle touches only its own env's colliders
-                    near = False
-                    for c in range(B.n_col):
-                        if S.col_env[c] == env and not beyond_bound(S, c, P.x[p], P.radius[p] + B.reach):
-                            phi, nrm, vc = collider_contact(S, c, P.x[p], B.dt)
-                            if phi - P.radius[p] < B.reach:
-                                near = True
-                    stuck_to = -1  # collider whose anchor the particle keeps after this substep
-                    slid = False
-                    if near:
-                        base, fx, w = stencil(P.x[p], B.inv_dx, origin)
-                        off = field_offset(P, S, B, p)
-                        v0 = vec3(0.0)  # the free velocity v*, gathered
-                        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                            v0 += w[i][0] * w[j][1] * w[k][2] * G.grid_v[off + ((base[0] + i) * B.ny + base[1] + j)
-                                                                          * B.nz + base[2] + k]
-                        vp = v0
-                        for c in range(B.n_col):
-                            if S.col_env[c] != env or beyond_bound(S, c, P.x[p] + B.dt * vp, P.radius[p]):
-                                continue  # (not this env's, or too far to touch)
-                            phi, nrm, vc = collider_contact(S, c, P.x[p] + B.dt * vp, B.dt)
-                            gap = phi - P.radius[p]
-                            if gap < 0.0:
-                                vrel = vp - vc
-                                # stop the approach, and take back an older penetration by at most
-                                # RECOVERY cells per substep: the push stays in the particle's velocity
-                                approach = ti.max(-vrel.dot(nrm), 0.0)
-                                dvn = ti.min(-gap / B.dt, approach + RECOVERY / (B.inv_dx * B.dt), B.max_push)
-                                want = -(vrel - vrel.dot(nrm) * nrm)  # stop the slip (first contact)
-                                anchored = ti.cast(P.anchor[p][3], ti.i32) == c
-                                if anchored:  # back onto the anchor
-                                    _R0, _t0, R1, t1 = frame_at(S.col_frames, c)
-                                    a = ti.Vector([P.anchor[p][0], P.anchor[p][1], P.anchor[p][2]])
-                                    drift = P.x[p] + B.dt * vp - (R1 @ a + t1)
-                                    want = -(drift - drift.dot(nrm) * nrm) / B.dt
-                                wn = want.norm()
-                                if wn > B.max_push:  # a jump of the anchor (a teleported collider) is not a load
-                                    want *= B.max_push / wn
-                                    wn = B.max_push
-                                dvt = want
-                                slides = S.col_friction[c, 1] <= 0.0 and wn > S.col_friction[c, 0] * dvn
-                                if slides:  # Coulomb
-                                    dvt = (S.col_friction[c, 0] * dvn / wn) * want
-                                vp = vp + dvn * nrm + dvt
-                                P.contact_id[p] = c
-                                # sliding or a new contact: anchor where it ends this substep
-                                slid = slid or slides or not anchored
-                                stuck_to = c
-                        if stuck_to >= 0 and slid:
-                            _R0, _t0, R1, t1 = frame_at(S.col_frames, stuck_to)
-                            a = R1.transpose() @ (P.x[p] + B.dt * vp - t1)
-                            P.anchor[p] = ti.Vector([a[0], a[1], a[2], ti.cast(stuck_to, ti.f32)])
-                        if P.contact_id[p] >= 0:
-                            J = P.mass[p] * (vp - v0)  # the contact impulse m_p Δv
-                            free = 0.0
-                            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                                idx = off + ((base[0] + i) * B.ny + base[1] + j) * B.nz + base[2] + k
-                                wi = w[i][0] * w[j][1] * w[k][2]
-                                add_to(G.grid_dp, idx, wi * J, flags.atomic)
-                                if not pinned(G, idx):
-                                    free += wi
-                            P.impulse[p] += free * J
-                    if stuck_to < 0:
-                        P.anchor[p][3] = -1.0
+    scatter_particles(P, G, S, O, B, flags, contact_particle)
+
+
+@ti.func
+def contact_particle(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), B: ti.template(),
+        flags: ti.template(), p, origin):
+    """Particle p's part of :func:`contact_scatter` (``origin``: the active box's corner, in cells)."""
+    if P.kind[p] == DYNAMIC:
+        env = S.group_env[P.group[p]]  # a particle touches only its own env's colliders
+        near = False
+        for c in range(B.n_col):
+            if S.col_env[c] == env and not beyond_bound(S, c, P.x[p], P.radius[p] + B.reach):
+                phi, nrm, vc = collider_contact(S, c, P.x[p], B.dt)
+                if phi - P.radius[p] < B.reach:
+                    near = True
+        stuck_to = -1  # collider whose anchor the particle keeps after this substep
+        slid = False
+        if near:
+            base, fx, w = stencil(P.x[p], B.inv_dx, origin)
+            off = field_offset(P, S, B, p)
+            v0 = vec3(0.0)  # the free velocity v*, gathered
+            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                v0 += w[i][0] * w[j][1] * w[k][2] * G.grid_v[off + ((base[0] + i) * B.ny + base[1] + j)
+                                                              * B.nz + base[2] + k]
+            vp = v0
+            for c in range(B.n_col):
+                if S.col_env[c] != env or beyond_bound(S, c, P.x[p] + B.dt * vp, P.radius[p]):
+                    continue  # (not this env's, or too far to touch)
+                phi, nrm, vc = collider_contact(S, c, P.x[p] + B.dt * vp, B.dt)
+                gap = phi - P.radius[p]
+                if gap < 0.0:
+                    vrel = vp - vc
+                    # stop the approach, and take back an older penetration by at most
+                    # RECOVERY cells per substep: the push stays in the particle's velocity
+                    approach = ti.max(-vrel.dot(nrm), 0.0)
+                    dvn = ti.min(-gap / B.dt, approach + RECOVERY / (B.inv_dx * B.dt), B.max_push)
+                    want = -(vrel - vrel.dot(nrm) * nrm)  # stop the slip (first contact)
+                    anchored = ti.cast(P.anchor[p][3], ti.i32) == c
+                    if anchored:  # back onto the anchor
+                        _R0, _t0, R1, t1 = frame_at(S.col_frames, c)
+                        a = ti.Vector([P.anchor[p][0], P.anchor[p][1], P.anchor[p][2]])
+                        drift = P.x[p] + B.dt * vp - (R1 @ a + t1)
+                        want = -(drift - drift.dot(nrm) * nrm) / B.dt
+                    wn = want.norm()
+                    if wn > B.max_push:  # a jump of the anchor (a teleported collider) is not a load
+                        want *= B.max_push / wn
+                        wn = B.max_push
+                    dvt = want
+                    slides = S.col_friction[c, 1] <= 0.0 and wn > S.col_friction[c, 0] * dvn
+                    if slides:  # Coulomb
+                        dvt = (S.col_friction[c, 0] * dvn / wn) * want
+                    vp = vp + dvn * nrm + dvt
+                    P.contact_id[p] = c
+                    # sliding or a new contact: anchor where it ends this substep
+                    slid = slid or slides or not anchored
+                    stuck_to = c
+            if stuck_to >= 0 and slid:
+                _R0, _t0, R1, t1 = frame_at(S.col_frames, stuck_to)
+                a = R1.transpose() @ (P.x[p] + B.dt * vp - t1)
+                P.anchor[p] = ti.Vector([a[0], a[1], a[2], ti.cast(stuck_to, ti.f32)])
+            if P.contact_id[p] >= 0:
+                J = P.mass[p] * (vp - v0)  # the contact impulse m_p Δv
+                free = 0.0
+                for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                    idx = off + ((base[0] + i) * B.ny + base[1] + j) * B.nz + base[2] + k
+                    wi = w[i][0] * w[j][1] * w[k][2]
+                    add_to(G.grid_dp, idx, wi * J, flags.atomic)
+                    if not pinned(G, idx):
+                        free += wi
+                P.impulse[p] += free * J
+        if stuck_to < 0:
+            P.anchor[p][3] = -1.0
 
 
 @ti.func

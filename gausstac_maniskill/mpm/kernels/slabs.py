@@ -107,6 +107,24 @@ def slab_range(O: ti.template(), flags: ti.template(), color: ti.template(), q):
 
 
 @ti.func
+def scatter_particles(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), B: ti.template(),
+        flags: ti.template(), body: ti.template()):
+    """Run ``body(P, G, S, O, B, flags, p, origin)`` (a ``ti.func``) for every sorted particle p
+    (``origin``: the active box's corner, in cells): the even slabs in parallel, then the odd ones,
+    each slab's particles in order, in a parallel loop a thread block per slab
+    (:func:`scatter_tasks`, :func:`slab_range`); with ``flags.atomic`` a thread per particle.
+    The loop is the caller's outermost one (a ``ti.func`` is inlined): call it at a kernel's
+    outermost scope, not under a run-time ``if``."""
+    origin = ti.Vector([B.ox, B.oy, B.oz])
+    for color in ti.static(range(1 if ti.static(flags.atomic) else 2)):
+        ti.loop_config(block_dim=128 if ti.static(flags.atomic) else TASK_SPREAD)
+        for q in range(scatter_tasks(O, B, flags, color)):
+            lo, hi = slab_range(O, flags, color, q)
+            for ii in range(lo, hi):
+                body(P, G, S, O, B, flags, O.order[ii], origin)
+
+
+@ti.func
 def add_to(a: ti.template(), idx, value, atomic: ti.template()):
     """a[idx] += value: atomically, or as a plain read-modify-write where the slab
     colouring guarantees that no other thread writes a[idx] meanwhile."""

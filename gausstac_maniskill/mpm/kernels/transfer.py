@@ -6,7 +6,7 @@ from ...geometry.kinematics import frame_at
 from .. import materials as mat
 from .grid import field_offset, pinned
 from .layout import BOND_STRETCH, DYNAMIC, KINEMATIC, MAX_STRETCH, SOFT_CONTACT, vec3
-from .slabs import TASK_SPREAD, add_to, scatter_tasks, slab_range
+from .slabs import add_to, scatter_particles
 
 @ti.func
 def bspline_weights(fx):
@@ -47,68 +47,68 @@ def p2g(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), 
     ``cell_G`` (the cell holds 4³ nodes, those of its particles' stencils). Its cell lies
     between nodes floor(x/dx) and floor(x/dx) + 1, inside the stencil: the slab colouring holds.
     """
-    origin = ti.Vector([B.ox, B.oy, B.oz])
-    for color in ti.static(range(1 if ti.static(flags.atomic) else 2)):
-        ti.loop_config(block_dim=128 if ti.static(flags.atomic) else TASK_SPREAD)
-        for q in range(scatter_tasks(O, B, flags, color)):
-            lo, hi = slab_range(O, flags, color, q)
-            for ii in range(lo, hi):
-                p = O.order[ii]
-                base, fx, w = stencil(P.x[p], B.inv_dx, origin)
-                off = field_offset(P, S, B, p)
-                if ti.static(flags.fbar or flags.cellp):
-                    P.tau[p] = stress_at(flags, False, P.F[p], P.Jp[p], P.matid[p], S, G, B, base, w, off)
-                slot = -1
-                cell = ti.Vector([0, 0, 0])
-                if ti.static(flags.cellp):
-                    if S.mat_table[P.matid[p], mat.CELL_P] > 0.0:
-                        cell = ti.cast(ti.floor(P.x[p] * B.inv_dx - origin), ti.i32)
-                        slot = G.cell_slot[off + (cell[0] * B.ny + cell[1]) * B.nz + cell[2]]
-                        if slot >= 0:
-                            lnJ = ti.log(ti.max(P.F[p].determinant(), mat.MIN_J))
-                            add_to(G.cell_a, slot,
-                                   P.vol[p] * ti.Vector([1.0, lnJ, S.mat_table[P.matid[p], 1], 0.0]), flags.atomic)
-                vj = 0.0
-                if ti.static(flags.two_field):
-                    vj = P.vol[p] * P.F[p].determinant()
-                m = P.mass[p]
-                # the affine momentum less the stress impulse, Δt V0 (4/dx²) τ
-                affine = m * P.C[p] - (B.dt * P.vol[p] * 4.0 * B.inv_dx * B.inv_dx) * P.tau[p]
-                # momentum plus this substep's weight impulse; weight is the physical mass
-                # ρ V0 (a quasi-static group's pseudo-mass slows its inertia, not its weight)
-                mv = m * P.v[p] + (B.dt * P.vol[p] * S.mat_table[P.matid[p], 6]) * B.gravity
-                is_kin = P.kind[p] == KINEMATIC
-                is_qs = (not is_kin) and S.group_qs[P.group[p]] > 0
-                lk = P.link[p]
-                bn = ti.Vector([P.bond[p][0], P.bond[p][1], P.bond[p][2]])
-                bond_d = P.bond[p][3]
-                bonded = 0.0  # 1 for a bound particle that knows the bond surface
-                if is_kin and bn.norm_sqr() > 0.0:
-                    R0, _t0, _R1, _t1 = frame_at(S.link_frames, lk)  # the pose kinematic_update placed it at
-                    bn = R0 @ bn
-                    bonded = 1.0
-                for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                    dpos = (ti.Vector([i, j, k]) - fx) / B.inv_dx  # x_i - x_p [m]
-                    weight = w[i][0] * w[j][1] * w[k][2]
-                    idx = off + ((base[0] + i) * B.ny + base[1] + j) * B.nz + base[2] + k
-                    mom = mv + affine @ dpos
-                    add_to(G.grid_pm, idx, weight * ti.Vector([mom[0], mom[1], mom[2], m]), flags.atomic)
-                    if ti.static(flags.cellp):
-                        if slot >= 0:  # V0 ∇w_ip, ∇w_ip = (4/dx²) w_ip (x_i - x_p) (MLS)
-                            lcl = base + ti.Vector([i, j, k]) - cell + 1
-                            add_to(G.cell_G, slot * 64 + (lcl[0] * 4 + lcl[1]) * 4 + lcl[2],
-                                   (P.vol[p] * 4.0 * B.inv_dx * B.inv_dx * weight) * dpos, flags.atomic)
-                    if ti.static(flags.two_field):
-                        add_to(G.grid_vc, idx, weight * vj, flags.atomic)
-                    if is_kin:
-                        wm = weight * m
-                        add_to(G.grid_kin, idx, ti.Vector([wm * bn[0], wm * bn[1], wm * bn[2],
-                                                           wm * (bond_d + bn.dot(dpos)), wm * bonded, wm]),
-                               flags.atomic)
-                        G.grid_link[idx] = lk
-                    elif is_qs:
-                        add_to(G.grid_mq, idx, weight * m, flags.atomic)
-                        G.grid_link[idx] = lk
+    scatter_particles(P, G, S, O, B, flags, p2g_particle)
+
+
+@ti.func
+def p2g_particle(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), B: ti.template(),
+        flags: ti.template(), p, origin):
+    """Particle p's part of :func:`p2g` (``origin``: the active box's corner, in cells)."""
+    base, fx, w = stencil(P.x[p], B.inv_dx, origin)
+    off = field_offset(P, S, B, p)
+    if ti.static(flags.fbar or flags.cellp):
+        P.tau[p] = stress_at(flags, False, P.F[p], P.Jp[p], P.matid[p], S, G, B, base, w, off)
+    slot = -1
+    cell = ti.Vector([0, 0, 0])
+    if ti.static(flags.cellp):
+        if S.mat_table[P.matid[p], mat.CELL_P] > 0.0:
+            cell = ti.cast(ti.floor(P.x[p] * B.inv_dx - origin), ti.i32)
+            slot = G.cell_slot[off + (cell[0] * B.ny + cell[1]) * B.nz + cell[2]]
+            if slot >= 0:
+                lnJ = ti.log(ti.max(P.F[p].determinant(), mat.MIN_J))
+                add_to(G.cell_a, slot,
+                       P.vol[p] * ti.Vector([1.0, lnJ, S.mat_table[P.matid[p], 1], 0.0]), flags.atomic)
+    vj = 0.0
+    if ti.static(flags.two_field):
+        vj = P.vol[p] * P.F[p].determinant()
+    m = P.mass[p]
+    # the affine momentum less the stress impulse, Δt V0 (4/dx²) τ
+    affine = m * P.C[p] - (B.dt * P.vol[p] * 4.0 * B.inv_dx * B.inv_dx) * P.tau[p]
+    # momentum plus this substep's weight impulse; weight is the physical mass
+    # ρ V0 (a quasi-static group's pseudo-mass slows its inertia, not its weight)
+    mv = m * P.v[p] + (B.dt * P.vol[p] * S.mat_table[P.matid[p], 6]) * B.gravity
+    is_kin = P.kind[p] == KINEMATIC
+    is_qs = (not is_kin) and S.group_qs[P.group[p]] > 0
+    lk = P.link[p]
+    bn = ti.Vector([P.bond[p][0], P.bond[p][1], P.bond[p][2]])
+    bond_d = P.bond[p][3]
+    bonded = 0.0  # 1 for a bound particle that knows the bond surface
+    if is_kin and bn.norm_sqr() > 0.0:
+        R0, _t0, _R1, _t1 = frame_at(S.link_frames, lk)  # the pose kinematic_update placed it at
+        bn = R0 @ bn
+        bonded = 1.0
+    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+        dpos = (ti.Vector([i, j, k]) - fx) / B.inv_dx  # x_i - x_p [m]
+        weight = w[i][0] * w[j][1] * w[k][2]
+        idx = off + ((base[0] + i) * B.ny + base[1] + j) * B.nz + base[2] + k
+        mom = mv + affine @ dpos
+        add_to(G.grid_pm, idx, weight * ti.Vector([mom[0], mom[1], mom[2], m]), flags.atomic)
+        if ti.static(flags.cellp):
+            if slot >= 0:  # V0 ∇w_ip, ∇w_ip = (4/dx²) w_ip (x_i - x_p) (MLS)
+                lcl = base + ti.Vector([i, j, k]) - cell + 1
+                add_to(G.cell_G, slot * 64 + (lcl[0] * 4 + lcl[1]) * 4 + lcl[2],
+                       (P.vol[p] * 4.0 * B.inv_dx * B.inv_dx * weight) * dpos, flags.atomic)
+        if ti.static(flags.two_field):
+            add_to(G.grid_vc, idx, weight * vj, flags.atomic)
+        if is_kin:
+            wm = weight * m
+            add_to(G.grid_kin, idx, ti.Vector([wm * bn[0], wm * bn[1], wm * bn[2],
+                                               wm * (bond_d + bn.dot(dpos)), wm * bonded, wm]),
+                   flags.atomic)
+            G.grid_link[idx] = lk
+        elif is_qs:
+            add_to(G.grid_mq, idx, weight * m, flags.atomic)
+            G.grid_link[idx] = lk
 
 
 @ti.func
@@ -235,20 +235,20 @@ def volume_scatter(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.t
     Σ w V0 J of the particles around it into ``G.grid_vol`` (slab-ordered like :func:`p2g`; per
     field, so two bodies that touch do not average their volume change). Particles whose volume
     term is solved on cells (``mat.CELL_P``) take no part."""
-    origin = ti.Vector([B.ox, B.oy, B.oz])
-    for color in ti.static(range(1 if ti.static(flags.atomic) else 2)):
-        ti.loop_config(block_dim=128 if ti.static(flags.atomic) else TASK_SPREAD)
-        for q in range(scatter_tasks(O, B, flags, color)):
-            lo, hi = slab_range(O, flags, color, q)
-            for ii in range(lo, hi):
-                p = O.order[ii]
-                if P.kind[p] == DYNAMIC and S.mat_table[P.matid[p], mat.CELL_P] <= 0.0:
-                    base, fx, w = stencil(P.x[p], B.inv_dx, origin)
-                    off = field_offset(P, S, B, p)
-                    vj = P.vol[p] * ti.Vector([1.0, P.F[p].determinant()])
-                    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                        idx = off + ((base[0] + i) * B.ny + base[1] + j) * B.nz + base[2] + k
-                        add_to(G.grid_vol, idx, (w[i][0] * w[j][1] * w[k][2]) * vj, flags.atomic)
+    scatter_particles(P, G, S, O, B, flags, volume_particle)
+
+
+@ti.func
+def volume_particle(P: ti.template(), G: ti.template(), S: ti.template(), O: ti.template(), B: ti.template(),
+        flags: ti.template(), p, origin):
+    """Particle p's part of :func:`volume_scatter` (``origin``: the active box's corner, in cells)."""
+    if P.kind[p] == DYNAMIC and S.mat_table[P.matid[p], mat.CELL_P] <= 0.0:
+        base, fx, w = stencil(P.x[p], B.inv_dx, origin)
+        off = field_offset(P, S, B, p)
+        vj = P.vol[p] * ti.Vector([1.0, P.F[p].determinant()])
+        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+            idx = off + ((base[0] + i) * B.ny + base[1] + j) * B.nz + base[2] + k
+            add_to(G.grid_vol, idx, (w[i][0] * w[j][1] * w[k][2]) * vj, flags.atomic)
 
 
 @ti.func
