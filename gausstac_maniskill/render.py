@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from .errors import ConfigError
+from .owner import Owner
 from .splat import FramedGaussians, GaussianSet, PosedGaussians, SoftBinding, pose_gaussians
 from .splat.deform import polar_rotation, rigid_frames
 
@@ -245,10 +246,12 @@ class SceneGaussians:
             except on links carrying a soft pad, whose surface is open where the pad replaces it.
     """
 
+    sim = Owner()  # the co-simulator whose Gaussians these are
+
     def __init__(self, sim, hand: GaussianSet | None = None, hand_links: Sequence[str] = (),
                  objects: Mapping[str, GaussianSet] | None = None, hand_lod: tuple | None = None,
                  closed_links: Sequence[str] = ()):
-        self.sim = sim
+        self.sim = sim  # held weakly (owner.Owner): the simulator owns its scene
         self.hand_links = list(hand_links)
         unknown = sorted(set(closed_links) - set(self.hand_links))
         if unknown:

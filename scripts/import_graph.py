@@ -23,7 +23,7 @@ MAPPED = {"agents": "agents", "tasks": "tasks", "assets": "assets"}  # top-level
 #: Layer of each component, lowest first: a component may import only from its own layer or below.
 LAYERS: dict[str, int] = {
     "errors": 0, "environment": 0, "config": 0, "backend": 0, "cache": 0, "cpu_pinning": 0,
-    "kernel_launch": 0, "transforms": 0, "assets": 0, "_registry": 0,
+    "kernel_launch": 0, "transforms": 0, "assets": 0, "_registry": 0, "owner": 0,
     "geometry": 1, "urdf": 1, "reference": 1,
     "fem": 2, "mpm": 2, "tactile": 2, "splat": 2, "pose": 2, "pads": 2,
     "cosim": 3, "batch": 3, "render": 3,

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from ..config import PadSolverSettings
+from ..owner import Owner
 
 __all__ = ["PadScene", "PadSolver", "Maps"]
 
@@ -63,9 +64,10 @@ class PadSolver(ABC):
 
     #: the solver's kind, ``"fem"`` or ``"mpm"``
     kind: str = ""
+    scene = Owner()  # the scene the pads belong to
 
     def __init__(self, scene: PadScene, settings: PadSolverSettings):
-        self.scene = scene
+        self.scene = scene  # held weakly (owner.Owner): the scene owns its solvers
         self.settings = settings
         self.names: list[str] = []  # the pads this solver solves, in the scene's pad order
         self.awake: dict[str, bool] = {}  # pad name -> simulated this step
