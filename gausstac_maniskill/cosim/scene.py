@@ -29,22 +29,25 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import torch
 
-from .config import Material, PadSolverSettings, PadSpec, SolverSettings
-from .errors import ConfigError
-from .mpm import MPMWorld
-from .geometry.colliders import Collider
-from .pads import EquilibriumPads, MPMPads, PadSolver
-from .pads.fem import add_contact
-from .pads.mpm import REST_TOLERANCE
-from .tactile import Pad, pad_geometry
-from .tactile.readout import TactileReadout
-from .transforms import as_pose_matrix, turn_angle
-from .urdf import default_hand_urdf
+from ..config import Material, PadSolverSettings, PadSpec, SolverSettings
+from ..errors import ConfigError
+from ..geometry.colliders import Collider
+from ..mpm import MPMWorld
+from ..pads import EquilibriumPads, MPMPads, PadSolver
+from ..pads.fem import add_contact
+from ..pads.mpm import REST_TOLERANCE
+from ..tactile import Pad, pad_geometry
+from ..tactile.readout import TactileReadout
+from ..transforms import as_pose_matrix
+from ..urdf import default_hand_urdf
+from .rows import SceneRows
+from .sleep import update_sleep
+from .state import SceneState
 
 __all__ = ["GaussTacSim", "REST_TOLERANCE"]
 
 
-class GaussTacSim:
+class GaussTacSim(SceneRows, SceneState):
     """Soft pads on rigid links (at equilibrium by default, or MLS-MPM) plus rigid and soft
     objects in one MPM world.
 
@@ -358,44 +361,10 @@ class GaussTacSim:
             solver.prepare()
 
     def _update_sleep(self) -> None:
-        """Wake pads near an object (collider or soft group), put the others to sleep.
+        """Wake the pads that an object nears over the coming step, put the others to sleep
+        (:func:`.sleep.update_sleep`)."""
+        update_sleep(self)
 
-        A pad is near when the region it sweeps over the coming step, relative to an object,
-        comes within ``sleep_margin`` of that object; both move from their start poses (where
-        the pad's particles are, where the collider was) to their end poses. Seen from the
-        object's end pose, the pad's bounding-sphere centre travels from its start position
-        (carried along with the object's motion) to its end position; the region lies inside
-        spheres on that segment, at most the pad's radius apart, grown by half their spacing and
-        by the centre's departure from the segment (at most each body's turn angle times the
-        centre's distance from that body's origin). A pad that crosses an object within one
-        step, or an object that crosses a pad, therefore wakes the pad, although both end poses
-        may be clear. Soft objects are taken where their particles are."""
-        soft_boxes = []
-        if self._soft:
-            for g in self._soft:
-                x = self.world.positions(self._w(g))
-                soft_boxes.append((x.min(0), x.max(0)))
-        for name, pad in self.pads.items():
-            T = self._link_pose[pad.spec.link]
-            c_local, r = pad.bounding_sphere()
-            c = T[:3, :3] @ c_local + T[:3, 3]
-            S = self.world.link_pose(self._w(pad.spec.link))  # the step's start pose
-            c0 = S[:3, :3] @ c_local + S[:3, 3]
-            r += float(turn_angle(S, T)) * float(np.linalg.norm(c_local))
-            near = False
-            for idx in self._objects.values():
-                col = self.world.colliders[idx]
-                O0, O1 = self.world.collider_start_pose(idx), col.pose
-                start = O1[:3, :3] @ (O0[:3, :3].T @ (c0 - O0[:3, 3])) + O1[:3, 3]  # c0 as the object sees it
-                grown = r + float(turn_angle(O0, O1)) * float(np.linalg.norm(c0 - O0[:3, 3]))  # the object's turn
-                centres, reach = _sweep(start, c, grown)
-                near |= min(_distance(col, p) for p in centres) - reach < self.sleep_margin
-            if soft_boxes:
-                centres, reach = _sweep(c0, c, r)
-                for lo, hi in soft_boxes:
-                    d = float(np.linalg.norm(np.maximum(np.maximum(lo - centres, centres - hi), 0.0), axis=1).min())
-                    near |= d - reach < self.sleep_margin
-            self.pad_solver_of(name).set_near(name, near)
 
     # ------------------------------------------------------------------ rendering
     def attach_gaussians(self, hand=None, hand_links: Sequence[str] = (), objects=None, hand_lod=None,
@@ -418,7 +387,7 @@ class GaussTacSim:
                 pointing out (``links.json["closed_links"]``): the splat camera skips those
                 facing away (see :class:`gausstac_maniskill.render.SceneGaussians`).
         """
-        from .render import SceneGaussians
+        from ..render import SceneGaussians
 
         self._scene = SceneGaussians(self, hand, hand_links, objects, hand_lod, closed_links)
         self._posed = None
@@ -537,172 +506,6 @@ class GaussTacSim:
         name = self._pad(pad).name
         return self.pad_solver_of(name).particles(name)
 
-    def particles(self, index: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """World positions [P, 3] and F [P, 3, 3] (float32) of every particle of the scene, for
-        rendering: first the equilibrium pads' (pad after pad, from their solution:
-        :attr:`solved_rows` rows), then every particle of the world (MPM pads, soft objects, in
-        group order; row ``solved_rows + i`` is the world's particle i), sleeping pads carried by
-        their links. With ``index`` ([P'] ascending rows) only those particles, [P', 3] and
-        [P', 3, 3]. (The splat camera reads the world's on the device instead: :meth:`carry_rows`,
-        :meth:`pad_carries`, :func:`gausstac_maniskill.mpm.gather.carried_frames`.)"""
-        n, fem = self.solved_rows, self.solvers["fem"]
-        if self._world_particles():
-            x, F = self.world.positions(), self.world.deformation_gradients()
-        else:
-            x, F = np.zeros((0, 3), np.float32), np.zeros((0, 3, 3), np.float32)
-        rows = np.arange(n + len(x)) if index is None else np.asarray(index)
-        k = int(np.searchsorted(rows, n))  # rows[:k]: the equilibrium pads', rows[k:]: the world's
-        x = np.concatenate([np.zeros((k, 3), np.float32), x if index is None else x[rows[k:] - n]])
-        F = np.concatenate([np.zeros((k, 3, 3), np.float32), F if index is None else F[rows[k:] - n]])
-        self.solvers["mpm"].fill_particles(rows[k:] - n, x[k:], F[k:])  # sleeping pads carried by their links
-        fem.fill_particles(rows[:k], x[:k], F[:k])  # from their solution
-        return x, F
-
-    @property
-    def solved_rows(self) -> int:
-        """The equilibrium pads' particle count: the first rows of :meth:`particles` (the world's
-        particles follow)."""
-        return self.solvers["fem"].num_particles
-
-    def particle_rows(self, name: str) -> tuple[int, int]:
-        """Rows ``start:stop`` of pad or soft object ``name`` among :meth:`particles`."""
-        fem = self.solvers["fem"]
-        if name in fem:
-            return fem.rows(name)
-        g = self.group(name)
-        return self.solved_rows + g.start, self.solved_rows + g.stop
-
-    def _world_particles(self) -> int:
-        """The world's particle count (every env's, in a shared world)."""
-        return max((g.stop for g in self.world.groups), default=0)
-
-    def rest_positions(self) -> np.ndarray:
-        """[P, 3] float32 positions [m] of the rows of :meth:`particles` as held now, sleeping
-        pads where they fell asleep (the equilibrium pads' from their solution, the world's as
-        it holds them): what the splat scene binds its soft Gaussians to, at rest."""
-        x = self.world.positions() if self._world_particles() else np.zeros((0, 3), np.float32)
-        fem = self.solvers["fem"]
-        return np.concatenate([np.zeros((0, 3), np.float32)] + [fem.particles(name)[0] for name in fem.names] + [x])
-
-    def equilibrium_frames(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The frames of the rows ``rows`` ([P'] ascending rows of :meth:`particles`) that lie on
-        pads solved at equilibrium (``pad_solver="fem"``): (their positions in ``rows`` [k],
-        their frames (F | x) [k, 3, 4] float32, world frame, from :meth:`pad_particles`). The
-        splat camera draws these pads with them."""
-        rows = np.asarray(rows)
-        return self.solvers["fem"].frames(rows[:int(np.searchsorted(rows, self.solved_rows))])
-
-    def _carry(self, name: str) -> np.ndarray | None:
-        """The rigid motion [4, 4] of pad ``name``'s link since the pad fell asleep (its particles
-        stay where they were), or None while it is awake."""
-        return self.pad_solver_of(name).carry(name)
-
-    def carry_rows(self, index: np.ndarray) -> np.ndarray:
-        """[P'] int32: for each row of :meth:`particles` in ``index`` ([P'] ascending), the row of
-        :meth:`pad_carries` that carries it: 1 + the number of its pad, 0 for a soft object's."""
-        index = np.asarray(index)
-        rows = np.zeros(len(index), np.int32)
-        for i, name in enumerate(self.pads):
-            lo, hi = np.searchsorted(index, self.particle_rows(name))
-            rows[lo:hi] = 1 + i
-        return rows
-
-    def pad_carries(self) -> np.ndarray:
-        """[1 + pads, 3, 4] float32 rigid motions that move the particles to where the renderer
-        draws them: row 0 the identity; row 1 + i pad i's link motion since it fell asleep
-        (:meth:`_carry`), the identity while it is awake."""
-        out = np.zeros((1 + len(self.pads), 3, 4), np.float32)
-        out[:, :, :3] = np.eye(3)
-        for i, name in enumerate(self.pads):
-            D = self._carry(name)
-            if D is not None:
-                out[1 + i] = D[:3]
-        return out
-
-    @property
-    def _state_env(self):
-        """The env whose part of the world is this scene's state (None: the whole world)."""
-        return self.env if self.shared else None
-
-    def state_dict(self) -> dict:
-        """Full state (MPM world, link poses, sleep flags); restore with :meth:`load_state_dict`.
-        In a shared world, this env's part only: it loads into the same scene alone and back."""
-        state = {"world": self.world.state_dict(env=self._state_env),
-                 "link_pose": {k: v.copy() for k, v in self._link_pose.items()},
-                 "awake": {name: self.is_awake(name) for name in self.pads}}
-        for solver in self.solvers.values():  # what the world does not hold (the equilibrium pads' solutions)
-            own = solver.state()
-            if own:
-                state[solver.kind] = own
-        return state
-
-    def flat_state(self) -> dict[str, np.ndarray]:
-        """The state of :meth:`state_dict` as a flat dict of fixed-shape numpy arrays
-        (no ``None``, no nesting), so that several identical scenes stack along a batch
-        axis — the form ManiSkill's ``get_state_dict`` and ``RecordEpisode`` store. Pads
-        solved at equilibrium add their last solution as ``fem{i}_*`` (i: the pad's index in
-        :attr:`pads`; :meth:`EquilibriumPad.flat_state`)."""
-        w = self.world.state_dict(env=self._state_env)
-        out = {f"p_{k}": v for k, v in w["particles"].items()}
-        n_groups = len(w["awake"])
-        sleep = np.tile(np.eye(4), (n_groups, 1, 1))
-        has_sleep = np.zeros(n_groups, bool)
-        for i, T in enumerate(w["sleep_pose"]):
-            if T is not None:
-                sleep[i], has_sleep[i] = T, True
-        out.update(
-            link_prev=np.asarray(w["link_prev"], np.float64).reshape(-1, 4, 4),
-            link_next=np.asarray(w["link_next"], np.float64).reshape(-1, 4, 4),
-            link_twist=np.asarray(w["link_twist"], np.float64).reshape(-1, 6),
-            collider_prev=np.asarray(w["collider_prev"], np.float64).reshape(-1, 4, 4),
-            collider_pose=np.asarray(w["collider_pose"], np.float64).reshape(-1, 4, 4),
-            collider_impulse=np.asarray(w["collider_impulse"], np.float64),
-            pair_impulse=np.asarray(w["pair_impulse"], np.float64),
-            group_awake=np.asarray(w["awake"], bool), group_sleep_pose=sleep, group_has_sleep_pose=has_sleep,
-            scalars=np.array([w["time"], w["step_count"], w["vmax"], w["last_dt_ctrl"]], np.float64),
-            link_pose=np.stack([self._link_pose[k] for k in sorted(self._link_pose)]),
-            pad_awake=np.array([self.is_awake(k) for k in self.pads], bool),
-        )
-        for solver in self.solvers.values():
-            out.update(solver.flat_state())
-        return out
-
-    def load_flat_state(self, state: Mapping[str, np.ndarray]) -> None:
-        """Restore a :meth:`flat_state` of a scene built the same way (bit-exact)."""
-        names = sorted(self._link_pose)
-        if len(state["link_pose"]) != len(names):
-            raise ConfigError(f"load_flat_state: state has {len(state['link_pose'])} link poses, this scene "
-                              f"tracks {len(names)} links ({names})")
-        sc = np.asarray(state["scalars"], np.float64)
-        world = {
-            "particles": {k[2:]: np.asarray(v) for k, v in state.items() if k.startswith("p_")},
-            "link_prev": list(np.asarray(state["link_prev"], np.float64)),
-            "link_next": list(np.asarray(state["link_next"], np.float64)),
-            "link_twist": list(np.asarray(state["link_twist"], np.float64)) if "link_twist" in state else None,
-            "collider_prev": list(np.asarray(state["collider_prev"], np.float64)),
-            "collider_pose": list(np.asarray(state["collider_pose"], np.float64)),
-            "collider_impulse": np.asarray(state["collider_impulse"], np.float64),
-            **{k: np.asarray(state[k], np.float64) for k in ("pair_impulse", "link_impulse") if k in state},
-            "awake": np.asarray(state["group_awake"], bool),
-            "sleep_pose": [np.asarray(T, np.float64) if h else None
-                           for T, h in zip(state["group_sleep_pose"], state["group_has_sleep_pose"])],
-            "time": float(sc[0]), "step_count": int(sc[1]), "vmax": float(sc[2]), "last_dt_ctrl": float(sc[3]),
-        }
-        self.load_state_dict({"world": world,
-                              "link_pose": {k: np.asarray(T, np.float64) for k, T in zip(names, state["link_pose"])},
-                              "awake": {k: bool(a) for k, a in zip(self.pads, state["pad_awake"])}})
-        for solver in self.solvers.values():
-            solver.load_flat_state(state)
-
-    def load_state_dict(self, state: dict) -> None:
-        """Restore a :meth:`state_dict` of a scene built the same way (bit-exact)."""
-        self.world.load_state_dict(state["world"], env=self._state_env)
-        self._link_pose = {k: v.copy() for k, v in state["link_pose"].items()}
-        for solver in self.solvers.values():
-            solver.awake.update({name: state["awake"][name] for name in solver.names})
-            solver.load_state(state.get(solver.kind, {}))
-        self._maps = {}
-        self._posed = None
 
 
 def _pad_settings(settings: PadSolverSettings | None, **loose) -> PadSolverSettings:
@@ -717,32 +520,3 @@ def _pad_settings(settings: PadSolverSettings | None, **loose) -> PadSolverSetti
     if given:
         raise ConfigError(f"GaussTacSim: give pad_settings or the loose pad options ({sorted(given)}), not both")
     return settings
-
-
-def _sweep(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, float]:
-    """Spheres that hold a sphere of ``radius`` [m] moved along the segment a -> b: centres
-    at most ``radius`` apart on it ([n + 1, 3]) and their radius, grown by half the spacing."""
-    length = float(np.linalg.norm(b - a))
-    n = max(1, int(np.ceil(length / max(radius, 1e-9))))
-    return a + np.linspace(0.0, 1.0, n + 1)[:, None] * (b - a), radius + 0.5 * length / n
-
-
-def _distance(collider: Collider, point: np.ndarray) -> float:
-    """Signed distance [m] from ``point`` to ``collider`` (exact for analytic shapes, a
-    bounding-sphere lower bound for meshes), in numpy: cheap enough for every step."""
-    from .geometry import colliders as col
-
-    T = collider.pose
-    q = (point - T[:3, 3]) @ T[:3, :3]
-    if collider.kind == col.SPHERE:
-        return float(np.linalg.norm(q) - collider.radius)
-    if collider.kind == col.BOX:
-        d = np.abs(q) - np.asarray(collider.half_extents)
-        return float(np.linalg.norm(np.maximum(d, 0.0)) + min(d.max(), 0.0))
-    if collider.kind == col.CAPSULE:
-        z = np.clip(q[2], -collider.half_length, collider.half_length)
-        return float(np.linalg.norm(q - [0.0, 0.0, z]) - collider.radius)
-    if collider.kind == col.HALFSPACE:
-        return float(q[2])
-    lo, hi = collider.mesh.bounds
-    return float(np.linalg.norm(np.maximum(np.maximum(lo - q, q - hi), 0.0)))
