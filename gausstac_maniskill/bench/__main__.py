@@ -30,6 +30,7 @@ BENCHMARKS = {
     "scale": "gausstac_maniskill.bench.scale",
     "motion": "gausstac_maniskill.bench.motion",
     "quasistatic": "gausstac_maniskill.bench.quasistatic",
+    "touch": "gausstac_maniskill.bench.touch",
 }
 
 
