@@ -23,9 +23,9 @@ __version__ = "0.1.0"
 #: Submodules and subpackages, imported on first attribute access.
 _SUBMODULES = ("agents", "assets", "backend", "batch", "bench", "cache", "cli", "collect", "config", "cosim", "demo",
                "environment", "errors", "experts", "fem", "geometry", "mpm", "obs_wrappers", "pose", "reference",
-               "render", "replay", "sensors", "splat", "tactile", "tasks", "transforms", "urdf")
+               "render", "replay", "sensors", "splat", "stock_tasks", "tactile", "tasks", "transforms", "urdf")
 
-__all__ = ["__version__", "register", *_SUBMODULES]
+__all__ = ["__version__", "register", "make_tactile", *_SUBMODULES]
 
 
 def register() -> None:
@@ -37,6 +37,8 @@ def register() -> None:
 
 
 def __getattr__(name: str):
+    if name == "make_tactile":  # a stock ManiSkill task with pads: stock_tasks.make_tactile
+        return importlib.import_module(f"{__name__}.stock_tasks").make_tactile
     if name in _SUBMODULES:
         return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

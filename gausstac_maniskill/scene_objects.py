@@ -31,6 +31,7 @@ class RigidObject:
     collider: Collider
     gaussians: object = None
     two_way: bool = False
+    offset: np.ndarray | None = None  #: [4, 4] the collider's pose in the actor frame (None: identity)
 
 
 @dataclass

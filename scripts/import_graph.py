@@ -28,7 +28,7 @@ LAYERS: dict[str, int] = {
     "fem": 2, "mpm": 2, "tactile": 2, "splat": 2, "pose": 2, "pads": 2,
     "cosim": 3, "batch": 3, "render": 3,
     "sensors": 4, "obs_wrappers": 4, "agents": 4, "tasks": 4, "experts": 4,
-    "tactile_env": 4, "task_checks": 4, "scene_objects": 4, "physx": 4,
+    "tactile_env": 4, "task_checks": 4, "scene_objects": 4, "physx": 4, "stock_tasks": 4,
     "collect": 5, "replay": 5, "demo": 5, "bench": 5, "cli": 6,
     "__init__": 0,  # the package: register() and lazy submodules, importing only _registry
 }

@@ -214,7 +214,9 @@ class GaussTacEnv(BaseEnv):
         #: wall time [s] of the parts of the last step: physics, mpm, tactile, render
         self.step_timing: dict[str, float] = {}
         self._splat_source = EnvSplatSource(self)
-        super().__init__(*args, robot_uids=robot_uids, **kwargs)
+        if robot_uids is not None:  # None: the task below sets its own (a stock task, make_tactile)
+            kwargs["robot_uids"] = robot_uids
+        super().__init__(*args, **kwargs)
         check_pad_coupling(self.pad_coupling, self.gpu_sim_enabled, self.sim_config.scene_config.enable_tgs,
                            self.sim_freq, PAD_REACTION_MIN_FREQ)
 
@@ -272,16 +274,18 @@ class GaussTacEnv(BaseEnv):
             self.ground = build_ground(self.scene, floor_width=4, altitude=self.ground_altitude,
                                        texture_square_len=0.1)
 
-    def add_mpm_rigid(self, name: str, actor, collider: Collider, gaussians=None, two_way: bool = False) -> None:
-        """Let the pads feel ``actor`` through ``collider`` (its pose in the actor frame is
-        taken as identity; the actor's pose drives it). ``two_way``: apply the pads'
-        reaction wrench to the (dynamic) actor in SAPIEN. ``gaussians``: the actor's look
-        for the splat camera (actor frame); without them SAPIEN draws it."""
+    def add_mpm_rigid(self, name: str, actor, collider: Collider, gaussians=None, two_way: bool = False,
+                      offset=None) -> None:
+        """Let the pads feel ``actor`` through ``collider``, posed at ``offset`` ([4, 4], the
+        collider's pose in the actor frame; default identity) by the actor's pose. ``two_way``:
+        apply the pads' reaction wrench to the (dynamic) actor in SAPIEN. ``gaussians``: the
+        actor's look for the splat camera (actor frame); without them SAPIEN draws it."""
         if name in self._rigid or name in self._soft or name in self._captured:
             raise ConfigError(f"MPM object {name!r} already registered")
         if two_way and getattr(actor, "px_body_type", "dynamic") != "dynamic":
             raise ConfigError(f"two_way coupling needs a dynamic actor; {name!r} is {actor.px_body_type}")
-        self._rigid[name] = RigidObject(name, actor, collider, gaussians, bool(two_way))
+        self._rigid[name] = RigidObject(name, actor, collider, gaussians, bool(two_way),
+                                        None if offset is None else np.asarray(offset, np.float64))
 
     def add_captured_object(self, name: str, actor, capture, placement=None) -> None:
         """Draw ``actor`` in the splat camera with captured Gaussians that follow its pose
@@ -419,8 +423,11 @@ class GaussTacEnv(BaseEnv):
     # ------------------------------------------------------------------ co-simulation
     def _object_poses(self) -> dict[str, np.ndarray]:
         """``{name: [B, 4, 4]}`` world poses [m] of the MPM rigid objects' actors."""
-        return {name: vec7_to_matrix(obj.actor.pose.raw_pose).detach().cpu().double().numpy()
-                for name, obj in self._rigid.items()}
+        poses = {}
+        for name, obj in self._rigid.items():
+            T = vec7_to_matrix(obj.actor.pose.raw_pose).detach().cpu().double().numpy()
+            poses[name] = T if obj.offset is None else T @ obj.offset
+        return poses
 
     def _link_poses(self) -> torch.Tensor:
         """[B, L, 4, 4] world poses of every link of the pose source (``link_names`` order)."""
@@ -529,11 +536,16 @@ class GaussTacEnv(BaseEnv):
     def _step_mpm(self, dt: float) -> None:
         self._ensure_cosims()
         t0 = time.perf_counter()
-        self._batch.advance(self._link_poses(), dt, self._object_poses())
+        objects = self._object_poses()
+        self._batch.advance(self._link_poses(), dt, objects)
         self._tactile_maps = None
         for b, sim in enumerate(self.cosims):
             for name in self._wrench:
-                self._wrench[name][b] = np.concatenate(sim.object_wrench(name))
+                f, tau = sim.object_wrench(name)  # torque about the collider's origin
+                if self._rigid[name].offset is not None:  # ... moved to the actor's (apply_wrench)
+                    arm = objects[name][b][:3, 3] - self._rigid[name].actor.pose.raw_pose[b, :3].double().cpu().numpy()
+                    tau = tau + np.cross(arm, f)
+                self._wrench[name][b] = np.concatenate([f, tau])
             if self._contacts.shape[1]:
                 self._contacts[b] = pad_contacts(sim, self._pad_links, list(self._rigid))
         self.step_timing["mpm"] = self.step_timing.get("mpm", 0.0) + time.perf_counter() - t0
