@@ -198,7 +198,8 @@ def split_task_state(leaves: dict, rows: torch.Tensor, num_envs: int, task_now) 
     the pad contacts or None)."""
     task = {}
     for k, v in leaves.items():
-        v = common.to_tensor(v).cpu()
+        # not common.to_tensor: it casts float64 to float32 (face frames, wrenches, pad contacts)
+        v = v.detach().cpu() if isinstance(v, torch.Tensor) else torch.as_tensor(np.asarray(v))
         task[k] = v[rows] if v.shape[0] == num_envs else v  # rows of the envs being set
     wrench = {k[len("wrench_"):]: task.pop(k) for k in list(task) if k.startswith("wrench_")}
     contacts = task.pop("pad_contacts", None)

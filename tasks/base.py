@@ -388,7 +388,7 @@ class GaussTacEnv(BaseEnv):
         geo = self.pad_geometry(pad)
         names = self._pose_source.link_names
         P = self._pose_source.all_link_poses()[:, names.index(geo.spec.link)].detach().cpu().double()
-        return (P @ torch.as_tensor(geo.sensor_frame)).to(torch.float64)
+        return (P @ torch.tensor(geo.sensor_frame)).to(torch.float64)  # a copy: the cached pad is read-only
 
     def _splat_camera_pose(self) -> sapien.Pose:
         """Pose of the default splat and render cameras (tasks override)."""
@@ -557,11 +557,23 @@ class GaussTacEnv(BaseEnv):
 
     def _after_control_step(self):
         super()._after_control_step()
+        self._canonical_sapien_state()
         if not self.mpm_every_sim_step:
             self._step_mpm(self.control_timestep)
         t1 = time.perf_counter()
         self.tactile()  # read the maps now (kept for evaluate / obs)
         self.step_timing["tactile"] = time.perf_counter() - t1
+
+    def _canonical_sapien_state(self) -> None:
+        """Set SAPIEN's state to itself (CPU sim), once per control step: PhysX then derives the
+        links' poses and velocities from the root pose, qpos and qvel, as ``set_state_dict`` does,
+        instead of keeping those its solver integrated, which now and then differ in the last
+        float32 bit (the next step then differs: qvel ~1e-8, tactile maps ~5e-7 N). The state after
+        a step is then a function of ``get_state_dict()`` alone, so that a step from a restored
+        state (ManiSkill's replay by env states: step, then set the recorded state) is bit-identical
+        to the recorded one. About 0.1 ms per step."""
+        if not self.gpu_sim_enabled:
+            self.scene.set_sim_state(self.scene.get_sim_state())
 
     def _before_simulation_step(self):
         """Two-way coupling: the pads' reactions of the last MPM step act during this SAPIEN
