@@ -174,13 +174,18 @@ def _own_parser() -> argparse.ArgumentParser:
 
 
 _OWN_HELP = ("gausstac_maniskill.replay adds:\n  --overwrite  replace the files the replay writes (--save-traj, "
-             "--save-video) if they exist; without it the launcher refuses (never the source itself)\n")
+             "--save-video) if they exist; without it the launcher refuses (never the source itself)\n"
+             "  --add-tactile  add GaussTac touch to a stock task's trajectory (--add-tactile --help)\n")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     from mani_skill.trajectory import replay_trajectory
 
     argv = list(sys.argv[1:] if argv is None else argv)
+    if "--add-tactile" in argv:  # touch for a stock task's trajectory: our own parser, not ManiSkill's
+        from .add_tactile import main as add_tactile_main
+
+        return add_tactile_main([a for a in argv if a != "--add-tactile"])
     own, rest = _own_parser().parse_known_args(argv)
     if "-h" in rest or "--help" in rest:
         print(_OWN_HELP)

@@ -29,7 +29,7 @@ LAYERS: dict[str, int] = {
     "cosim": 3, "batch": 3, "render": 3,
     "sensors": 4, "obs_wrappers": 4, "agents": 4, "tasks": 4, "experts": 4,
     "tactile_env": 4, "task_checks": 4, "scene_objects": 4, "physx": 4, "stock_tasks": 4,
-    "collect": 5, "replay": 5, "demo": 5, "bench": 5, "cli": 6,
+    "collect": 5, "replay": 5, "add_tactile": 5, "demo": 5, "bench": 5, "cli": 6,
     "__init__": 0,  # the package: register() and lazy submodules, importing only _registry
 }
 
