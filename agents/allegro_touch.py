@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
 import warnings
 
 import numpy as np
@@ -120,7 +119,7 @@ def touch_urdf(pads, urdf: str = TOUCH_URDF) -> str:
     tip, written once per content to ``cache_path("pad_meshes", <key>)``; its path. Every
     other link (the 12 other FSRs included) is ManiSkill's."""
     from ..cache import cache_dir
-    from ..urdf import write_urdf_with_collisions
+    from ..urdf import write_urdf_with_meshes
 
     meshes = {TIP_FSR_LINKS[p.link]: tip_fsr_mesh(p, urdf) for p in pads if p.link in TIP_FSR_LINKS}
     key = hashlib.sha1(b"touch-fsr-under-pad-v1\0")
@@ -129,16 +128,7 @@ def touch_urdf(pads, urdf: str = TOUCH_URDF) -> str:
     for link, mesh in sorted(meshes.items()):
         key.update(link.encode() + np.round(mesh.vertices, 9).tobytes())
     folder = cache_dir(PAD_MESHES, key.hexdigest()[:16])
-    out = folder / os.path.basename(urdf)
-    if not out.is_file():
-        files = {}
-        for link, mesh in meshes.items():
-            files[link] = folder / f"{link}.obj"
-            tmp = files[link].with_name(f".{link}.{os.getpid()}.tmp.obj")
-            mesh.export(tmp)
-            os.replace(tmp, files[link])
-        write_urdf_with_collisions(urdf, out, files)
-    return str(out)
+    return str(write_urdf_with_meshes(urdf, folder, {link: [mesh] for link, mesh in meshes.items()}))
 
 
 def _make_twin():

@@ -84,7 +84,7 @@ def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
     from ..cache import cache_dir
     from ..tactile import pad_mesh
     from ..tactile.pad import CORE_DEPTH
-    from ..urdf import write_urdf_with_collisions
+    from ..urdf import write_urdf_with_meshes
 
     _check_pad_links(uid, pad_urdf, pads)
     by_link = _pads_by_link(pads)
@@ -97,18 +97,8 @@ def _core_urdf(uid: str, urdf: str, pad_urdf: str, pads: tuple) -> str:
     for link, specs in sorted(by_link.items()):
         key.update(repr([(s.link, s.axis, s.cone_deg, s.thickness, CORE_DEPTH) for s in specs]).encode())
         key.update(meshes[link].vertices.tobytes())
-    folder = cache_dir("cores", key.hexdigest()[:16])
-    out = folder / os.path.basename(urdf)
-    if not out.is_file():
-        files = {}
-        for link, pieces in _link_cores(by_link, meshes).items():
-            files[link] = [folder / f"{link}_core{i}.obj" for i in range(len(pieces))]
-            for piece, path in zip(pieces, files[link]):
-                tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.obj")
-                piece.export(tmp)
-                os.replace(tmp, path)
-        write_urdf_with_collisions(urdf, out, files)
-    return str(out)
+    return str(write_urdf_with_meshes(urdf, cache_dir("cores", key.hexdigest()[:16]), _link_cores(by_link, meshes),
+                                      stem="core"))
 
 
 def core_meshes(agent: type) -> dict[str, list]:

@@ -162,7 +162,7 @@ def dclaw_urdf(pads, urdf: str = DCLAW_URDF) -> str:
 
     from ..cache import cache_dir
     from ..tactile import pad_core_meshes, pad_mesh
-    from ..urdf import parse_urdf, primitive_mesh, write_urdf_with_collisions
+    from ..urdf import parse_urdf, primitive_mesh, write_urdf_with_meshes
 
     model = parse_urdf(urdf)
     _, (lo, hi) = dclaw_tip_meshes(urdf)
@@ -189,18 +189,7 @@ def dclaw_urdf(pads, urdf: str = DCLAW_URDF) -> str:
         key.update(link.encode())
         for m in meshes:
             key.update(np.round(m.vertices, 9).tobytes())
-    folder = cache_dir(PAD_MESHES, key.hexdigest()[:16])
-    out = folder / os.path.basename(urdf)
-    if not out.is_file():
-        files = {}
-        for link, meshes in pieces.items():
-            files[link] = [folder / f"{link}_collision{i}.obj" for i in range(len(meshes))]
-            for m, path in zip(meshes, files[link]):
-                tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.obj")
-                m.export(tmp)
-                os.replace(tmp, path)
-        write_urdf_with_collisions(urdf, out, files)
-    return str(out)
+    return str(write_urdf_with_meshes(urdf, cache_dir(PAD_MESHES, key.hexdigest()[:16]), pieces))
 
 
 def _axis(link: str) -> tuple:

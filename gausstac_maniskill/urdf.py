@@ -49,7 +49,7 @@ __all__ = [
     "primitive_mesh",
     "resolve_mesh_path",
     "rpy_matrix",
-    "write_urdf_with_collisions",
+    "write_urdf_with_collisions", "write_urdf_with_meshes",
     "write_floating_urdf",
     "FLOATING_JOINTS",
 ]
@@ -412,6 +412,26 @@ def resolve_mesh_path(urdf: str | os.PathLike, filename: str, where: str = "<mes
     tried = ", ".join(str(c) for c in candidates[:4]) + (" ..." if len(candidates) > 4 else "")
     raise AssetError(f"{urdf}: {where} filename={filename!r}: mesh file not found "
                      f"(tried {tried})")
+
+
+def write_urdf_with_meshes(urdf: str | os.PathLike, folder: str | os.PathLike, meshes: Mapping[str, Sequence],
+                           stem: str = "collision") -> Path:
+    """``folder/<urdf's name>``: :func:`write_urdf_with_collisions` of ``urdf`` with each link of
+    ``meshes`` colliding with its trimesh meshes (link frame), exported once to
+    ``folder/<link>_<stem><i>.obj`` (atomically: several processes may write the same files);
+    nothing is written when that URDF exists (a folder named by a digest of the content)."""
+    folder = Path(folder)
+    out = folder / os.path.basename(urdf)
+    if not out.is_file():
+        files = {}
+        for link, pieces in meshes.items():
+            files[link] = [folder / f"{link}_{stem}{i}.obj" for i in range(len(pieces))]
+            for piece, path in zip(pieces, files[link]):
+                tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.obj")
+                piece.export(tmp)
+                os.replace(tmp, path)
+        write_urdf_with_collisions(urdf, out, files)
+    return out
 
 
 def write_urdf_with_collisions(urdf: str | os.PathLike, out: str | os.PathLike,
