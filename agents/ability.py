@@ -114,8 +114,8 @@ FloatingAbilityHandRightGaussTac = add_gausstac_pads(
 FloatingAbilityHandRightGaussTac.__module__ = __name__
 FloatingAbilityHandRightGaussTac.__qualname__ = "FloatingAbilityHandRightGaussTac"
 FloatingAbilityHandRightGaussTac.__doc__ = (
-    "Floating Ability right hand; pads ``thumb``, ``index``, ``middle``, ``ring``, ``pinky`` (2 mm silicone, "
-    "E = 0.3 MPa) on the palmar side of the distal phalanges. Action (``pd_joint_pos``): "
+    "Floating Ability right hand; pads ``thumb``, ``index``, ``middle``, ``ring``, ``pinky`` (4 mm Dragon Skin 10, "
+    "E = 0.26 MPa, ν = 0.48) on the palmar side of the distal phalanges. Action (``pd_joint_pos``): "
     "root x, y, z [m], rx, ry, rz [rad]; index, middle, ring, pinky q1 (q2 follows by mimic); thumb q1, q2.")
 #: ``rest``: root at the origin, hand open (finger q2 at the mimic controller's q1 = 0 value,
 #: so a zero finger action holds the pose).

@@ -1,5 +1,5 @@
 """``allegro_hand_right_gausstac``: ManiSkill's Allegro right hand with soft pads on its
-four fingertips (they replace the FSR pads of ``allegro_hand_right_touch``), and
+four fingertips (``allegro_hand_right_touch_gausstac`` is the FSR hand's twin, :mod:`.allegro_touch`), and
 ``floating_allegro_hand_right_gausstac``: the same hand on a 6-DoF floating root, for tasks
 that pick things up."""
 from __future__ import annotations

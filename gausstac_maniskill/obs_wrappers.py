@@ -1,14 +1,14 @@
 """Tactile maps as an extra observation for ManiSkill's imitation-learning baselines.
 
-GaussTac envs return ``obs["tactile"] = {pad: {"depth" [B, 16, 16] m, "shear" [B, 16, 16, 2] m,
-"force" [B, 16, 16] N}}``; a recorded ``.h5`` holds the same under ``obs/tactile/<pad>/...`` with a
+GaussTac envs return ``obs["tactile"] = {pad: {"depth" [B, H, W] m, "shear" [B, H, W, 2] m,
+"force" [B, H, W] N}}`` (H × W the pad's taxels: 16 × 16 on the Allegro pads); a recorded ``.h5`` holds the same under ``obs/tactile/<pad>/...`` with a
 time axis for the env axis. ManiSkill's flatteners refuse arrays of more than 2 dims, so one
 :class:`TactileLayout` turns the maps into a vector the same way for the live env
 (:class:`TactileObsWrapper`) and the recorded data (:func:`tactile_state_obs_extractor`,
 :func:`load_demos`, :func:`flatten_file`): a policy sees at evaluation what it was trained on.
 Vector: pads in sorted name order, per pad the ``fields`` in order, each map average-pooled by
 ``pool``, times ``scale[field]`` (default m -> mm for depth and shear), flattened row-major (shear:
-x, y last); 4 Allegro pads of 16x16 give 4096 entries at pool 1, 256 at pool 4. Image:
+x, y last); 4 Allegro pads of 16 × 16 give 4096 entries at pool 1, 256 at pool 4. Image:
 ``[..., H/pool, W/pool, C]``, channels last, C = pads x channels in the same order. Example::
 
     env = gym.make("GaussTac-PressCube-v1", obs_mode="rgb", control_mode="pd_joint_delta_pos")
