@@ -98,3 +98,37 @@ def test_resident_memory_stays_flat_over_resets(env):
     growth = _rss_mb() - start
     assert growth < MAX_GROWTH_MB, f"resident memory grew {growth:.1f} MB over {RESETS} resets " \
                                    f"({growth / RESETS:.2f} MB per reset)"
+
+
+#: the long run of ``make bench``: resets and random steps of each task family
+LONG_RESETS = int(os.environ.get("GAUSSTAC_LONG_RESETS", "200"))
+LONG_FAMILIES = [("GaussTac-Gesture-v1", {}), ("GaussTac-PressCube-v1", {}), ("GaussTac-SlideCube-v1", {}),
+                 ("GaussTac-GraspLiftCube-v1", {}), ("RotateValveLevel0-v1", {"stock": True}),
+                 ("TriFingerRotateCubeLevel0-v1", {"stock": True})]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="known gap: with 3 random steps per episode every family still grows, 0.39 MB per episode "
+                   "(TriFinger 2 MB; stock RotateValve: flat); tracemalloc sees under 0.6 MB of Python "
+                   "allocations over 100 episodes, so it is native memory (Taichi or SAPIEN objects made by an "
+                   "episode's first steps); resets alone are flat (the tests above)")
+@pytest.mark.parametrize("env_id,how", LONG_FAMILIES, ids=[f[0] for f in LONG_FAMILIES])
+def test_memory_stays_flat_over_hundreds_of_resets_and_random_steps(env_id, how):
+    """``LONG_RESETS`` episodes of 3 random steps each (2 mm grid): resident memory after the
+    first tenth (warm-up) grows by less than 0.25 MB per reset over the rest."""
+    kw = dict(sim_backend="physx_cpu", obs_mode="state_dict", mpm_dx=2e-3)
+    env = gausstac_maniskill.make_tactile(env_id, **kw) if how.get("stock") else gym.make(env_id, **kw)
+    try:
+        env.action_space.seed(0)
+        warm = max(LONG_RESETS // 10, 2)
+        for i in range(LONG_RESETS):
+            if i == warm:
+                start = _rss_mb()
+            env.reset(seed=i)
+            for _ in range(3):
+                env.step(env.action_space.sample())
+        grown = _rss_mb() - start
+        assert grown < 0.25 * (LONG_RESETS - warm), f"{env_id}: grew {grown:.1f} MB over {LONG_RESETS - warm} resets"
+    finally:
+        env.close()
