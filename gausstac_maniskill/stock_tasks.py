@@ -67,8 +67,8 @@ def twin_agent(uid) -> type:
                           f"with GaussTac pads: {sorted(hands_with_pads())}")
     if issubclass(cls, GaussTacAgent) and cls.gausstac_pads:
         return cls
-    for twin in _twin_classes():
-        if twin.__bases__[-1] is cls and twin.gausstac_pads:
+    for twin in _twin_classes():  # every one has pads
+        if twin.__bases__[-1] is cls:
             return twin
     have = hands_with_pads()
     near = difflib.get_close_matches(str(getattr(cls, "uid", uid)), list(have), n=2)
@@ -85,7 +85,6 @@ class StockTask:
     ground_altitude = None  # the task builds its own ground
     #: pads feel the task's dynamic actors both ways (their reaction pushes the object)
     stock_two_way = True
-    _stock_task: type = None  # the stock task class (set by make_tactile)
 
     def __init__(self, *args, camera: str | None = None, **kwargs):
         self._stock_camera = camera
@@ -109,10 +108,14 @@ class StockTask:
         self._stock()._load_scene(options)
         self._register_scene_colliders()
 
+    def _stock_sensor_configs(self) -> list:
+        """The stock task's sensor configs, as a list (ManiSkill allows one config alone)."""
+        configs = self._stock()._default_sensor_configs
+        return list(configs) if isinstance(configs, (list, tuple)) else [configs]
+
     @property
     def _default_sensor_configs(self):
-        configs = self._stock()._default_sensor_configs
-        configs = list(configs) if isinstance(configs, (list, tuple)) else [configs]
+        configs = self._stock_sensor_configs()
         if self._stock_camera == "splat":
             configs.append(self._camera_config("splat_camera", self.splat_size))
         return configs
@@ -122,21 +125,16 @@ class StockTask:
         return self._stock()._default_human_render_camera_configs
 
     def _splat_camera_pose(self):
-        configs = self._stock()._default_sensor_configs
-        configs = list(configs) if isinstance(configs, (list, tuple)) else [configs]
-        if not configs:
-            return super()._splat_camera_pose()
-        return configs[0].pose
+        configs = self._stock_sensor_configs()
+        return configs[0].pose if configs else super()._splat_camera_pose()
 
     def _register_scene_colliders(self) -> None:
         """One MPM rigid object per collision shape of every actor and articulation link of the
         scene other than the hand's (env 0's shapes: ``physx_cpu`` runs one env)."""
-        robot = {id(link) for link in self.agent.robot.links}
-        bodies = [(name, actor) for name, actor in self.scene.actors.items()]
+        bodies = list(self.scene.actors.items())
         for art_name, art in self.scene.articulations.items():
-            if art is self.agent.robot or art_name == self.agent.robot.name:
-                continue
-            bodies += [(f"{art_name}/{link.name}", link) for link in art.links if id(link) not in robot]
+            if art is not self.agent.robot:
+                bodies += [(f"{art_name}/{link.name}", link) for link in art.links]
         for name, body in bodies:
             comp = _rigid_component(body)
             if comp is None:
@@ -161,19 +159,6 @@ def _rigid_component(body):
     return obj.find_component_by_type(sapien.physx.PhysxRigidBaseComponent)
 
 
-def _pose_matrix(pose) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = _quat_matrix(np.asarray(pose.q, np.float64))
-    T[:3, 3] = np.asarray(pose.p, np.float64)
-    return T
-
-
-def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    from .transforms import quat_to_matrix
-
-    return quat_to_matrix(q)
-
-
 #: PhysX capsules and planes lie along their local x axis, ours along z: the collider's frame
 #: in the shape's (a quarter turn about y takes z to x)
 _Z_TO_X = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
@@ -185,9 +170,11 @@ def _collider(shape, name: str):
     import sapien
 
     from .geometry import Box, Capsule, HalfSpace, MeshCollider, Sphere
+    from .transforms import make_pose, quat_to_matrix
 
     px = sapien.physx
-    offset = _pose_matrix(shape.local_pose)
+    pose = shape.local_pose
+    offset = make_pose(np.asarray(pose.p, np.float64), quat_to_matrix(np.asarray(pose.q, np.float64)))
     mat = shape.physical_material
     friction = float(mat.dynamic_friction) if mat is not None else 0.5
     if isinstance(shape, px.PhysxCollisionShapeBox):
@@ -271,7 +258,7 @@ def tactile_class(task: type) -> type:
     cached = _CLASSES.get(task)
     if cached is None:
         cached = _CLASSES[task] = type(f"Tactile{task.__name__}", (StockTask, GaussTacEnv, task), {
-            "_stock_task": task, "SUPPORTED_ROBOTS": None, "__module__": __name__,
+            "SUPPORTED_ROBOTS": None, "__module__": __name__,
             "__doc__": f"ManiSkill's {task.__name__} with GaussTac pads on its hand (make_tactile)."})
     return cached
 

@@ -542,9 +542,10 @@ class GaussTacEnv(BaseEnv):
         for b, sim in enumerate(self.cosims):
             for name in self._wrench:
                 f, tau = sim.object_wrench(name)  # torque about the collider's origin
-                if self._rigid[name].offset is not None:  # ... moved to the actor's (apply_wrench)
-                    arm = objects[name][b][:3, 3] - self._rigid[name].actor.pose.raw_pose[b, :3].double().cpu().numpy()
-                    tau = tau + np.cross(arm, f)
+                offset = self._rigid[name].offset
+                if offset is not None:  # ... moved to the actor's (apply_wrench): the arm from actor to collider
+                    R = objects[name][b][:3, :3] @ offset[:3, :3].T  # the actor's rotation
+                    tau = tau + np.cross(R @ offset[:3, 3], f)
                 self._wrench[name][b] = np.concatenate([f, tau])
             if self._contacts.shape[1]:
                 self._contacts[b] = pad_contacts(sim, self._pad_links, list(self._rigid))

@@ -36,8 +36,8 @@ from ..config import Material, SolverSettings
 from ..errors import ConfigError
 from ..geometry.colliders import Collider, MeshCollider
 from ..transforms import as_pose_matrices, as_pose_matrix, quat_to_matrix
-from .building import WorldBuilder, _velocity_gradient  # noqa: F401
-from .model import Model, _collider_bound, no_anchor  # noqa: F401
+from .building import WorldBuilder
+from .model import Model, no_anchor
 from .patch import ActivePatch
 from .readouts import WorldReadouts
 from .rows import forget_contact, move_rigidly, put_at_rest

@@ -59,10 +59,10 @@ def test_mesh_collider_sdf_replaced_moves_its_surface():
 
 
 def test_a_colliders_bounding_sphere_holds_all_of_it():
-    """solver._collider_bound: no point of a collider lies outside the sphere of that radius
+    """model._collider_bound: no point of a collider lies outside the sphere of that radius
     about its origin, so its signed distance anywhere is at least the distance to that sphere
     (what kernels.beyond_bound relies on to skip it); a half-space has no bound."""
-    from gausstac_maniskill.mpm.solver import _collider_bound
+    from gausstac_maniskill.mpm.model import _collider_bound
 
     for c in (Sphere(radius=3e-3, pose=POSE), Box(half_extents=(1e-3, 2e-3, 3e-3), pose=POSE),
               Capsule(radius=1e-3, half_length=2e-3, pose=POSE),

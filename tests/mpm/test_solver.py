@@ -31,12 +31,12 @@ def assert_healthy(world, n0):
 # ----------------------------------------------------------------------------- hard cases
 
 def test_initial_velocity_gradient_stays_inside_each_body():
-    """add_group fits each particle's APIC C to its initial velocity (solver._velocity_gradient).
+    """add_group fits each particle's APIC C to its initial velocity (building._velocity_gradient).
     Two cubes of one group that move apart at uniform velocities, their facing layers 1.9
     particle spacings apart: C is zero in both, since neither strains (a fit over plain nearest
     neighbours would reach across the gap and give the facing layers up to 6.3 1/s); and a
     spin is fitted exactly, [ω]× in every particle."""
-    from gausstac_maniskill.mpm.solver import _velocity_gradient
+    from gausstac_maniskill.mpm.building import _velocity_gradient
 
     h = 1e-3
     a = box_particles([0, 0, 0], [0.005, 0.005, 0.005], h)
