@@ -38,6 +38,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench kernels
 	$(PY) -m gausstac_maniskill.bench compile
 	$(PY) -m gausstac_maniskill.bench soft
+	$(PY) -m gausstac_maniskill.bench optical
 	$(PY) -m gausstac_maniskill.bench patch
 	$(PY) -m gausstac_maniskill.bench patch --pad-solver fem --out out/bench_patch_fem
 	$(PY) -m gausstac_maniskill.bench look

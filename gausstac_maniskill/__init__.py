@@ -23,7 +23,7 @@ __version__ = "0.1.0"
 #: Submodules and subpackages, imported on first attribute access.
 _SUBMODULES = ("add_tactile", "agents", "assets", "backend", "batch", "bench", "cache", "cli", "collect", "config", "cosim", "demo",
                "environment", "errors", "experts", "fem", "geometry", "mpm", "obs_wrappers", "pose", "reference",
-               "render", "replay", "sensors", "splat", "stock_tasks", "tactile", "tasks", "transforms", "urdf")
+               "optical", "render", "replay", "sensors", "splat", "stock_tasks", "tactile", "tasks", "transforms", "urdf")
 
 __all__ = ["__version__", "register", "make_tactile", *_SUBMODULES]
 

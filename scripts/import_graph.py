@@ -25,7 +25,7 @@ LAYERS: dict[str, int] = {
     "errors": 0, "environment": 0, "config": 0, "backend": 0, "cache": 0, "cpu_pinning": 0,
     "kernel_launch": 0, "transforms": 0, "assets": 0, "_registry": 0, "owner": 0,
     "geometry": 1, "urdf": 1, "reference": 1,
-    "fem": 2, "mpm": 2, "tactile": 2, "splat": 2, "pose": 2, "pads": 2,
+    "fem": 2, "mpm": 2, "tactile": 2, "optical": 2, "splat": 2, "pose": 2, "pads": 2,
     "cosim": 3, "batch": 3, "render": 3,
     "sensors": 4, "obs_wrappers": 4, "agents": 4, "tasks": 4, "experts": 4,
     "tactile_env": 4, "task_checks": 4, "scene_objects": 4, "physx": 4, "stock_tasks": 4,

@@ -28,6 +28,7 @@ BENCHMARKS = {
     "hold": "gausstac_maniskill.bench.hold",
     "batch": "gausstac_maniskill.bench.batch",
     "scale": "gausstac_maniskill.bench.scale",
+    "optical": "gausstac_maniskill.bench.optical",
     "motion": "gausstac_maniskill.bench.motion",
     "quasistatic": "gausstac_maniskill.bench.quasistatic",
     "touch": "gausstac_maniskill.bench.touch",

@@ -1,0 +1,65 @@
+"""Optical sensors (:mod:`gausstac_maniskill.optical`): the cost of one image per pad.
+
+``python -m gausstac_maniskill.bench optical [--presets gelsight gelsight_mini] [--size 320 240]
+[--batch 1 4] [--repeats 50] [--out DIR]``
+
+Per preset and batch: the milliseconds per image of the colour lookup over the no-contact frame
+(:func:`~gausstac_maniskill.optical.render_rgb`) and of the markers moved and drawn
+(:func:`~gausstac_maniskill.optical.marker_positions` and the dots), on a surface with a
+Gaussian indentation of 0.5 mm and a uniform 0.2 mm shear, on this process's torch threads.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from .common import cli, write_report
+
+
+def _surface(cam, batch: int):
+    yy, xx = np.mgrid[:cam.height, :cam.width].astype(float)
+    r2 = ((xx - cam.width / 2) ** 2 + (yy - cam.height / 2) ** 2) * (cam.mm_per_px * 1e-3) ** 2
+    depth = torch.tensor(0.5e-3 * np.exp(-r2 / (1.5e-3) ** 2), dtype=torch.float32).expand(batch, -1, -1).contiguous()
+    shear = torch.full((batch, cam.height, cam.width, 2), 0.2e-3)
+    return depth, shear
+
+
+def time_point(name: str, size, batch: int, repeats: int) -> dict:
+    """Milliseconds per image (batch ``batch``) of the lookup alone and with the markers."""
+    from ..optical import marker_positions, preset, render_rgb
+
+    sensor = preset(name).at_resolution(*size)
+    depth, shear = _surface(sensor.camera, batch)
+    render_rgb(depth, sensor)  # tables built once
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        render_rgb(depth, sensor)
+    t1 = time.perf_counter()
+    for _ in range(repeats):
+        _, moved = marker_positions(shear, depth, sensor)
+        render_rgb(depth, sensor, markers=moved)
+    t2 = time.perf_counter()
+    per = 1e3 / (repeats * batch)
+    return dict(preset=name, batch=batch, lookup_ms=(t1 - t0) * per, with_markers_ms=(t2 - t1) * per,
+                markers=int(moved.shape[1]))
+
+
+def main(argv=None) -> int:
+    ap = cli("optical", __doc__)
+    ap.add_argument("--presets", nargs="+", default=["gelsight", "gelsight_mini"])
+    ap.add_argument("--size", nargs=2, type=int, default=[320, 240], metavar=("W", "H"))
+    ap.add_argument("--batch", nargs="+", type=int, default=[1, 4])
+    ap.add_argument("--repeats", type=int, default=50)
+    ap.add_argument("--out", default="out/bench_optical")
+    args = ap.parse_args(argv)
+    rows = [time_point(p, args.size, b, args.repeats) for p in args.presets for b in args.batch]
+    lines = [f"Optical image {args.size[0]}x{args.size[1]}, {torch.get_num_threads()} torch threads", "",
+             "| preset | batch | markers | lookup [ms/image] | lookup + markers [ms/image] |", "|---|---|---|---|---|"]
+    lines += [f"| {r['preset']} | {r['batch']} | {r['markers']} | {r['lookup_ms']:.2f} | {r['with_markers_ms']:.2f} |"
+              for r in rows]
+    text = "\n".join(lines)
+    print(text)
+    write_report(args.out, "optical.md", text)
+    return 0
