@@ -54,6 +54,10 @@ class Calibration:
         return self.background.shape[1]
 
 
+#: polycalib.npz's arrays in the order of the red, green and blue channels (as the taxim package reads them)
+_RGB_KEYS = ("grad_b", "grad_g", "grad_r")
+
+
 def _read(path: Path, what: str):
     if not path.is_file():
         raise ConfigError(f"optical calibration {path.parent}: {path.name} is missing ({what})")
@@ -85,11 +89,11 @@ def load_calibration(folder) -> Calibration:
                           f"(pixmm={mm_per_px}, num_bins={bins}, h={h}, w={w})")
     with _read(folder / "polycalib.npz", "an npz of grad_r, grad_g, grad_b") as poly:
         try:
-            channels = [np.asarray(poly[k], np.float64) for k in ("grad_b", "grad_g", "grad_r")]
+            channels = [np.asarray(poly[k], np.float64) for k in _RGB_KEYS]
         except KeyError as exc:
             raise ConfigError(f"optical calibration {folder}: polycalib.npz lacks {exc} "
                               "(expected grad_r, grad_g, grad_b)") from None
-    for c, k in zip(channels, ("grad_b", "grad_g", "grad_r")):
+    for c, k in zip(channels, _RGB_KEYS):
         if c.shape != (bins, bins, 6):
             raise ConfigError(f"optical calibration {folder}: polycalib.npz {k} has shape {c.shape}, "
                               f"expected ({bins}, {bins}, 6) (num_bins from params.json)")

@@ -55,7 +55,7 @@ class MarkerGrid:
 @dataclass(frozen=True)
 class Preset:
     """One optical sensor. ``ball_radius`` [m]: the radius of the ball its calibration frames
-    were pressed with (:func:`~gausstac_maniskill.optical.press_sphere`)."""
+    were pressed with."""
 
     name: str
     calibration: Calibration

@@ -78,9 +78,13 @@ def shading(depth, preset: Preset) -> torch.Tensor:
     [B, H, W] [m] makes on the preset's camera image (zero for an undeformed gel)."""
     depth = _check("depth", depth, preset)
     poly, feat, _ = _tables(preset, depth.device)
-    idx = _bin_index(depth, preset)
+    return _shading(depth, preset, poly, feat)
+
+
+def _shading(depth: torch.Tensor, preset: Preset, poly: torch.Tensor, feat: torch.Tensor) -> torch.Tensor:
+    """:func:`shading` of a checked ``depth``, given the preset's tables (:func:`_tables`)."""
     flat = (poly[(preset.calibration.bins - 1) // 2] * feat).sum(-1)  # tilt 0, azimuth 0: a flat surface
-    return (poly[idx] * feat).sum(-1) - flat
+    return (poly[_bin_index(depth, preset)] * feat).sum(-1) - flat
 
 
 def render_rgb(depth, preset: Preset, markers=None) -> torch.Tensor:
@@ -88,8 +92,8 @@ def render_rgb(depth, preset: Preset, markers=None) -> torch.Tensor:
     ``depth`` [B, H, W] [m]; with ``markers`` [B, N, 2] (pixel places, column then row) the
     preset's dots drawn dark there."""
     depth = _check("depth", depth, preset)
-    _, _, bg = _tables(preset, depth.device)
-    img = bg + shading(depth, preset)
+    poly, feat, bg = _tables(preset, depth.device)
+    img = bg + _shading(depth, preset, poly, feat)
     if markers is not None:
         img = img * (1.0 - preset.markers.darkness * _dots(torch.as_tensor(markers, dtype=torch.float32), preset))[..., None]
     return (img.clamp_(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8)
