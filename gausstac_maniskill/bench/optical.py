@@ -1,13 +1,18 @@
 """Optical sensors (:mod:`gausstac_maniskill.optical`): the cost of one image per pad.
 
 ``python -m gausstac_maniskill.bench optical [--presets gelsight gelsight_mini] [--size 320 240]
-[--batch 1 4] [--repeats 50] [--out DIR]``
+[--batch 1 4] [--repeats 50] [--frames gelsight] [--model linear] [--limit N] [--out DIR]``
 
 Per preset and batch: the milliseconds per image of the colour lookup over the no-contact frame
 (:func:`~gausstac_maniskill.optical.render_rgb`) and of the markers moved and drawn
 (:func:`~gausstac_maniskill.optical.marker_positions` and the dots), on a surface with a
 Gaussian indentation of 0.5 mm and a uniform 0.2 mm shear, on this process's torch threads.
 Writes the table and ``optical.png``: each preset's image of that surface with its markers.
+
+Then the real frames of ``--frames`` (:mod:`.optical_frames`: each pressed with
+:func:`~gausstac_maniskill.optical.press_sphere` and compared with the real image and two
+baselines; ``optical_frames.png``), and the marker flow of a ball slid over the GelSight's gel
+(``optical_slide.png``). ``--frames none`` skips both.
 """
 from __future__ import annotations
 
@@ -53,6 +58,9 @@ def main(argv=None) -> int:
     ap.add_argument("--size", nargs=2, type=int, default=[320, 240], metavar=("W", "H"))
     ap.add_argument("--batch", nargs="+", type=int, default=[1, 4])
     ap.add_argument("--repeats", type=int, default=50)
+    ap.add_argument("--frames", nargs="+", default=["gelsight"], help="presets whose real frames to compare, or none")
+    ap.add_argument("--model", default="linear", choices=["linear", "neo_hookean"], help="the gel's pad model")
+    ap.add_argument("--limit", type=int, default=None, help="compare only the first N frames")
     ap.add_argument("--out", default="out/bench_optical")
     args = ap.parse_args(argv)
     rows = [time_point(p, args.size, b, args.repeats) for p in args.presets for b in args.batch]
@@ -62,9 +70,51 @@ def main(argv=None) -> int:
               for r in rows]
     text = "\n".join(lines)
     print(text)
-    write_report(args.out, "optical.md", text)
     print("wrote", write_picture(args.out, args.presets, args.size))
+    for name in [f for f in args.frames if f != "none"]:
+        from .optical_frames import compare_frames, summary_lines, write_frames_figure
+
+        result = compare_frames(name, model=args.model, limit=args.limit)
+        table = "\n".join(summary_lines(result, name, args.model))
+        print(table)
+        text += "\n\n" + table
+        print("wrote", write_frames_figure(args.out, result))
+    if args.frames != ["none"]:
+        print("wrote", write_slide_picture(args.out))
+    write_report(args.out, "optical.md", text)
     return 0
+
+
+def write_slide_picture(out_dir: str, depth: float = 0.8e-3, distance: float = 1.5e-3) -> str:
+    """``out_dir/optical_slide.png``: the GelSight's image of its calibration ball pressed
+    ``depth`` [m] and slid ``distance`` [m] along the columns with friction 1, markers drawn, and
+    the markers' motion from rest as arrows (drawn 3x)."""
+    import os
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..optical import image, slide_gel
+
+    steps = slide_gel("gelsight", None, depth, distance, steps=6)
+    press = image(steps[-1], "gelsight")
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.6))
+    ax[0].imshow(press.rgb)
+    ax[0].set_title(f"GelSight, ball pressed {depth * 1e3:g} mm, slid {distance * 1e3:g} mm (μ = 1)", fontsize=9)
+    d = press.markers - press.marker_rest
+    ax[1].imshow(press.rgb, alpha=0.35)
+    ax[1].quiver(press.marker_rest[:, 0], press.marker_rest[:, 1], d[:, 0], d[:, 1], color="k", angles="xy",
+                 scale_units="xy", scale=1 / 3, width=0.002)
+    ax[1].set_title(f"marker flow (x3); largest {np.abs(d).max():.1f} px", fontsize=9)
+    for a in ax:
+        a.axis("off")
+    fig.tight_layout()
+    path = os.path.join(out_dir, "optical_slide.png")
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
 
 
 def write_picture(out_dir: str, presets, size) -> str:
@@ -81,6 +131,7 @@ def write_picture(out_dir: str, presets, size) -> str:
         depth, shear = _surface(sensor.camera, 1)
         _, moved = marker_positions(shear * (depth / depth.max())[..., None], depth, sensor)
         images.append(render_rgb(depth, sensor, markers=moved)[0].numpy())
+    os.makedirs(out_dir, exist_ok=True)
     path = os.path.join(out_dir, "optical.png")
     imageio.imwrite(path, np.concatenate(images, axis=1))
     return path
