@@ -38,6 +38,7 @@ bench: setup
 	$(PY) -m gausstac_maniskill.bench kernels
 	$(PY) -m gausstac_maniskill.bench compile
 	$(PY) -m gausstac_maniskill.bench soft
+	$(PY) -m pip install -q 'jax>=0.4'  # bench optical's baseline: taxim's own height map (its JAX backend)
 	$(PY) -m gausstac_maniskill.bench optical
 	$(PY) -m gausstac_maniskill.bench patch
 	$(PY) -m gausstac_maniskill.bench patch --pad-solver fem --out out/bench_patch_fem

@@ -241,12 +241,15 @@ def load_demos(path: str, num_traj: int | None = None, *, include_last: bool = F
       ``TactileObsWrapper(flatten=True)``) return live;
     * ``tactile`` [N, D] float32: the tactile vector alone (:class:`TactileLayout`);
     * ``rgb`` [N, H, W, 3 x cameras] uint8 (rgb obs mode, ``rgb=True``);
+    * ``optical/<pad>`` [N, H, W, 3] uint8 and ``markers/<pad>`` [N, M, 2] float32 [px]: the
+      optical image and markers of each pad recorded with an optical sensor (``optical=``);
     * ``actions`` [N, A] float32; ``episode`` [N] int (trajectory index), ``t`` [N] int (step).
     """
     import h5py
 
     layout = TactileLayout(**layout_kwargs)
     out: dict[str, list] = {"state": [], "tactile": [], "rgb": [], "actions": [], "episode": [], "t": []}
+    optical: dict[str, list] = {}
     with h5py.File(path, "r") as f:
         names = sorted((k for k in f if k.startswith("traj_")), key=lambda k: int(k.split("_")[1]))
         if num_traj is not None:
@@ -270,10 +273,16 @@ def load_demos(path: str, num_traj: int | None = None, *, include_last: bool = F
                         if "rgb" in obs["sensor_data"][c]]
                 if cams:
                     out["rgb"].append(np.concatenate(cams, axis=-1))
+            for pad in obs["tactile"]:
+                for key in ("rgb", "markers"):
+                    if key in obs["tactile"][pad]:
+                        name = f"{'optical' if key == 'rgb' else key}/{pad}"
+                        optical.setdefault(name, []).append(obs["tactile"][pad][key][:keep])
             if not include_last:
                 out["actions"].append(g["actions"][()].astype(np.float32))
             out["episode"].append(np.full(keep, i, np.int64))
             out["t"].append(np.arange(keep, dtype=np.int64))
+    out.update(optical)
     return {k: np.concatenate(v, axis=0) for k, v in out.items() if v}
 
 

@@ -265,9 +265,13 @@ class GaussianSplatCamera(Camera):
 
 @dataclass
 class TactileSensorConfig(BaseSensorConfig):
-    """Configuration of a :class:`TactileSensor`: its ``uid`` and the map names it reports."""
+    """Configuration of a :class:`TactileSensor`: its ``uid``, the map names it reports, and
+    ``optical``: ``{pad: optical sensor}`` (a :class:`~gausstac_maniskill.optical.Preset` sized
+    to the pad's layout, :func:`~gausstac_maniskill.optical.pad_preset`) for the pads that also
+    report that sensor's image and markers."""
 
     keys: tuple = TACTILE_KEYS
+    optical: dict | None = None
 
 
 class TactileSensor(BaseSensor):
@@ -284,7 +288,9 @@ class TactileSensor(BaseSensor):
     :meth:`get_obs` returns ``{pad: {"depth": [B, H, W] m, "shear": [B, H, W, 2] m,
     "force": [B, H, W] N}}`` float32. Depth is positive into the pad; shear is the
     surface displacement along the sensor's x (along the finger) and y; force is the
-    normal contact force per taxel.
+    normal contact force per taxel. A pad with an optical sensor (``config.optical``) also
+    gives ``"rgb"`` [B, H', W', 3] uint8, the sensor's image of the same surface, and
+    ``"markers"`` [B, N, 2] float32, its markers' places in that image [px] (column, row).
     """
 
     def __init__(self, config: TactileSensorConfig, maps_fn: Callable[[], dict],
@@ -299,10 +305,16 @@ class TactileSensor(BaseSensor):
         self.device = device
         self._obs = None
 
-    def capture(self):
-        """Gather the maps of the last co-simulation step."""
+    def capture(self, optical: bool = True):
+        """Gather the maps of the last co-simulation step (and, with ``optical``, the optical
+        pads' images)."""
         maps = self.maps_fn()
         self._obs = {p: {k: maps[p][k].to(self.device) for k in self.config.keys} for p in self.pad_names}
+        for p, sensor in (self.config.optical or {}).items() if optical else ():
+            from .optical import pad_images
+
+            rgb, markers = pad_images(maps[p]["depth"], maps[p]["shear"], sensor)
+            self._obs[p]["rgb"], self._obs[p]["markers"] = rgb.to(self.device), markers.to(self.device)
 
     def get_obs(self, **kwargs):
         if self._obs is None:

@@ -12,6 +12,7 @@ the value and fail with a bare error.
 from __future__ import annotations
 
 import numbers
+import os
 import sys
 import warnings
 
@@ -117,6 +118,29 @@ def check_splat_look(task: str, splat_background, splat_lighting) -> None:
             or rgb.min() < 0 or rgb.max() > 1:
         raise ConfigError(f"{task}: splat_background={splat_background!r} must be None, 'sapien' or an RGB "
                           "triple in [0, 1]")
+
+
+def check_optical(task: str, optical, width) -> dict:
+    """The kwarg ``optical`` as ``{pad or None (every pad): preset}`` (each preset read, so an
+    unknown name or a broken calibration folder fails here, named); ``ConfigError`` naming
+    ``optical`` or ``optical_width`` otherwise. The pads' names are checked against the hand
+    once it is built."""
+    if isinstance(width, bool) or not isinstance(width, (int, np.integer)) or not 8 <= width <= 4096:
+        raise ConfigError(f"{task}: optical_width={width!r} must be an integer number of pixels in 8..4096")
+    if optical is None:
+        return {}
+    from .optical import preset
+
+    chosen = {str(k): v for k, v in optical.items()} if isinstance(optical, dict) else {None: optical}
+    for pad, name in chosen.items():
+        if not isinstance(name, (str, os.PathLike)):
+            raise ConfigError(f"{task}: optical={optical!r}: expected a preset name or calibration folder, or "
+                              "{pad: preset}")
+        try:
+            preset(name)
+        except ConfigError as e:
+            raise ConfigError(f"{task}: optical" + (f"[{pad!r}]" if pad else "") + f": {e}") from None
+    return chosen
 
 
 def check_sim_backend(num_envs, sim_backend) -> None:

@@ -47,8 +47,8 @@ from ..sensors import GaussianSplatCameraConfig, TactileSensor, TactileSensorCon
 from ..tactile_env import (EnvSplatSource, attach_splat_cameras, batch_state, copied, fold_pad_reaction,
                            invalidate_splat_backgrounds, load_flat_states, pad_contacts, split_task_state,
                            stacked_flat_states, task_state_leaves)
-from ..task_checks import (check_action, check_choice, check_flag, check_pad_coupling, check_pair, check_range,
-                           check_render_mode, check_sim_backend, check_size, check_splat_look)
+from ..task_checks import (check_action, check_choice, check_flag, check_optical, check_pad_coupling, check_pair,
+                           check_range, check_render_mode, check_sim_backend, check_size, check_splat_look)
 from .contact_spring import ObjectSpring
 from .joint_contact import JointContact
 
@@ -153,6 +153,14 @@ class GaussTacEnv(BaseEnv):
             (None): in full up to 256 MiB (the Allegro fingertips at the default ``mpm_dx``),
             point by point above, with a :class:`~gausstac_maniskill.errors.CostWarning`
             (:class:`~gausstac_maniskill.cosim.GaussTacSim`'s ``fem_precompute``).
+        optical: optical sensors on the pads: an optical preset (``"gelsight"``,
+            ``"gelsight_mini"`` or a calibration folder: :func:`~gausstac_maniskill.optical.preset`)
+            for every pad, or ``{pad: preset}`` for some. Each such pad's ``obs["tactile"][pad]``
+            then also holds ``"rgb"`` [B, H, W, 3] uint8, the sensor's image of the pad's surface
+            over its taxel layout, and ``"markers"`` [B, N, 2] px (dict obs modes; the flat
+            ``"state"`` mode leaves them out). Default None: no image, no cost.
+        optical_width: the optical images' width [px] across the pad's x (along the finger);
+            the height follows the layout's aspect (square pixels).
     """
 
     SUPPORTED_ROBOTS = ["allegro_hand_right_gausstac"]
@@ -164,7 +172,7 @@ class GaussTacEnv(BaseEnv):
                  scene_ply: str | os.PathLike | None = None, scene_pose=None, splat_lighting="scene",
                  pad_reaction: bool = False, splat_lod: bool = True, splat_cull: bool = True,
                  pad_solver: str = "auto", fem_model: str = "linear", fem_precompute: bool | None = None,
-                 **kwargs):
+                 optical=None, optical_width: int = 320, **kwargs):
         backend.ensure_init()
         check_sim_backend(kwargs.get("num_envs", 1), kwargs.get("sim_backend", "auto"))
         task = self._env_id()
@@ -182,6 +190,9 @@ class GaussTacEnv(BaseEnv):
         #: the pads' solver settings, from the kwargs pad_solver, fem_model, fem_precompute, mpm_sleep_margin
         self.pad_settings = PadSolverSettings(solver=pad_solver, fem_model=fem_model, fem_precompute=fem_precompute,
                                               sleep_margin=mpm_sleep_margin)
+        #: ``{pad or None (every pad): optical preset}`` from the kwarg ``optical`` (checked here)
+        self.optical = check_optical(task, optical, optical_width)
+        self.optical_width = int(optical_width)
         self.splat_size = tuple(int(v) for v in splat_size)
         self.render_size = tuple(int(v) for v in render_size)
         self.record_mpm_state = bool(record_mpm_state)
@@ -345,9 +356,25 @@ class GaussTacEnv(BaseEnv):
                                              for o in self._rigid.values()])
         self._pose_source = SapienPoseSource(self.agent)
         self._cosim_stale = True
-        self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile"),
+        self.tactile_sensor = TactileSensor(TactileSensorConfig(uid="tactile", optical=self._optical_pads()),
                                             self.tactile,
                                             self.pad_names, device=self.device)
+
+    def _optical_pads(self) -> dict | None:
+        """``{pad: optical preset sized to its layout}`` for the pads with an optical sensor."""
+        if not self.optical:
+            return None
+        from ..optical import pad_preset
+
+        specs = {p.name: p for p in self.agent.gausstac_pads}
+        named = {pad: self.optical[pad] for pad in self.optical if pad is not None}
+        unknown = sorted(set(named) - set(specs))
+        if unknown:
+            raise ConfigError(f"{self._env_id()}: optical names pads {unknown} that the hand does not have; "
+                              f"its pads: {sorted(specs)}")
+        every = {pad: self.optical[None] for pad in specs} if None in self.optical else {}
+        return {pad: pad_preset(sensor, specs[pad].layout, self.optical_width)
+                for pad, sensor in {**every, **named}.items()}
 
     @property
     def action_joint_index(self) -> list[int]:
@@ -653,7 +680,7 @@ class GaussTacEnv(BaseEnv):
         if self._obs_mode != "none":
             t0 = time.perf_counter()
             self._ensure_cosims()
-            self.tactile_sensor.capture()
+            self.tactile_sensor.capture(optical=self._obs_mode != "state")
             tactile = self.tactile_sensor.get_obs()
             if self._obs_mode == "state":  # a flat state vector: maps flattened to [B, H*W(*2)]
                 tactile = {p: {k: v.reshape(v.shape[0], -1) for k, v in m.items()} for p, m in tactile.items()}

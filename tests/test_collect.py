@@ -2,7 +2,8 @@
 replay launcher and the tactile observation wrapper.
 
 One short recording is shared by the module: PressCube (the index pad touches the cube, so
-the tactile maps are non-zero) when it is registered, else Gesture (maps read zero).
+the tactile maps are non-zero) when it is registered, else Gesture (maps read zero). Its index
+pad carries a small GelSight Mini image (``OPTICAL``), recorded and replayed with the maps.
 """
 import shutil
 
@@ -30,6 +31,7 @@ def _task() -> str:
 
 TASK = _task()
 CONTACT = TASK != "GaussTac-Gesture-v1"
+OPTICAL = {"optical": {"index": "gelsight_mini"}, "optical_width": 48}  # 48 x 48 px on the square pad
 STEPS = 12  # PressCube reaches its force target (and terminates) in about 6-8 steps
 
 
@@ -38,7 +40,7 @@ def recorded(tmp_path_factory, sapien_vulkan):
     out = tmp_path_factory.mktemp("demos")
     summary = collect(CollectConfig(env_id=TASK, num_episodes=2, num_procs=1, obs_mode="rgb",
                                     control_mode="pd_joint_delta_pos", seed=3, out=str(out),
-                                    max_episode_steps=STEPS, mpm_dx=2e-3, progress=False))
+                                    max_episode_steps=STEPS, mpm_dx=2e-3, progress=False, env_kwargs=OPTICAL))
     return summary
 
 
@@ -70,6 +72,9 @@ def test_collect_writes_h5_and_json_with_tactile_rgb_and_mpm_state(recorded):
                 assert g[f"obs/tactile/{pad}/shear"].shape == (T + 1, 16, 16, 2)
                 assert g[f"obs/tactile/{pad}/force"].shape == (T + 1, 16, 16)
                 assert g[f"obs/tactile/{pad}/force"].dtype == np.float32
+            assert g["obs/tactile/index/rgb"].shape == (T + 1, 48, 48, 3) and g["obs/tactile/index/rgb"].dtype == np.uint8
+            assert g["obs/tactile/index/markers"].shape[::2] == (T + 1, 2)
+            assert "rgb" not in g["obs/tactile/thumb"]  # an optical sensor on the index pad only
             rgb = g["obs/sensor_data/splat_camera/rgb"]
             assert rgb.shape == (T + 1, 128, 128, 3) and rgb.dtype == np.uint8
             assert g["env_states/gausstac/link_pose"].shape[0] == T + 1
@@ -132,6 +137,9 @@ def test_replay_by_env_states_reproduces_tactile_and_rgb_exactly(recorded):
                             want = g[f"obs/tactile/{pad}/{key}"][t]
                             got = obs["tactile"][pad][key][0].numpy()
                             assert np.array_equal(got, want), (ep["episode_id"], t, pad, key)
+                    for key in ("rgb", "markers"):  # the index pad's optical image and markers
+                        want = g[f"obs/tactile/index/{key}"][t]
+                        assert np.array_equal(obs["tactile"]["index"][key][0].numpy(), want), (ep["episode_id"], t, key)
                     touched += float(np.abs(obs["tactile"]["index"]["force"][0].numpy()).sum())
                     rgb = obs["sensor_data"]["splat_camera"]["rgb"][0].numpy()
                     assert np.array_equal(rgb, g["obs/sensor_data/splat_camera/rgb"][t]), (ep["episode_id"], t)
@@ -346,6 +354,8 @@ def test_obs_wrapper_shapes_and_loader_match_the_live_env(recorded, tmp_path):
     n = recorded["steps"]
     assert data["tactile"].shape == (n, 4096) and data["tactile"].dtype == np.float32
     assert data["actions"].shape == (n, 16) and data["rgb"].shape == (n, 128, 128, 3)
+    assert data["optical/index"].shape == (n, 48, 48, 3) and data["optical/index"].dtype == np.uint8
+    assert data["markers/index"].shape[::2] == (n, 2) and "optical/thumb" not in data
     assert data["state"].shape[0] == n and data["state"].shape[1] > 4096
     assert TactileLayout(pool=4).size(4) == 256 and TactileLayout(fields=("force",)).size(4) == 1024
 

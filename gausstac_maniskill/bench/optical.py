@@ -88,7 +88,7 @@ def main(argv=None) -> int:
 def write_slide_picture(out_dir: str, depth: float = 0.8e-3, distance: float = 1.5e-3) -> str:
     """``out_dir/optical_slide.png``: the GelSight's image of its calibration ball pressed
     ``depth`` [m] and slid ``distance`` [m] along the columns with friction 1, markers drawn, and
-    the markers' motion from rest as arrows (drawn 3x)."""
+    the markers' motion from rest as arrows (to scale)."""
     import os
 
     import matplotlib
@@ -106,8 +106,8 @@ def write_slide_picture(out_dir: str, depth: float = 0.8e-3, distance: float = 1
     d = press.markers - press.marker_rest
     ax[1].imshow(press.rgb, alpha=0.35)
     ax[1].quiver(press.marker_rest[:, 0], press.marker_rest[:, 1], d[:, 0], d[:, 1], color="k", angles="xy",
-                 scale_units="xy", scale=1 / 3, width=0.002)
-    ax[1].set_title(f"marker flow (x3); largest {np.abs(d).max():.1f} px", fontsize=9)
+                 scale_units="xy", scale=1, width=0.002)
+    ax[1].set_title(f"marker flow (to scale); largest {np.abs(d).max():.1f} px", fontsize=9)
     for a in ax:
         a.axis("off")
     fig.tight_layout()

@@ -9,12 +9,14 @@ gel's solved surface.
   no-contact frame; markers moved by the surface's displacement and drawn as dark dots.
 * :mod:`.press` — a ball pressed into (or slid over) a flat gel, solved by the pad model and
   imaged: the scene of the calibration frames (:func:`press_sphere`).
+* :mod:`.pad` — a sensor looking at a hand's pad: its image from the pad's tactile maps.
 """
 from .calibration import Calibration, load_calibration
 from .presets import Camera, Gel, MarkerGrid, Preset, preset
+from .pad import pad_images, pad_preset
 from .press import Press, PressedGel, image, press_gel, press_sphere, slide_gel
 from .render import marker_positions, render_rgb, shading
 
 __all__ = ["Calibration", "load_calibration", "Camera", "Gel", "MarkerGrid", "Preset", "preset",
            "shading", "render_rgb", "marker_positions", "Press", "PressedGel", "press_gel", "slide_gel", "image",
-           "press_sphere"]
+           "press_sphere", "pad_preset", "pad_images"]

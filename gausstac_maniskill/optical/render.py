@@ -60,9 +60,9 @@ def _check(name: str, x: torch.Tensor, preset: Preset, channels: int | None = No
 def _bin_index(depth: torch.Tensor, preset: Preset) -> torch.Tensor:
     """[B, H, W] long: each pixel's normal bin (tilt · bins + azimuth), as Taxim bins it."""
     cal, cam = preset.calibration, preset.camera
-    z = depth * (1e3 / cal.mm_per_px)  # towards the camera, in full-resolution pixels
-    d_row = (z[:, 2:, 1:-1] - z[:, :-2, 1:-1]) * (0.5 * cam.height / cal.height)
-    d_col = (z[:, 1:-1, 2:] - z[:, 1:-1, :-2]) * (0.5 * cam.width / cal.width)
+    z = depth * (1e3 / cam.mm_per_px)  # towards the camera, in this camera's pixels
+    d_row = (z[:, 2:, 1:-1] - z[:, :-2, 1:-1]) * 0.5  # the surface's slopes (central differences)
+    d_col = (z[:, 1:-1, 2:] - z[:, 1:-1, :-2]) * 0.5
     tilt = torch.atan(torch.sqrt(d_row * d_row + d_col * d_col))
     azimuth = torch.atan2(d_row, d_col)
     bins = cal.bins
