@@ -239,7 +239,8 @@ TASKS = {"GaussTac-Gesture-v1": {}, "GaussTac-PressCube-v1": {}, "GaussTac-Slide
 def run_tasks(out: str = "out/demo/tasks", seed: int = 0) -> list[dict]:
     """One scripted-expert episode of each registered GaussTac task in ManiSkill (held for
     five more steps after success): an MP4 per task of the splat render camera with the four
-    pads' depth maps beside it, and a PNG of its last frame. Returns one summary per task."""
+    pads' depth maps and the index pad's GelSight Mini image beside it, and a PNG of its last
+    frame. Returns one summary per task."""
     import gymnasium as gym
     import imageio.v2 as imageio
     from mani_skill.utils.registration import REGISTERED_ENVS
@@ -251,7 +252,7 @@ def run_tasks(out: str = "out/demo/tasks", seed: int = 0) -> list[dict]:
     for env_id, kwargs in TASKS.items():
         t0 = time.perf_counter()
         env = gym.make(env_id, obs_mode="state_dict", render_mode="rgb_array", sim_backend="physx_cpu",
-                       **{"control_mode": "pd_joint_delta_pos", **kwargs})
+                       **{"control_mode": "pd_joint_delta_pos", "optical": {"index": "gelsight_mini"}, **kwargs})
         obs, _ = env.reset(seed=seed)
         expert = make_expert(env)
         expert.reset()
@@ -279,7 +280,8 @@ def run_tasks(out: str = "out/demo/tasks", seed: int = 0) -> list[dict]:
 
 
 def _task_frame(rgb: np.ndarray, tactile: dict) -> np.ndarray:
-    """The render camera image next to the four pads' depth maps (0–0.5 mm, 16×16 taxels)."""
+    """The render camera image next to the four pads' depth maps (0–0.5 mm, 16×16 taxels) and,
+    where the index pad has an optical sensor, its image (scaled to the camera's height)."""
     h = rgb.shape[0]
     cell = h // 4
     col = []
@@ -288,7 +290,14 @@ def _task_frame(rgb: np.ndarray, tactile: dict) -> np.ndarray:
         img = np.stack([d, d ** 0.5, 1 - d], -1)
         img = np.kron(img, np.ones((cell // 16 + 1, cell // 16 + 1, 1)))[:cell, :cell]
         col.append((img * 255).astype(np.uint8))
-    return np.concatenate([rgb, np.concatenate(col, 0)[:h]], 1)
+    panels = [rgb, np.concatenate(col, 0)[:h]]
+    if "rgb" in tactile["index"]:
+        import cv2
+
+        optical = tactile["index"]["rgb"][0].numpy()
+        panels.append(cv2.resize(optical, (round(optical.shape[1] * h / optical.shape[0]), h),
+                                 interpolation=cv2.INTER_AREA))
+    return np.concatenate(panels, 1)
 
 
 def main(argv: list[str] | None = None) -> int:

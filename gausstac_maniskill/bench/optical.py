@@ -13,6 +13,10 @@ Then the real frames of ``--frames`` (:mod:`.optical_frames`: each pressed with
 :func:`~gausstac_maniskill.optical.press_sphere` and compared with the real image and two
 baselines; ``optical_frames.png``), and the marker flow of a ball slid over the GelSight's gel
 (``optical_slide.png``). ``--frames none`` skips both.
+
+Last, on the hand: PressCube's expert episode with a GelSight Mini on the index pad
+(``optical=``), the milliseconds per control step of its image and markers against the pads'
+solve in the same steps (``--no-hand`` skips it).
 """
 from __future__ import annotations
 
@@ -61,6 +65,8 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", nargs="+", default=["gelsight"], help="presets whose real frames to compare, or none")
     ap.add_argument("--model", default="linear", choices=["linear", "neo_hookean"], help="the gel's pad model")
     ap.add_argument("--limit", type=int, default=None, help="compare only the first N frames")
+    ap.add_argument("--no-hand", dest="hand", action="store_false",
+                    help="skip the optical pads on the hand (PressCube's expert, timed against the pad's solve)")
     ap.add_argument("--out", default="out/bench_optical")
     args = ap.parse_args(argv)
     rows = [time_point(p, args.size, b, args.repeats) for p in args.presets for b in args.batch]
@@ -81,6 +87,10 @@ def main(argv=None) -> int:
         print("wrote", write_frames_figure(args.out, result))
     if args.frames != ["none"]:
         print("wrote", write_slide_picture(args.out))
+    if args.hand:
+        table = "\n".join(hand_lines(time_on_hand(args.size[0])))
+        print(table)
+        text += "\n\n" + table
     write_report(args.out, "optical.md", text)
     return 0
 
@@ -135,3 +145,43 @@ def write_picture(out_dir: str, presets, size) -> str:
     path = os.path.join(out_dir, "optical.png")
     imageio.imwrite(path, np.concatenate(images, axis=1))
     return path
+
+
+def time_on_hand(width: int = 320, seed: int = 0) -> dict:
+    """PressCube's expert with a GelSight Mini image of ``width`` px on the index pad: per control
+    step, the pads' solve [s] (the env's ``step_timing["mpm"]``) and the image with its markers
+    [s] (timed on the step's maps, as the observation makes them)."""
+    import gymnasium as gym
+
+    from ..experts import make_expert
+    from ..optical import pad_images
+
+    env = gym.make("GaussTac-PressCube-v1", obs_mode="state_dict", optical={"index": "gelsight_mini"},
+                   optical_width=width)
+    try:
+        obs, _ = env.reset(seed=seed)
+        expert = make_expert(env)
+        expert.reset()
+        sensor = env.unwrapped.tactile_sensor.config.optical["index"]
+        solve, image = [], []
+        for _ in range(40):
+            obs, _, terminated, truncated, _ = env.step(expert.act(obs))
+            solve.append(env.unwrapped.step_timing.get("mpm", 0.0))
+            t0 = time.perf_counter()
+            pad_images(obs["tactile"]["index"]["depth"], obs["tactile"]["index"]["shear"], sensor)
+            image.append(time.perf_counter() - t0)
+            if bool(terminated[0]) or bool(truncated[0]):
+                break
+        cam = sensor.camera
+        return dict(width=cam.width, height=cam.height, steps=len(solve), solve_ms=1e3 * float(np.median(solve[1:])),
+                    image_ms=1e3 * float(np.median(image[1:])))
+    finally:
+        env.close()
+
+
+def hand_lines(r: dict) -> list[str]:
+    """The table of :func:`time_on_hand`."""
+    return [f"On the hand: PressCube's expert, {r['steps']} control steps, GelSight Mini image "
+            f"{r['width']}x{r['height']} on the index pad (medians, first step left out)", "",
+            "| pads' solve [ms/step] | index image + markers [ms/step] | image / solve |", "|---|---|---|",
+            f"| {r['solve_ms']:.1f} | {r['image_ms']:.1f} | {r['image_ms'] / max(r['solve_ms'], 1e-9):.2f} |"]
