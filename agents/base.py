@@ -26,6 +26,7 @@ from mani_skill.agents.registration import REGISTERED_AGENTS, register_agent
 
 from ..config import PadSpec
 from ..errors import AssetError, ConfigError
+from ..task_checks import check_optical
 # the hand Gaussians folder's readers (re-exported: agents name their folder here)
 from ..splat.asset import load_hand_closed_links, load_hand_gaussians, load_hand_lod  # noqa: F401
 from ..urdf import link_names
@@ -45,12 +46,16 @@ class GaussTacAgent:
         gausstac_core: pad links collide in SAPIEN with their rigid core (default). ``False``
             keeps the URDF's collision meshes (the rigid fingertip then stops before the
             pad compresses).
+        gausstac_optical: the optical sensors its pads carry, as a task's ``optical=`` takes
+            them (a preset for every pad, or ``{pad: preset}``); a task's own ``optical=``
+            overrides it. None: none.
     """
 
     gausstac_pads: tuple = ()
     gausstac_urdf: str | None = None
     gausstac_gaussians: str | None = None
     gausstac_core: bool = True
+    gausstac_optical = None
 
     def __init__(self, *args, **kwargs):
         if self.gausstac_pads and self.gausstac_core and self.urdf_path:
@@ -145,7 +150,7 @@ def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str,
                       uid: str | None = None, urdf: str | None = None, gaussians: str | None = None,
                       axes: Mapping[str, Sequence[float]] | None = None,
                       per_link: Mapping[str, Mapping] | None = None, register: bool = True,
-                      **pad_fields) -> type:
+                      optical=None, **pad_fields) -> type:
     """A new agent class: ``agent`` (a registered uid or an agent class) with soft pads.
 
     Args:
@@ -159,6 +164,9 @@ def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str,
         per_link: other :class:`PadSpec` fields per link (e.g. ``{"thumb_L2": {"cone_deg": 30}}``),
             overriding ``pad_fields``.
         register: register the class with ManiSkill under ``uid``.
+        optical: optical sensors on the pads (``"gelsight_mini"`` for every pad, or ``{pad name:
+            preset}``): their ``obs["tactile"][pad]`` gain ``"rgb"`` and ``"markers"`` in every
+            task (:class:`~gausstac_maniskill.tasks.base.GaussTacEnv`'s ``optical``).
         pad_fields: other :class:`PadSpec` fields shared by all pads (``thickness``, ``cone_deg``,
             ``material``, ``layout``).
 
@@ -198,6 +206,7 @@ def add_gausstac_pads(agent: str | type, pad_links: Sequence[str] | Mapping[str,
     _check_pad_links(base.uid, pad_urdf, pads)
     cls = type(base.__name__ + "GaussTac", (GaussTacAgent, base), {
         "uid": new_uid, "gausstac_pads": tuple(pads), "gausstac_urdf": pad_urdf, "gausstac_gaussians": gaussians,
+        "gausstac_optical": check_optical(f"add_gausstac_pads({new_uid!r})", optical, 320) or None,
         "__doc__": f"ManiSkill agent {base.uid!r} with GaussTac pads on {list(named.values())}.",
         "__module__": __name__,
     })

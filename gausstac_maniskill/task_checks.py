@@ -133,13 +133,15 @@ def check_optical(task: str, optical, width) -> dict:
 
     chosen = {str(k): v for k, v in optical.items()} if isinstance(optical, dict) else {None: optical}
     for pad, name in chosen.items():
-        if not isinstance(name, (str, os.PathLike)):
-            raise ConfigError(f"{task}: optical={optical!r}: expected a preset name or calibration folder, or "
-                              "{pad: preset}")
-        try:
-            preset(name)
-        except ConfigError as e:
-            raise ConfigError(f"{task}: optical" + (f"[{pad!r}]" if pad else "") + f": {e}") from None
+        why = "" if isinstance(name, (str, os.PathLike)) else f"{name!r} is not a name"
+        if not why:
+            try:
+                preset(name)
+            except ConfigError as e:
+                why = str(e)
+        if why:
+            raise ConfigError(f"{task}: optical={optical!r} must be a preset name ('gelsight', 'gelsight_mini') or a "
+                              f"calibration folder, or {{pad: preset}}: {why}")
     return chosen
 
 

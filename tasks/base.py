@@ -361,18 +361,20 @@ class GaussTacEnv(BaseEnv):
                                             self.pad_names, device=self.device)
 
     def _optical_pads(self) -> dict | None:
-        """``{pad: optical preset sized to its layout}`` for the pads with an optical sensor."""
-        if not self.optical:
+        """``{pad: optical preset sized to its layout}`` for the pads with an optical sensor (the
+        task's ``optical``, else the agent's ``gausstac_optical``)."""
+        chosen = self.optical or self.agent.gausstac_optical  # the task's, else the agent's
+        if not chosen:
             return None
         from ..optical import pad_preset
 
         specs = {p.name: p for p in self.agent.gausstac_pads}
-        named = {pad: self.optical[pad] for pad in self.optical if pad is not None}
+        named = {pad: chosen[pad] for pad in chosen if pad is not None}
         unknown = sorted(set(named) - set(specs))
         if unknown:
             raise ConfigError(f"{self._env_id()}: optical names pads {unknown} that the hand does not have; "
                               f"its pads: {sorted(specs)}")
-        every = {pad: self.optical[None] for pad in specs} if None in self.optical else {}
+        every = {pad: chosen[None] for pad in specs} if None in chosen else {}
         return {pad: pad_preset(sensor, specs[pad].layout, self.optical_width)
                 for pad, sensor in {**every, **named}.items()}
 

@@ -47,9 +47,27 @@ def test_optical_pads_give_images_of_their_maps(env):
 
 
 def test_bad_optical_arguments_are_named(sapien_vulkan):
-    with pytest.raises(ConfigError, match="optical.*not a preset name"):
-        gym.make(TASK, optical="gelsite", mpm_dx=2e-3)
-    with pytest.raises(ConfigError, match="optical_width"):
-        gym.make(TASK, optical="gelsight", optical_width=3, mpm_dx=2e-3)
+    """(The constructor's bad values are in tests/tasks/test_conventions.py's BAD.)"""
     with pytest.raises(ConfigError, match="pinky"):
         gym.make(TASK, optical={"pinky": "gelsight"}, mpm_dx=2e-3).reset(seed=0)
+
+
+def test_an_agent_can_carry_optical_pads(sapien_vulkan):
+    """add_gausstac_pads(optical=...) puts the sensor on the agent: every task it runs in shows
+    the images without being told."""
+    from gausstac_maniskill.agents import add_gausstac_pads
+    from gausstac_maniskill.agents.ability import ABILITY_FINGER_HULL, ABILITY_PAD_AXES
+
+    cls = add_gausstac_pads("floating_ability_hand_right", {"index": "index_L2"}, uid="ability_optical_index_test",
+                            axes={"index_L2": ABILITY_PAD_AXES["index_L2"]}, mesh=ABILITY_FINGER_HULL, thickness=2e-3,
+                            optical="gelsight_mini")
+    assert cls.gausstac_optical == {None: "gelsight_mini"}
+    env = gym.make("GaussTac-Touch-v1", robot_uids=cls.uid, obs_mode="state_dict", mpm_dx=2e-3, optical_width=32)
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs["tactile"]["index"]["rgb"].shape == (1, 32, 32, 3)
+    finally:
+        env.close()
+    with pytest.raises(ConfigError, match="optical"):
+        add_gausstac_pads("floating_ability_hand_right", ["index_L2"], uid="ability_optical_bad", optical=3,
+                          register=False)
