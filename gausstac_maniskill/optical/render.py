@@ -28,22 +28,24 @@ __all__ = ["shading", "render_rgb", "marker_positions", "marker_rest"]
 _TABLES: dict = {}
 
 
-def _tables(preset: Preset, device) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(poly [bins², 3, 6], features [H, W, 1, 6], background [H, W, 3] float 0–1) at the preset's
-    camera resolution, kept per (calibration, resolution, device)."""
+def _tables(preset: Preset, device) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(coefficients [bins², 18] (6 terms × 3 channels per bin), features [H·W, 1, 6], the flat
+    surface's colour [H, W, 3] and the background [H, W, 3], float 0–1) at the preset's camera
+    resolution, kept per (calibration, resolution, device)."""
     cal, cam = preset.calibration, preset.camera
     key = (str(cal.folder), cam.height, cam.width, str(device))
     if key not in _TABLES:
         bins = cal.bins
-        poly = torch.from_numpy(np.array(cal.poly)).permute(1, 2, 0, 3).reshape(bins * bins, 3, 6).to(device)
+        poly = torch.from_numpy(np.array(cal.poly)).permute(1, 2, 3, 0).reshape(bins * bins, 18).to(device)
         y = torch.arange(cam.height, dtype=torch.float32) * (cal.height / cam.height)
         x = torch.arange(cam.width, dtype=torch.float32) * (cal.width / cam.width)
         yy, xx = torch.meshgrid(y, x, indexing="ij")
-        feat = torch.stack([xx * xx, yy * yy, xx * yy, xx, yy, torch.ones_like(xx)], -1)[:, :, None, :].to(device)
+        feat = torch.stack([xx * xx, yy * yy, xx * yy, xx, yy, torch.ones_like(xx)], -1).reshape(-1, 1, 6).to(device)
+        flat = (feat @ poly[(bins - 1) // 2].view(6, 3)).view(cam.height, cam.width, 3)  # tilt 0: a flat surface
         bg = torch.from_numpy(np.array(cal.background)).float().div(255.0).permute(2, 0, 1)[None]
         if (cam.height, cam.width) != (cal.height, cal.width):
             bg = F.interpolate(bg, size=(cam.height, cam.width), mode="bilinear", antialias=True, align_corners=False)
-        _TABLES[key] = (poly, feat, bg[0].permute(1, 2, 0).contiguous().to(device))
+        _TABLES[key] = (poly, feat, flat, bg[0].permute(1, 2, 0).contiguous().to(device))
     return _TABLES[key]
 
 
@@ -77,14 +79,17 @@ def shading(depth, preset: Preset) -> torch.Tensor:
     """The colour change [B, H, W, 3] (0–1 units, RGB) that the indentation ``depth``
     [B, H, W] [m] makes on the preset's camera image (zero for an undeformed gel)."""
     depth = _check("depth", depth, preset)
-    poly, feat, _ = _tables(preset, depth.device)
-    return _shading(depth, preset, poly, feat)
+    return _shading(depth, preset, _tables(preset, depth.device))
 
 
-def _shading(depth: torch.Tensor, preset: Preset, poly: torch.Tensor, feat: torch.Tensor) -> torch.Tensor:
-    """:func:`shading` of a checked ``depth``, given the preset's tables (:func:`_tables`)."""
-    flat = (poly[(preset.calibration.bins - 1) // 2] * feat).sum(-1)  # tilt 0, azimuth 0: a flat surface
-    return (poly[_bin_index(depth, preset)] * feat).sum(-1) - flat
+def _shading(depth: torch.Tensor, preset: Preset, tables) -> torch.Tensor:
+    """:func:`shading` of a checked ``depth``, given the preset's :func:`_tables`: each pixel's
+    six features times its bin's 6 × 3 coefficients, one small matrix product per pixel."""
+    poly, feat, flat, _ = tables
+    B, H, W = depth.shape
+    coef = poly.index_select(0, _bin_index(depth, preset).reshape(-1)).view(B * H * W, 6, 3)
+    colour = torch.bmm(feat.expand(B, -1, -1, -1).reshape(B * H * W, 1, 6), coef)
+    return colour.view(B, H, W, 3) - flat
 
 
 def render_rgb(depth, preset: Preset, markers=None) -> torch.Tensor:
@@ -92,10 +97,14 @@ def render_rgb(depth, preset: Preset, markers=None) -> torch.Tensor:
     ``depth`` [B, H, W] [m]; with ``markers`` [B, N, 2] (pixel places, column then row) the
     preset's dots drawn dark there."""
     depth = _check("depth", depth, preset)
-    poly, feat, bg = _tables(preset, depth.device)
-    img = bg + _shading(depth, preset, poly, feat)
+    tables = _tables(preset, depth.device)
+    img = tables[3] + _shading(depth, preset, tables)
     if markers is not None:
-        img = img * (1.0 - preset.markers.darkness * _dots(torch.as_tensor(markers, dtype=torch.float32), preset))[..., None]
+        markers = torch.as_tensor(markers, dtype=torch.float32, device=depth.device)
+        if markers.ndim != 3 or markers.shape[0] != depth.shape[0] or markers.shape[2] != 2:
+            raise ConfigError(f"optical sensor {preset.name!r}: markers has shape {tuple(markers.shape)}, expected "
+                              f"[{depth.shape[0]}, N, 2] (pixel places, column then row)")
+        img = img * (1.0 - preset.markers.darkness * _dots(markers, preset))[..., None]
     return (img.clamp_(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8)
 
 

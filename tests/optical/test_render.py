@@ -91,3 +91,5 @@ def test_wrong_shapes_and_unknown_presets_are_named():
     s = preset("gelsight").at_resolution(320, 240)
     with pytest.raises(ConfigError, match="depth has shape"):
         render_rgb(torch.zeros(1, 480, 640), s)
+    with pytest.raises(ConfigError, match="markers has shape"):
+        render_rgb(torch.zeros(1, 240, 320), s, markers=torch.zeros(1, 5, 3))
