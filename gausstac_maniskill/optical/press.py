@@ -26,6 +26,7 @@ import torch
 import torch.nn.functional as F
 
 from ..errors import ConfigError
+from ..fem import Indenter, layer_body
 from .presets import Preset, preset as _preset
 from .render import marker_positions, render_rgb
 
@@ -107,8 +108,6 @@ def _smooth(z: torch.Tensor, sigma_px: float) -> torch.Tensor:
 
 @functools.lru_cache(maxsize=4)
 def _layer(thickness: float, half_width: float, element: float, E: float, nu: float, model: str, quarter: bool):
-    from ..fem import layer_body
-
     return layer_body(thickness, half_width, element, E, nu, model=model, quarter=quarter)
 
 
@@ -168,8 +167,6 @@ def press_gel(sensor, radius: float | None, depth: float, model: str = "linear",
     body = _layer(gel.thickness, half_width, element, gel.E, gel.nu, model, True)
     pose = np.eye(4)
     pose[2, 3] = gel.thickness + radius - depth
-    from ..fem import Indenter
-
     res = body.solve(Indenter(_ball_sdf(radius), pose), geometry="deformed",
                      warm=None if warm is None else warm.result, max_iterations=max_iterations)
     q = _top_grid(body, np.concatenate([res.displacement, (np.abs(res.force).sum(1) > 0)[:, None]], 1))
@@ -183,20 +180,18 @@ def slide_gel(sensor, radius: float | None, depth: float, distance: float, steps
               friction: float = 1.0, element: float = 0.5e-3, half_width: float | None = None
               ) -> list[PressedGel]:
     """The ball of ``radius`` [m] (None: the preset's) pressed ``depth`` [m] into the gel of
-    ``sensor`` and dragged ``distance`` [m]
-    along x in ``steps`` equal steps with Coulomb friction ``friction`` (the whole layer,
-    linear): one :class:`PressedGel` per step, the press first."""
+    ``sensor`` and dragged ``distance`` [m] along x in ``steps`` equal steps with Coulomb
+    friction ``friction`` (the whole layer, linear): one :class:`PressedGel` per step, the
+    press first."""
     sensor = _preset(sensor)
     gel = sensor.gel
     radius = sensor.ball_radius if radius is None else float(radius)
     element = _check_press(sensor, radius, float(depth), float(element))
     if not (math.isfinite(distance) and steps >= 1 and friction >= 0):
-        raise ConfigError(f"slide_gel: distance={distance!r} m, steps={steps!r}, friction={friction!r}: "
-                          "expected a finite distance, steps >= 1 and friction >= 0")
+        raise ConfigError(f"slide_gel: distance={distance!r} m, steps={steps!r}, friction={friction!r}: the "
+                          "distance must be finite, steps >= 1 and friction >= 0")
     half_width = 2 * gel.thickness + abs(distance) if half_width is None else float(half_width)
     body = _layer(gel.thickness, half_width, element, gel.E, gel.nu, "linear", False)
-    from ..fem import Indenter
-
     out, warm = [], None
     for x in np.linspace(0.0, distance, steps + 1):
         pose = np.eye(4)
