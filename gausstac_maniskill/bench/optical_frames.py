@@ -75,14 +75,20 @@ def frame_metrics(sim: np.ndarray, real: np.ndarray, centre, radius: float) -> d
 def match_radius(sensor, radius_px: float, model: str = "linear", tol_px: float = 0.25, iterations: int = 14,
                  **kwargs):
     """The :class:`~gausstac_maniskill.optical.PressedGel` whose contact radius is nearest
-    ``radius_px`` (bisection on the depth, stopping within ``tol_px``), and that radius [px]."""
+    ``radius_px`` (bisection on the depth, stopping within ``tol_px``), and that radius [px]. A
+    depth the model cannot solve (finite strain: an element inverts) counts as too deep."""
+    from ..errors import SimulationError
     from ..optical import image, press_gel
 
     R = sensor.ball_radius
     lo, hi, best = 0.0, min(R, sensor.gel.thickness) * 0.995, None
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)
-        gel = press_gel(sensor, None, mid, model=model, warm=None if best is None else best[0], **kwargs)
+        try:
+            gel = press_gel(sensor, None, mid, model=model, warm=None if best is None else best[0], **kwargs)
+        except SimulationError:
+            hi = mid
+            continue
         r = image(gel, sensor, markers=False).contact_radius_px
         if best is None or abs(r - radius_px) < abs(best[1] - radius_px):
             best = (gel, r)

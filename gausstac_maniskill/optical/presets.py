@@ -111,7 +111,8 @@ def _load(key: str) -> Preset:
 def preset(name) -> Preset:
     """The optical sensor ``name``: ``"gelsight"``, ``"gelsight_mini"``, or the path of a
     calibration folder in Taxim's format (:func:`~.calibration.load_calibration`; the gel and
-    markers are the GelSight's). Read once and kept."""
+    markers are the GelSight's: give your own with ``dataclasses.replace(preset(folder),
+    gel=Gel(...), markers=MarkerGrid(...), ball_radius=...)``). Read once and kept."""
     if isinstance(name, Preset):
         return name
     key = str(name)
