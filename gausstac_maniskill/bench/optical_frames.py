@@ -129,9 +129,9 @@ _TAXIM: dict = {}
 
 
 def compare_frames(name: str = "gelsight", model: str = "linear", element: float = 0.25e-3, limit=None,
-                   progress: bool = True) -> dict:
+                   progress: bool = True, half_width: float | None = None) -> dict:
     """Every frame of preset ``name``'s data pack against its simulated press (``model``,
-    ``element``) and the two baselines. Returns ``rows`` (one dict per frame), ``images`` (frame
+    ``element``, ``half_width``: :func:`~gausstac_maniskill.optical.press_gel`) and the two baselines. Returns ``rows`` (one dict per frame), ``images`` (frame
     index -> (real, simulated, taxim or None) uint8 RGB), ``centres`` [N, 2] px and ``matched``
     (touch radius -> (depth [m], simulated radius [px], normal force [N]))."""
     from ..optical import image, preset, render_rgb
@@ -142,7 +142,7 @@ def compare_frames(name: str = "gelsight", model: str = "linear", element: float
     n = len(data["imgs"]) if limit is None else min(limit, len(data["imgs"]))
     matched = {}
     for r in sorted(set(data["radii"][:n].tolist())):
-        gel, got = match_radius(sensor, r, model=model, element=element)
+        gel, got = match_radius(sensor, r, model=model, element=element, half_width=half_width)
         matched[r] = (gel, got)
     rows, images = [], {}
     bar = progress_bar(n, f"optical frames ({name})", progress)
