@@ -72,30 +72,55 @@ def frame_metrics(sim: np.ndarray, real: np.ndarray, centre, radius: float) -> d
                 ssim_all=float(s.mean()))
 
 
-def match_radius(sensor, radius_px: float, model: str = "linear", tol_px: float = 0.25, iterations: int = 14,
-                 **kwargs):
+def match_radius(sensor, radius_px: float, model: str = "linear", tol_px: float = 0.25, step: float = 0.15e-3,
+                 path: list | None = None, iterations: int = 10, **kwargs):
     """The :class:`~gausstac_maniskill.optical.PressedGel` whose contact radius is nearest
-    ``radius_px`` (bisection on the depth, stopping within ``tol_px``), and that radius [px]. A
-    depth the model cannot solve (finite strain: an element inverts) counts as too deep."""
+    ``radius_px``, and that radius [px]. The press deepens by ``step`` [m] from the last one
+    solved (each warm-started from the one before: finite strain needs the continuation) until
+    its radius passes ``radius_px``, then the depth is bisected in that last step to within
+    ``tol_px``. ``path``: the presses solved so far, ``[(depth, radius, gel)]`` deepening (kept
+    by the caller, so that radii matched in increasing order march once). A depth the model
+    cannot solve (an element inverts) ends the march."""
     from ..errors import SimulationError
     from ..optical import image, press_gel
 
-    R = sensor.ball_radius
-    lo, hi, best = 0.0, min(R, sensor.gel.thickness) * 0.995, None
+    path = [] if path is None else path
+    limit = min(sensor.ball_radius, sensor.gel.thickness) * 0.995
+
+    def solve(depth, warm):
+        gel = press_gel(sensor, None, depth, model=model, warm=warm, **kwargs)
+        return gel, image(gel, sensor, markers=False).contact_radius_px
+
+    while (not path or path[-1][1] < radius_px) and (path[-1][0] if path else 0.0) + step < limit:
+        depth = (path[-1][0] if path else 0.0) + step
+        try:
+            gel, r = solve(depth, path[-1][2] if path else None)
+        except SimulationError:
+            break
+        path.append((depth, r, gel))
+    if not path:
+        raise SimulationError(f"optical frames: no press of {model!r} could be solved")
+    above = next((i for i, p in enumerate(path) if p[1] >= radius_px), None)
+    best = min(path, key=lambda p: abs(p[1] - radius_px))
+    if above is None or abs(best[1] - radius_px) <= tol_px:
+        return best[2], best[1]
+    (lo, _, warm), hi = (path[above - 1] if above else (0.0, 0.0, None)), path[above][0]
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)
         try:
-            gel = press_gel(sensor, None, mid, model=model, warm=None if best is None else best[0], **kwargs)
+            gel, r = solve(mid, warm)
         except SimulationError:
             hi = mid
             continue
-        r = image(gel, sensor, markers=False).contact_radius_px
-        if best is None or abs(r - radius_px) < abs(best[1] - radius_px):
-            best = (gel, r)
+        if abs(r - radius_px) < abs(best[1] - radius_px):
+            best = (mid, r, gel)
         if abs(r - radius_px) <= tol_px:
             break
-        lo, hi = (mid, hi) if r < radius_px else (lo, mid)
-    return best
+        if r < radius_px:
+            lo, warm = mid, gel
+        else:
+            hi = mid
+    return best[2], best[1]
 
 
 def taxim_depth(name: str, centre, radius_px: float):
@@ -140,10 +165,9 @@ def compare_frames(name: str = "gelsight", model: str = "linear", element: float
     sensor = preset(name)
     data = real_frames(name)
     n = len(data["imgs"]) if limit is None else min(limit, len(data["imgs"]))
-    matched = {}
-    for r in sorted(set(data["radii"][:n].tolist())):
-        gel, got = match_radius(sensor, r, model=model, element=element, half_width=half_width)
-        matched[r] = (gel, got)
+    matched, path = {}, []
+    for r in sorted(set(data["radii"][:n].tolist())):  # deepening: one march for them all
+        matched[r] = match_radius(sensor, r, model=model, element=element, half_width=half_width, path=path)
     rows, images = [], {}
     bar = progress_bar(n, f"optical frames ({name})", progress)
     for i in range(n):
