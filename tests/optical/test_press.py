@@ -43,8 +43,8 @@ def test_markers_flow_with_a_slide():
     """A ball dragged along +x with friction pulls the markers under it along +x; without
     friction they move far less along the drag."""
     s = preset("gelsight")
-    stuck = image(slide_gel(s, None, 0.6e-3, 1.0e-3, steps=4, friction=1.0)[-1], s)
-    free = image(slide_gel(s, None, 0.6e-3, 1.0e-3, steps=4, friction=0.0)[-1], s)
+    stuck = image(slide_gel(s, None, 0.6e-3, 1.0e-3, steps=4, friction=1.0, half_width=5e-3)[-1], s)
+    free = image(slide_gel(s, None, 0.6e-3, 1.0e-3, steps=4, friction=0.0, half_width=5e-3)[-1], s)
     near = np.hypot(*(stuck.marker_rest - [319.5 + 1.0 / 0.0295 / 2, 239.5]).T) < 40
     pull = (stuck.markers - stuck.marker_rest)[near, 0].mean()
     assert pull > 5 and pull > 3 * abs((free.markers - free.marker_rest)[near, 0].mean())
