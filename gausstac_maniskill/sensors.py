@@ -30,6 +30,7 @@ from mani_skill.sensors.base_sensor import BaseSensor, BaseSensorConfig
 from mani_skill.sensors.camera import Camera, CameraConfig
 
 from .errors import ConfigError
+from .optical import pad_images
 from .tactile.extract import MAP_KEYS
 
 __all__ = ["GaussianSplatCameraConfig", "GaussianSplatCamera", "TactileSensor", "TactileSensorConfig",
@@ -311,8 +312,6 @@ class TactileSensor(BaseSensor):
         maps = self.maps_fn()
         self._obs = {p: {k: maps[p][k].to(self.device) for k in self.config.keys} for p in self.pad_names}
         for p, sensor in (self.config.optical or {}).items() if optical else ():
-            from .optical import pad_images
-
             rgb, markers = pad_images(maps[p]["depth"], maps[p]["shear"], sensor)
             self._obs[p]["rgb"], self._obs[p]["markers"] = rgb.to(self.device), markers.to(self.device)
 

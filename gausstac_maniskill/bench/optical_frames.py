@@ -3,7 +3,7 @@ a ball pressed into the gel, each with its touch's centre and radius in pixels).
 
 For each frame, :func:`~gausstac_maniskill.optical.press_sphere` presses the calibration ball
 into the preset's flat gel to the depth at which the simulated contact radius equals the frame's
-(bisection, once per distinct radius), renders it at the frame's centre, and compares it with
+(:func:`match_radius`, once per distinct radius), renders it at the frame's centre, and compares it with
 the real frame: PSNR and SSIM in the disc of 1.5x the touch radius and over the whole image.
 Baselines, with the same lookup and no-contact frame: the no-contact frame alone, and Taxim's own
 height-map approximation of the same press (the ball's geometric cap at the depth whose
@@ -123,6 +123,9 @@ def match_radius(sensor, radius_px: float, model: str = "linear", tol_px: float 
     return best[2], best[1]
 
 
+_TAXIM: dict = {}  # preset name -> taxim's JAX simulator
+
+
 def taxim_depth(name: str, centre, radius_px: float):
     """[H, W] indentation [m] of Taxim's own approximation of the calibration ball pressed to
     the depth whose intersection with the gel has radius ``radius_px``; None without ``jax``."""
@@ -150,15 +153,14 @@ def taxim_depth(name: str, centre, radius_px: float):
     return np.asarray(gel - deformed, np.float64) * 1e-3
 
 
-_TAXIM: dict = {}
-
 
 def compare_frames(name: str = "gelsight", model: str = "linear", element: float = 0.25e-3, limit=None,
-                   progress: bool = True, half_width: float | None = None) -> dict:
+                   progress: bool = True, half_width: float | None = None, keep_images=(0, 1, 2)) -> dict:
     """Every frame of preset ``name``'s data pack against its simulated press (``model``,
-    ``element``, ``half_width``: :func:`~gausstac_maniskill.optical.press_gel`) and the two baselines. Returns ``rows`` (one dict per frame), ``images`` (frame
-    index -> (real, simulated, taxim or None) uint8 RGB), ``centres`` [N, 2] px and ``matched``
-    (touch radius -> (depth [m], simulated radius [px], normal force [N]))."""
+    ``element``, ``half_width``: :func:`~gausstac_maniskill.optical.press_gel`) and the two
+    baselines. Returns ``rows`` (one dict per frame), ``images`` (for the frames in
+    ``keep_images``: index -> (real, simulated, taxim or None) uint8 RGB), ``centres`` [N, 2] px
+    and ``matched`` (touch radius -> (depth [m], simulated radius [px], normal force [N]))."""
     from ..optical import image, preset, render_rgb
     from .common import progress_bar
 
@@ -183,7 +185,8 @@ def compare_frames(name: str = "gelsight", model: str = "linear", element: float
             tx_img = render_rgb(torch.from_numpy(tx).float()[None], sensor)[0].numpy()
             row.update({f"taxim_{k}": v for k, v in frame_metrics(tx_img, real, c, r).items()})
         rows.append(row)
-        images[i] = (real, sim, tx_img)
+        if i in keep_images:
+            images[i] = (real, sim, tx_img)
         bar.update(1)
     bar.close()
     return dict(rows=rows, images=images, centres=data["centres"],

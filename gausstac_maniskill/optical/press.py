@@ -135,11 +135,15 @@ def _check_press(sensor: Preset, radius: float, depth: float, element: float) ->
     return gel.thickness / round(gel.thickness / element)  # a whole number of cells through the layer
 
 
-def _top_grid(body, values: np.ndarray) -> np.ndarray:
-    """The top face's point values [S, k] as a grid [k, nx, ny] (x-major, then y)."""
+def _top_fields(body, res) -> np.ndarray:
+    """[4, nx, ny] (x-major, then y) on the top face of ``body`` solved as ``res``: the
+    indentation [m] (towards the camera), the displacement along x and y [m], and 1 where the
+    point carries contact force."""
     order = np.lexsort((body.points[:, 1], body.points[:, 0]))
     n = int(round(math.sqrt(body.num_points)))
-    return values[order].reshape(n, n, -1).transpose(2, 0, 1)
+    u = res.displacement[order]
+    values = np.stack([-u[:, 2], u[:, 0], u[:, 1], (np.abs(res.force[order]).sum(1) > 0)], 1)
+    return values.reshape(n, n, 4).transpose(2, 0, 1)
 
 
 def _mirror(field: np.ndarray, odd: tuple[bool, bool]) -> np.ndarray:
@@ -169,9 +173,9 @@ def press_gel(sensor, radius: float | None, depth: float, model: str = "linear",
     pose[2, 3] = gel.thickness + radius - depth
     res = body.solve(Indenter(_ball_sdf(radius), pose), geometry="deformed",
                      warm=None if warm is None else warm.result, max_iterations=max_iterations)
-    q = _top_grid(body, np.concatenate([res.displacement, (np.abs(res.force).sum(1) > 0)[:, None]], 1))
-    fields = np.stack([_mirror(-q[2], (False, False)), _mirror(q[0], (True, False)),
-                       _mirror(q[1], (False, True)), _mirror(q[3], (False, False))])
+    q = _top_fields(body, res)
+    fields = np.stack([_mirror(q[0], (False, False)), _mirror(q[1], (True, False)),
+                       _mirror(q[2], (False, True)), _mirror(q[3], (False, False))])
     total = -4.0 * res.force.sum(0) * [0.0, 0.0, 1.0]  # the quarter's in-plane forces cancel on the whole layer
     return PressedGel(fields, element, radius, np.zeros(2), float(depth), total, model, float(res.residual), res)
 
@@ -197,10 +201,8 @@ def slide_gel(sensor, radius: float | None, depth: float, distance: float, steps
         pose = np.eye(4)
         pose[:3, 3] = [x, 0.0, gel.thickness + radius - depth]
         warm = body.solve(Indenter(_ball_sdf(radius), pose, friction=friction), geometry="deformed", warm=warm)
-        q = _top_grid(body, np.concatenate([warm.displacement, (np.abs(warm.force).sum(1) > 0)[:, None]], 1))
-        fields = np.stack([-q[2], q[0], q[1], q[3]])
-        out.append(PressedGel(fields, element, radius, np.array([x, 0.0]), float(depth), -warm.force.sum(0),
-                              "linear", 0.0, warm))
+        out.append(PressedGel(_top_fields(body, warm), element, radius, np.array([x, 0.0]), float(depth),
+                              -warm.force.sum(0), "linear", 0.0, warm))
     return out
 
 
@@ -224,12 +226,9 @@ def image(gel: PressedGel, sensor, center_px=None, markers: bool = True) -> Pres
         at = F.grid_sample(table, grid, mode="bicubic", padding_mode="zeros", align_corners=True)[0]
         return at * ((x.abs() <= reach) & (y.abs() <= reach))
 
-    lagrange = sample(xx, yy)  # at the material point that rests under each pixel
-    x, y = xx, yy
+    lagrange = at = sample(xx, yy)  # at the material point that rests under each pixel
     for _ in range(8):  # the material point that has moved over each pixel: X + u(X) = pixel
-        at = sample(x, y)
-        x, y = xx - at[1], yy - at[2]
-    at = sample(x, y)
+        at = sample(xx - at[1], yy - at[2])
     R = gel.ball_radius
     rho2 = (xx - gel.ball_xy[0]) ** 2 + (yy - gel.ball_xy[1]) ** 2
     ball = torch.where(rho2 < R * R, gel.press_depth - R + torch.sqrt((R * R - rho2).clamp(min=0)),
